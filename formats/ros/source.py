@@ -1,0 +1,91 @@
+"""The container layer of ROS logs: serialized messages in, without interpreting them.
+
+A :class:`MessageSource` is a ROS 1 bag, a ROS 2 bag (sqlite3 or MCAP storage) or a
+standalone MCAP file. It lists its topics and streams :class:`RawBatch` es — the raw bytes
+of many messages of one topic, as one buffer plus offsets — in log order, chunk by chunk,
+so decoders can work on whole batches with numpy instead of one message at a time.
+
+Decoding (``formats/ros/decode_*.py``) and interpretation into the reader contract
+(``formats/ros/reader.py``) are separate layers on top of this one.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Collection, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal, Protocol
+
+import numpy as np
+import numpy.typing as npt
+
+Encoding = Literal["ros1", "cdr"]
+
+
+@dataclass(frozen=True)
+class Connection:
+    """A topic as a container stores it: name, type, encoding and message definition.
+
+    ``msgdef`` is the definition text the log carries (ROS 1 ``message_definition``,
+    MCAP schema data, ROS 2 ``type_description``), ``''`` when the log carries none (then
+    decoders fall back to a default typestore). ``msgdef_format`` is ``'ros1msg'``,
+    ``'ros2msg'``, ``'ros2idl'`` or ``''``. Several connections may share one topic.
+    """
+
+    id: int
+    topic: str
+    msgtype: str  # normalised ROS 2 style: 'sensor_msgs/msg/Range'
+    encoding: Encoding
+    msgdef: str
+    msgdef_format: str
+    count: int  # messages stored for this connection (from the index/statistics)
+    md5sum: str = ""  # ROS 1 only
+
+
+@dataclass(frozen=True)
+class RawBatch:
+    """Serialized messages of one connection: message ``i`` is
+    ``buffer[offsets[i] : offsets[i] + lengths[i]]``, logged at ``log_time_ns[i]``."""
+
+    connection: Connection
+    log_time_ns: npt.NDArray[np.int64]
+    buffer: npt.NDArray[np.uint8]
+    offsets: npt.NDArray[np.int64]
+    lengths: npt.NDArray[np.int64]
+
+    def __len__(self) -> int:
+        return int(self.log_time_ns.shape[0])
+
+    def message(self, i: int) -> bytes:
+        o = int(self.offsets[i])
+        return self.buffer[o : o + int(self.lengths[i])].tobytes()
+
+
+class MessageSource(Protocol):
+    """A ROS log container (ROS 1 bag, ROS 2 bag, MCAP)."""
+
+    path: Path
+    format_name: str  # 'ros1', 'ros2-sqlite3', 'ros2-mcap', 'mcap'
+
+    @property
+    def connections(self) -> list[Connection]: ...
+
+    @property
+    def start_ns(self) -> int | None: ...
+
+    @property
+    def end_ns(self) -> int | None: ...
+
+    def raw_batches(self, connection_ids: Collection[int]) -> Iterator[RawBatch]:
+        """Messages of the given connections in log order, batched per chunk/connection.
+
+        Truncated or corrupt tails: yield what is intact, then record the loss in
+        ``self.warnings`` (one line each) instead of raising; a log whose header or index
+        is unusable raises :class:`~pipeline.errors.FormatError`.
+        """
+        ...
+
+    @property
+    def warnings(self) -> list[str]: ...
+
+    def close(self) -> None: ...

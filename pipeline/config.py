@@ -1,0 +1,459 @@
+"""sonarmap's configuration, in one place.
+
+One TOML file holds every parameter: the method's (``[mapper]``, ALGORITHM.md §1-5 and
+§8), the grid, scan building (§6), pose sync, input selection (topics, CSV schema) and
+sensor mounts. Each section is a frozen dataclass; each field's ``doc`` metadata is the
+comment ``sonarmap config`` prints. Loading validates names, types and ranges and raises
+:class:`~pipeline.errors.ConfigError` with one line naming the file and the key.
+
+TOML is parsed with the standard library's ``tomllib``: no code is executed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+import tomllib
+import types
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+from pipeline.errors import ConfigError
+
+
+def _doc(text: str, **kw: Any) -> Any:
+    return field(metadata={"doc": text}, **kw)
+
+
+@dataclass(frozen=True)
+class MapperConfig:
+    """Parameters of the mapping method (ALGORITHM.md), with its documented defaults."""
+
+    method: Literal["andersone", "classic"] = _doc(
+        "mapping method: 'andersone' (the paper's) or 'classic' (log-odds baseline, §8)",
+        default="andersone",
+    )
+    sigma_d0: float = _doc("σ_d0, distance uncertainty at zero range, m (eq. 2)", default=0.01)
+    k_d: float = _doc("k_d, growth of distance uncertainty with range (eq. 2)", default=0.01)
+    c_a: float = _doc(
+        "c_a in σ_a = d·tan(β/2)/c_a (eq. 3); 2 puts the 2σ bound on the cone edge",
+        default=2.0,
+    )
+    eps_max: float = _doc(
+        "ε_max, m: readings with d ≥ r_max − ε_max count as 'no echo' (§1)", default=0.01
+    )
+    match_distance: float = _doc(
+        "a reading merges into the nearest feature closer than this, m (§2)", default=0.15
+    )
+    kappa_free: float = _doc(
+        "κ_free: a cone is free up to d − κ_free·σ_d(d) (§3)", default=2.0
+    )
+    clear_on_max_range: bool = _doc(
+        "let max-range readings clear their cone up to r_max (§3; paper: off)", default=False
+    )
+    feature_correction: bool = _doc(
+        "correct features with free-space scans (§4); off = the paper's ablation",
+        default=True,
+    )
+    n_particles: int = _doc("N, particles drawn per corrected feature (§4)", default=200)
+    keep_fraction: float = _doc(
+        "a feature is refit when at least this fraction of particles survive (§4)",
+        default=0.05,
+    )
+    protect_times: int = _doc(
+        "features measured at least this often are protected from deletion (§4)", default=3
+    )
+    sigma_min: float = _doc(
+        "σ_min, covariance floor, m; 0 = half a grid cell (§4)", default=0.0
+    )
+    p_free: float = _doc("inverse sensor model value of a free observation (eq. 11)", default=0.35)
+    p_clamp_min: float = _doc("free layer clamp l_min = logit(p_clamp_min) (eq. 11)", default=0.12)
+    p_clamp_max: float = _doc("free layer clamp l_max = logit(p_clamp_max) (eq. 11)", default=0.97)
+    p_occ: float = _doc("probability of cells inside a feature's 2σ ellipse (eq. 12)", default=0.9)
+    classic_p_occ: float = _doc(
+        "classic baseline: inverse sensor model value at the echo (§8)", default=0.7
+    )
+    classic_thickness_cells: float = _doc(
+        "classic baseline: obstacle thickness w, in cells (§8)", default=2.0
+    )
+    seed: int = _doc("seed of the particle generator (runs are reproducible)", default=0)
+
+    def sigma_floor(self, resolution: float) -> float:
+        """σ_min in metres: the configured value, or half a cell when it is 0."""
+        return self.sigma_min if self.sigma_min > 0 else 0.5 * resolution
+
+
+@dataclass(frozen=True)
+class GridConfig:
+    """The map grid."""
+
+    resolution: float = _doc("cell size, m", default=0.05)
+    extent: tuple[float, ...] = _doc(
+        "[xmin, ymin, xmax, ymax] in m; empty = from the poses plus max range",
+        default=(),
+    )
+    margin: float = _doc("extra border around an automatic extent, m", default=0.5)
+    max_cells: int = _doc("refuse grids larger than this many cells", default=200_000_000)
+
+
+@dataclass(frozen=True)
+class ScanConfig:
+    """How readings are grouped into scans (ALGORITHM.md §6)."""
+
+    policy: Literal["time", "motion", "explicit"] = _doc(
+        "'time' (window), 'motion' (travel/turn) or 'explicit' (scan id in the log)",
+        default="time",
+    )
+    window_s: float = _doc("time policy: scan length, s", default=0.2)
+    max_travel_m: float = _doc("motion policy: new scan after this travel, m", default=0.10)
+    max_turn_deg: float = _doc("motion policy: new scan after this turn, degrees", default=10.0)
+
+
+@dataclass(frozen=True)
+class PoseSyncConfig:
+    """Interpolating the robot pose at each reading's stamp."""
+
+    max_pose_gap_s: float = _doc(
+        "readings inside a pose gap longer than this are dropped, s", default=0.5
+    )
+    time_offset_s: float = _doc(
+        "added to range stamps before lookup (sensor clock offset), s", default=0.0
+    )
+
+
+@dataclass(frozen=True)
+class CsvConfig:
+    """How to read CSV/text logs (see formats/csv_log.py for the schema)."""
+
+    layout: Literal["single", "set"] = _doc(
+        "'single': one file, a row per reading (t, x, y, yaw, sensor, range); "
+        "'set': separate ranges/poses/sensors files",
+        default="single",
+    )
+    ranges_file: str = _doc("set layout: ranges file, relative to the log directory", default="ranges.csv")
+    poses_file: str = _doc("set layout: poses file, relative to the log directory", default="poses.csv")
+    sensors_file: str = _doc(
+        "set layout: sensors file (optional; missing = mounts from [sensors])", default="sensors.csv"
+    )
+    wide_ranges: bool = _doc(
+        "ranges file has one column per sensor (t, r_0, r_1, ...) instead of a row per reading",
+        default=False,
+    )
+    delimiter: str = _doc("field delimiter; 'whitespace' for runs of spaces/tabs", default=",")
+    header: bool = _doc("first line names the columns", default=True)
+    time_unit: Literal["s", "ms", "us", "ns"] = _doc("unit of time columns", default="s")
+    length_unit: Literal["m", "cm", "mm"] = _doc("unit of x, y and ranges", default="m")
+    angle_unit: Literal["rad", "deg", "tenths"] = _doc(
+        "unit of yaw ('tenths' = tenths of a degree)", default="rad"
+    )
+    no_echo_value: float = _doc(
+        "a range equal to this (in length_unit) means no echo (+inf); NaN = none",
+        default=math.nan,
+    )
+
+
+@dataclass(frozen=True)
+class InputConfig:
+    """Which format and topics to read."""
+
+    format: str = _doc("log format; '' = detect from content", default="")
+    range_topics: tuple[str, ...] = _doc("range topics; empty = discover by type", default=())
+    pose_topic: str = _doc("pose topic ('/tf' for tf); '' = discover by type", default="")
+    base_frame: str = _doc("robot base frame (REP 105)", default="base_link")
+    csv: CsvConfig = field(default_factory=CsvConfig)
+
+
+@dataclass(frozen=True)
+class MountConfig:
+    """One sonar: mount in the base frame and beam limits."""
+
+    name: str = _doc("sensor name (frame id of its Range messages)", default="")
+    x: float = _doc("mount x in base frame, m", default=0.0)
+    y: float = _doc("mount y in base frame, m", default=0.0)
+    yaw_deg: float = _doc("beam axis in base frame, degrees", default=0.0)
+    fov_deg: float = _doc("full beam width β, degrees; 0 = from the log", default=0.0)
+    min_range: float = _doc("r_min, m; 0 = from the log", default=0.0)
+    max_range: float = _doc("r_max, m; 0 = from the log", default=0.0)
+
+
+@dataclass(frozen=True)
+class SensorsConfig:
+    """Sensor mounts: explicit entries, a preset, or /tf_static from the log."""
+
+    preset: str = _doc(
+        "mount preset ('pioneer-p3dx', 'udacity-8sonar'); '' = none", default=""
+    )
+    fov_deg: float = _doc("default beam width β where the log has none, degrees", default=0.0)
+    min_range: float = _doc("default r_min where the log has none, m", default=0.0)
+    max_range: float = _doc("default r_max where the log has none, m", default=0.0)
+    mounts: tuple[MountConfig, ...] = ()
+
+
+@dataclass(frozen=True)
+class Config:
+    """Everything a run needs besides the log itself."""
+
+    mapper: MapperConfig = field(default_factory=MapperConfig)
+    grid: GridConfig = field(default_factory=GridConfig)
+    scans: ScanConfig = field(default_factory=ScanConfig)
+    pose_sync: PoseSyncConfig = field(default_factory=PoseSyncConfig)
+    input: InputConfig = field(default_factory=InputConfig)
+    sensors: SensorsConfig = field(default_factory=SensorsConfig)
+
+    def validate(self) -> Config:
+        """Check cross-field rules; raise ConfigError naming the key. Returns self."""
+        _check_ranges(self)
+        return self
+
+    def to_dict(self) -> dict[str, Any]:
+        return _to_plain(self)
+
+    def hash(self) -> str:
+        """sha256 of the canonical JSON of the configuration (first 16 hex digits)."""
+        text = json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"))
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+    def replace(self, **sections: Any) -> Config:
+        return dataclasses.replace(self, **sections)
+
+
+# --------------------------------------------------------------------------- loading
+
+
+def load_config(path: str | Path | None) -> Config:
+    """Load and validate a TOML configuration; ``None`` gives the defaults."""
+    if path is None:
+        return Config().validate()
+    p = Path(path)
+    try:
+        data = tomllib.loads(p.read_text(encoding="utf-8"))
+    except FileNotFoundError as err:
+        raise ConfigError("configuration file not found", p) from err
+    except (OSError, UnicodeDecodeError) as err:
+        raise ConfigError(f"cannot read configuration: {err}", p) from err
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(f"invalid TOML: {err}", p) from err
+    return config_from_dict(data, source=p)
+
+
+def config_from_dict(data: dict[str, Any], source: str | Path | None = None) -> Config:
+    """Build a validated Config from plain data (as parsed from TOML)."""
+    try:
+        cfg = _build(Config, data, "")
+        return cfg.validate()
+    except ConfigError as err:
+        if source is not None and err.path is None:
+            raise ConfigError(err.reason, source) from err
+        raise
+
+
+def _build(cls: type, data: Any, where: str) -> Any:
+    if not isinstance(data, dict):
+        raise ConfigError(f"[{where or 'top level'}] must be a table, got {_tname(data)}")
+    hints = typing.get_type_hints(cls)
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - names)
+    if unknown:
+        known = ", ".join(sorted(names))
+        raise ConfigError(f"unknown key '{_join(where, unknown[0])}' (known: {known})")
+    kwargs = {k: _coerce(hints[k], v, _join(where, k)) for k, v in data.items()}
+    return cls(**kwargs)
+
+
+def _coerce(tp: Any, value: Any, key: str) -> Any:
+    origin = typing.get_origin(tp)
+    if dataclasses.is_dataclass(tp):
+        return _build(tp, value, key)
+    if origin is Literal:
+        allowed = typing.get_args(tp)
+        if value not in allowed:
+            raise ConfigError(f"'{key}' must be one of {list(allowed)}, got {value!r}")
+        return value
+    if origin is tuple:
+        args = typing.get_args(tp)
+        if not isinstance(value, list):
+            raise ConfigError(f"'{key}' must be an array, got {_tname(value)}")
+        item = args[0]
+        if dataclasses.is_dataclass(item):
+            return tuple(_build(item, v, f"{key}[{i}]") for i, v in enumerate(value))
+        return tuple(_coerce(item, v, f"{key}[{i}]") for i, v in enumerate(value))
+    if origin in (typing.Union, types.UnionType):
+        raise ConfigError(f"'{key}': unsupported type")  # pragma: no cover - none declared
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"'{key}' must be true or false, got {value!r}")
+        return value
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"'{key}' must be an integer, got {value!r}")
+        return value
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(f"'{key}' must be a number, got {value!r}")
+        return float(value)
+    if tp is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"'{key}' must be a string, got {value!r}")
+        return value
+    raise ConfigError(f"'{key}': unsupported type {tp}")  # pragma: no cover
+
+
+def _check_ranges(cfg: Config) -> None:
+    m, g, s, ps = cfg.mapper, cfg.grid, cfg.scans, cfg.pose_sync
+
+    def need(ok: bool, key: str, rule: str, value: Any) -> None:
+        if not ok:
+            raise ConfigError(f"'{key}' {rule}, got {value!r}")
+
+    def prob(key: str, v: float) -> None:
+        need(0.0 < v < 1.0, key, "must be a probability in (0, 1)", v)
+
+    need(m.sigma_d0 > 0, "mapper.sigma_d0", "must be > 0", m.sigma_d0)
+    need(m.k_d >= 0, "mapper.k_d", "must be >= 0", m.k_d)
+    need(m.c_a > 0, "mapper.c_a", "must be > 0", m.c_a)
+    need(m.eps_max >= 0, "mapper.eps_max", "must be >= 0", m.eps_max)
+    need(m.match_distance > 0, "mapper.match_distance", "must be > 0", m.match_distance)
+    need(m.kappa_free >= 0, "mapper.kappa_free", "must be >= 0", m.kappa_free)
+    need(m.n_particles >= 3, "mapper.n_particles", "must be >= 3", m.n_particles)
+    need(0 < m.keep_fraction < 1, "mapper.keep_fraction", "must be in (0, 1)", m.keep_fraction)
+    need(m.protect_times >= 1, "mapper.protect_times", "must be >= 1", m.protect_times)
+    need(m.sigma_min >= 0, "mapper.sigma_min", "must be >= 0", m.sigma_min)
+    for key in ("p_free", "p_clamp_min", "p_clamp_max", "p_occ", "classic_p_occ"):
+        prob(f"mapper.{key}", getattr(m, key))
+    need(m.p_free < 0.5, "mapper.p_free", "must be < 0.5 (a free observation)", m.p_free)
+    need(m.p_occ > 0.5, "mapper.p_occ", "must be > 0.5", m.p_occ)
+    need(m.classic_p_occ > 0.5, "mapper.classic_p_occ", "must be > 0.5", m.classic_p_occ)
+    need(
+        m.p_clamp_min < 0.5 < m.p_clamp_max,
+        "mapper.p_clamp_min",
+        "must be < 0.5 < p_clamp_max",
+        (m.p_clamp_min, m.p_clamp_max),
+    )
+    need(
+        m.classic_thickness_cells > 0,
+        "mapper.classic_thickness_cells",
+        "must be > 0",
+        m.classic_thickness_cells,
+    )
+    need(g.resolution > 0, "grid.resolution", "must be > 0", g.resolution)
+    need(g.margin >= 0, "grid.margin", "must be >= 0", g.margin)
+    need(g.max_cells > 0, "grid.max_cells", "must be > 0", g.max_cells)
+    if g.extent:
+        need(len(g.extent) == 4, "grid.extent", "must be [xmin, ymin, xmax, ymax]", g.extent)
+        x0, y0, x1, y1 = g.extent
+        need(x0 < x1 and y0 < y1, "grid.extent", "must have xmin < xmax and ymin < ymax", g.extent)
+    need(s.window_s > 0, "scans.window_s", "must be > 0", s.window_s)
+    need(s.max_travel_m > 0, "scans.max_travel_m", "must be > 0", s.max_travel_m)
+    need(s.max_turn_deg > 0, "scans.max_turn_deg", "must be > 0", s.max_turn_deg)
+    need(ps.max_pose_gap_s > 0, "pose_sync.max_pose_gap_s", "must be > 0", ps.max_pose_gap_s)
+    need(math.isfinite(ps.time_offset_s), "pose_sync.time_offset_s", "must be finite", ps.time_offset_s)
+    sc = cfg.sensors
+    need(0 <= sc.fov_deg < 180, "sensors.fov_deg", "must be in [0, 180)", sc.fov_deg)
+    _check_limits("sensors", sc.min_range, sc.max_range)
+    for i, mt in enumerate(sc.mounts):
+        key = f"sensors.mounts[{i}]"
+        need(bool(mt.name), f"{key}.name", "must be set", mt.name)
+        need(0 <= mt.fov_deg < 180, f"{key}.fov_deg", "must be in [0, 180)", mt.fov_deg)
+        _check_limits(key, mt.min_range, mt.max_range)
+    names = [mt.name for mt in sc.mounts]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    need(not dup, "sensors.mounts", "has duplicate names", dup)
+    if sc.preset:
+        from pipeline.presets import PRESETS
+
+        need(sc.preset in PRESETS, "sensors.preset", f"must be one of {sorted(PRESETS)}", sc.preset)
+    csv = cfg.input.csv
+    need(bool(csv.delimiter), "input.csv.delimiter", "must not be empty", csv.delimiter)
+
+
+def _check_limits(key: str, lo: float, hi: float) -> None:
+    if lo < 0 or hi < 0:
+        raise ConfigError(f"'{key}.min_range/max_range' must be >= 0, got {(lo, hi)!r}")
+    if lo > 0 and hi > 0 and not lo < hi:
+        raise ConfigError(f"'{key}.min_range' must be < max_range, got {(lo, hi)!r}")
+
+
+def _join(where: str, key: str) -> str:
+    return f"{where}.{key}" if where else key
+
+
+def _tname(v: Any) -> str:
+    return type(v).__name__
+
+
+def _to_plain(obj: Any) -> Any:
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return {f.name: _to_plain(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+    if isinstance(obj, tuple):
+        return [_to_plain(v) for v in obj]
+    if isinstance(obj, float) and math.isnan(obj):
+        return "nan"
+    return obj
+
+
+# --------------------------------------------------------------------------- dumping
+
+
+def dump_config(cfg: Config, *, comments: bool = True) -> str:
+    """The configuration as a TOML document, each key preceded by its doc comment."""
+    lines: list[str] = []
+    if comments:
+        lines += [
+            "# sonarmap configuration. Every key is optional; shown are the values in effect.",
+            "# Load with: sonarmap run LOG -o OUT --config this.toml",
+            "",
+        ]
+    _dump_table(cfg, "", lines, comments)
+    return "\n".join(lines).rstrip() + "\n"
+
+
+def _dump_table(obj: Any, prefix: str, lines: list[str], comments: bool) -> None:
+    scalars = []
+    tables = []
+    arrays = []
+    for f in dataclasses.fields(obj):
+        v = getattr(obj, f.name)
+        if dataclasses.is_dataclass(v):
+            tables.append((f, v))
+        elif isinstance(v, tuple) and v and dataclasses.is_dataclass(v[0]):
+            arrays.append((f, v))
+        else:
+            scalars.append((f, v))
+    if prefix and (scalars or not tables):
+        lines.append(f"[{prefix}]")
+    for f, v in scalars:
+        if comments and f.metadata.get("doc"):
+            lines.append(f"# {f.metadata['doc']}")
+        lines.append(f"{f.name} = {_toml_value(v)}")
+    if prefix and scalars:
+        lines.append("")
+    for f, v in tables:
+        _dump_table(v, _join(prefix, f.name), lines, comments)
+    for f, items in arrays:
+        for item in items:
+            lines.append(f"[[{_join(prefix, f.name)}]]")
+            for g in dataclasses.fields(item):
+                lines.append(f"{g.name} = {_toml_value(getattr(item, g.name))}")
+            lines.append("")
+
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float):
+        if math.isnan(v):
+            return "nan"
+        if math.isinf(v):
+            return "inf" if v > 0 else "-inf"
+        return repr(v)
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, tuple):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    raise TypeError(f"cannot write {v!r} as TOML")  # pragma: no cover
