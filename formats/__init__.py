@@ -1,0 +1,112 @@
+"""Readers and writers of the logs and maps sonarmap works with.
+
+Entry point: :func:`open_log` returns a :class:`~formats.contract.LogReader` for any
+supported log. The format is detected from the content (magic bytes, a rosbag2
+``metadata.yaml``, a CSV header), not from the suffix; ``format=`` overrides the guess.
+The registry :data:`FORMATS` maps each format name to the function that opens it: an
+explicit table, no plugin discovery.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+from formats.contract import LogReader
+from pipeline.config import Config
+from pipeline.errors import FormatError
+
+ROS1_MAGIC = b"#ROSBAG V2.0\n"
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+SQLITE_MAGIC = b"SQLite format 3\x00"
+ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
+
+
+def _open_ros1(path: Path, config: Config) -> LogReader:
+    from formats.ros.reader import RosLogReader
+    from formats.ros.ros1bag import Ros1BagSource
+
+    return RosLogReader(Ros1BagSource(path), config)
+
+
+def _open_ros2(path: Path, config: Config) -> LogReader:
+    from formats.ros.reader import RosLogReader
+    from formats.ros.ros2bag import Ros2BagSource
+
+    return RosLogReader(Ros2BagSource(path), config)
+
+
+def _open_mcap(path: Path, config: Config) -> LogReader:
+    from formats.ros.mcap_source import McapSource
+    from formats.ros.reader import RosLogReader
+
+    return RosLogReader(McapSource(path), config)
+
+
+def _open_csv(path: Path, config: Config) -> LogReader:
+    from formats.csv_log import CsvLogReader
+
+    return CsvLogReader(path, config)
+
+
+FORMATS: dict[str, Callable[[Path, Config], LogReader]] = {
+    "ros1": _open_ros1,
+    "ros2": _open_ros2,
+    "mcap": _open_mcap,
+    "csv": _open_csv,
+}
+
+
+def detect_format(path: str | Path) -> str:
+    """The format name of a log, from its content. Raises FormatError when unknown."""
+    p = Path(path)
+    if not p.exists():
+        raise FormatError("no such file or directory", p)
+    if p.is_dir():
+        if (p / "metadata.yaml").is_file():
+            return "ros2"
+        from formats.csv_log import looks_like_csv
+
+        if looks_like_csv(p):
+            return "csv"
+        raise FormatError(
+            "directory is neither a rosbag2 bag (no metadata.yaml) nor a CSV log set", p
+        )
+    try:
+        with p.open("rb") as f:
+            head = f.read(64)
+    except OSError as err:
+        raise FormatError(f"cannot read: {err.strerror or err}", p) from err
+    if not head:
+        raise FormatError("empty file (0 bytes)", p)
+    if head.startswith(ROS1_MAGIC):
+        return "ros1"
+    if head.startswith(MCAP_MAGIC):
+        # A single MCAP file inside a rosbag2 directory is read as the bag.
+        return "ros2" if (p.parent / "metadata.yaml").is_file() else "mcap"
+    if head.startswith(SQLITE_MAGIC) or head.startswith(ZSTD_MAGIC):
+        return "ros2"
+    if head.startswith(b"#ROSBAG"):
+        version = head.split(b"\n", 1)[0].decode("ascii", "replace")
+        raise FormatError(f"unsupported ROS bag version '{version}' (need V2.0)", p)
+    from formats.csv_log import looks_like_csv
+
+    if looks_like_csv(p):
+        return "csv"
+    raise FormatError(
+        f"unknown log format (starts with {head[:12]!r}); "
+        f"expected a ROS 1 bag, ROS 2 bag, MCAP or CSV (or pass --format)",
+        p,
+    )
+
+
+def open_log(path: str | Path, format: str | None = None, config: Config | None = None) -> LogReader:
+    """Open a log for reading; ``format`` (a key of FORMATS) overrides detection."""
+    p = Path(path)
+    cfg = config if config is not None else Config()
+    name = format or cfg.input.format or detect_format(p)
+    if name not in FORMATS:
+        raise FormatError(f"unknown format '{name}' (known: {', '.join(sorted(FORMATS))})", p)
+    if not p.exists():
+        raise FormatError("no such file or directory", p)
+    return FORMATS[name](p, cfg)

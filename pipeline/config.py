@@ -151,8 +151,8 @@ class CsvConfig:
         "unit of yaw ('tenths' = tenths of a degree)", default="rad"
     )
     no_echo_value: float = _doc(
-        "a range equal to this (in length_unit) means no echo (+inf); NaN = none",
-        default=math.nan,
+        "a range equal to this (in length_unit) means no echo (+inf); negative = none",
+        default=-1.0,
     )
 
 
@@ -266,7 +266,7 @@ def _build(cls: type, data: Any, where: str) -> Any:
 
 def _coerce(tp: Any, value: Any, key: str) -> Any:
     origin = typing.get_origin(tp)
-    if dataclasses.is_dataclass(tp):
+    if isinstance(tp, type) and dataclasses.is_dataclass(tp):
         return _build(tp, value, key)
     if origin is Literal:
         allowed = typing.get_args(tp)
@@ -278,7 +278,7 @@ def _coerce(tp: Any, value: Any, key: str) -> Any:
         if not isinstance(value, list):
             raise ConfigError(f"'{key}' must be an array, got {_tname(value)}")
         item = args[0]
-        if dataclasses.is_dataclass(item):
+        if isinstance(item, type) and dataclasses.is_dataclass(item):
             return tuple(_build(item, v, f"{key}[{i}]") for i, v in enumerate(value))
         return tuple(_coerce(item, v, f"{key}[{i}]") for i, v in enumerate(value))
     if origin in (typing.Union, types.UnionType):

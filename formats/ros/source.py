@@ -19,7 +19,8 @@ from typing import Literal, Protocol
 import numpy as np
 import numpy.typing as npt
 
-Encoding = Literal["ros1", "cdr"]
+# "other": an MCAP channel in another encoding (json, protobuf, ...): listed, not decodable.
+Encoding = Literal["ros1", "cdr", "other"]
 
 
 @dataclass(frozen=True)

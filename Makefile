@@ -1,0 +1,41 @@
+# sonarmap: `make demo` maps a sample log, `make test` runs lint, types and tests.
+# Both create .venv with everything the project needs on first use (Python 3.11+ and pip).
+
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed-stamp
+DEMO_LOG := sample_logs/office/office.mcap
+DEMO_OUT := demo_out/office
+
+.PHONY: setup demo test lint typecheck unit bench fuzz goldens clean
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -c 'import sys; sys.exit("sonarmap needs Python 3.11+") if sys.version_info < (3, 11) else None'
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e ".[dev,bench]"
+	touch $(STAMP)
+
+setup: $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/sonarmap run $(DEMO_LOG) -o $(DEMO_OUT) --force --compare-correction
+	@echo "open $(DEMO_OUT)/report.html (map: $(DEMO_OUT)/map.png, nav2: $(DEMO_OUT)/map.yaml)"
+
+lint: $(STAMP)
+	$(BIN)/ruff check pipeline formats cli tests benchmarks
+
+typecheck: $(STAMP)
+	$(BIN)/mypy
+
+unit: $(STAMP)
+	$(BIN)/python -m pytest -q -n 2
+
+test: lint typecheck unit
+
+bench: $(STAMP)
+	$(BIN)/python -m benchmarks
+
+clean:
+	rm -rf $(VENV) demo_out build *.egg-info .pytest_cache .mypy_cache .ruff_cache

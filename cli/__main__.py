@@ -1,0 +1,5 @@
+"""``python -m cli`` runs the sonarmap command line."""
+
+from cli.app import main
+
+main()

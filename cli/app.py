@@ -1,0 +1,290 @@
+"""The ``sonarmap`` command line (typer). Heavy imports live inside the commands, so that
+``sonarmap --help`` is instant. Errors become exit codes only in :mod:`cli.errors`."""
+
+from __future__ import annotations
+
+import json
+import logging
+import sys
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated, Any, Optional
+
+import typer
+
+from cli.errors import EXIT_FAILURE, handle_errors
+
+if TYPE_CHECKING:
+    from pipeline.config import Config
+
+app = typer.Typer(
+    name="sonarmap",
+    help="Probabilistic 2-D maps from sonar logs (MCAP, ROS 1 bags, ROS 2 bags, CSV).",
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    rich_markup_mode=None,
+    context_settings={"help_option_names": ["-h", "--help"]},
+)
+
+ConfigOpt = Annotated[
+    Optional[Path],
+    typer.Option("--config", "-c", help="TOML configuration file (see `sonarmap config`).",
+                 dir_okay=False),
+]
+FormatOpt = Annotated[
+    Optional[str],
+    typer.Option("--format", "-f", help="Log format: ros1, ros2, mcap, csv (default: detect)."),
+]
+RangeTopicOpt = Annotated[
+    Optional[list[str]],
+    typer.Option("--range-topic", help="Range topic to map (repeatable; default: discover)."),
+]
+PoseTopicOpt = Annotated[
+    Optional[str],
+    typer.Option("--pose-topic", help="Pose topic (Odometry/PoseStamped or /tf)."),
+]
+JsonOpt = Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")]
+LogArg = Annotated[Path, typer.Argument(help="Log file or bag directory.", show_default=False)]
+
+
+def _version(value: bool) -> None:
+    if value:
+        from pipeline import __version__
+
+        typer.echo(f"sonarmap {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: Annotated[
+        bool,
+        typer.Option("--version", callback=_version, is_eager=True, help="Print the version."),
+    ] = False,
+    verbose: Annotated[int, typer.Option("--verbose", "-v", count=True, help="More log output.")] = 0,
+) -> None:
+    """sonarmap: map sonar logs with Andersone's probabilistic feature method."""
+    level = logging.WARNING if verbose == 0 else logging.INFO if verbose == 1 else logging.DEBUG
+    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr)
+
+
+def _load(
+    config: Path | None,
+    *,
+    format: str | None = None,
+    range_topics: list[str] | None = None,
+    pose_topic: str | None = None,
+    method: str | None = None,
+    resolution: float | None = None,
+) -> Config:
+    """The configuration file plus command-line overrides, validated."""
+    import dataclasses
+
+    from pipeline.config import load_config
+
+    cfg = load_config(config)
+    inp = cfg.input
+    if format:
+        inp = dataclasses.replace(inp, format=format)
+    if range_topics:
+        inp = dataclasses.replace(inp, range_topics=tuple(range_topics))
+    if pose_topic:
+        inp = dataclasses.replace(inp, pose_topic=pose_topic)
+    mapper = cfg.mapper
+    if method:
+        mapper = dataclasses.replace(mapper, method=method)  # type: ignore[arg-type]
+    grid = cfg.grid
+    if resolution is not None:
+        grid = dataclasses.replace(grid, resolution=resolution)
+    return cfg.replace(input=inp, mapper=mapper, grid=grid).validate()
+
+
+@app.command()
+@handle_errors
+def run(
+    log: LogArg,
+    output: Annotated[Path, typer.Option("--output", "-o", help="Output directory (must not exist).")],
+    config: ConfigOpt = None,
+    format: FormatOpt = None,
+    range_topic: RangeTopicOpt = None,
+    pose_topic: PoseTopicOpt = None,
+    method: Annotated[
+        Optional[str],
+        typer.Option("--method", "-m", help="andersone (the paper's method) or classic."),
+    ] = None,
+    resolution: Annotated[
+        Optional[float], typer.Option("--resolution", "-r", help="Grid cell size, m.")
+    ] = None,
+    compare_correction: Annotated[
+        bool,
+        typer.Option("--compare-correction", help="Also map without feature correction; report both."),
+    ] = False,
+    force: Annotated[bool, typer.Option("--force", help="Replace an existing output directory.")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar or summary.")] = False,
+) -> None:
+    """Map a log: writes map.pgm/map.yaml (nav2), map.png, features.parquet, metrics.json,
+    config.toml and report.html/report.md into OUTPUT.
+
+    Examples:
+
+      sonarmap run sample_logs/office.mcap -o out/office
+
+      sonarmap run robot.bag -o out/robot --range-topic /sonar --pose-topic /odom
+
+      sonarmap run log.csv -o out/log --config sonarmap.toml --method classic --force
+    """
+    from pipeline.run import run as run_pipeline
+
+    if method is not None and method not in ("andersone", "classic"):
+        raise typer.BadParameter("must be 'andersone' or 'classic'", param_hint="--method")
+    cfg = _load(config, format=format, range_topics=range_topic, pose_topic=pose_topic,
+                method=method, resolution=resolution)
+    if quiet:
+        result = run_pipeline(log, output, cfg, force=force, compare_correction=compare_correction)
+    else:
+        from cli.progress import reading_progress
+
+        with reading_progress() as progress:
+            result = run_pipeline(log, output, cfg, force=force,
+                                  compare_correction=compare_correction, progress=progress)
+    if not quiet:
+        m = result.metrics
+        pm = m.paper_metric
+        typer.echo(
+            f"mapped {m.counts['readings']} readings into {m.counts['features']} features; "
+            f"mean feature variance {_fmt(pm['mean_feature_variance_m2'])} m²; "
+            f"{m.map['cells_occupied']} occupied / {m.map['cells_free']} free cells"
+        )
+        typer.echo(f"outputs in {result.out_dir}")
+
+
+def _fmt(v: Any) -> str:
+    return "n/a" if v is None or v != v else f"{v:.3g}"
+
+
+@app.command()
+@handle_errors
+def info(
+    log: LogArg,
+    config: ConfigOpt = None,
+    format: FormatOpt = None,
+    json_out: JsonOpt = False,
+) -> None:
+    """Describe a log like `ros2 bag info`, plus what sonarmap found in it.
+
+    Examples:
+
+      sonarmap info robot.bag
+
+      sonarmap info rosbag2_dir --json
+    """
+    import dataclasses
+
+    from formats import open_log
+
+    cfg = _load(config, format=format)
+    with open_log(log, format, cfg) as reader:
+        li = reader.info()
+    if json_out:
+        typer.echo(json.dumps(dataclasses.asdict(li) | {"duration_s": li.duration_s}, indent=2))
+        return
+    typer.echo(_info_table(li))
+
+
+def _info_table(li: Any) -> str:
+    def stamp(ns: int | None) -> str:
+        if ns is None:
+            return "-"
+        import datetime as dt
+
+        t = dt.datetime.fromtimestamp(ns / 1e9, tz=dt.UTC)
+        return f"{t:%Y-%m-%d %H:%M:%S}.{ns % 1_000_000_000:09d} UTC ({ns / 1e9:.9f})"
+
+    lines = [
+        f"Files:        {li.path}",
+        f"Format:       {li.format}",
+        f"Duration:     {li.duration_s:.3f} s",
+        f"Start:        {stamp(li.start_ns)}",
+        f"End:          {stamp(li.end_ns)}",
+        f"Messages:     {li.message_count}",
+        f"Topics:       {len(li.topics)}",
+    ]
+    width = max([len(t.name) for t in li.topics] + [5])
+    for t in li.topics:
+        role = f"  [{t.role}]" if t.role else ""
+        lines.append(f"  {t.name:<{width}}  {t.msgtype:<40} {t.count:>8} msgs  {t.encoding}{role}")
+    lines.append(f"Range topics: {', '.join(li.range_topics) or '-'}")
+    lines.append(f"Pose source:  {li.pose_topic or '-'}")
+    lines += [f"Note:         {n}" for n in li.notes]
+    return "\n".join(lines)
+
+
+@app.command()
+@handle_errors
+def validate(
+    log: LogArg,
+    config: ConfigOpt = None,
+    format: FormatOpt = None,
+    range_topic: RangeTopicOpt = None,
+    pose_topic: PoseTopicOpt = None,
+    json_out: JsonOpt = False,
+) -> None:
+    """Check a log for what breaks sonar maps: stamps going backwards, clock skew, pose
+    gaps, readings outside pose coverage, NaN/±Inf/negative/out-of-limit ranges (REP 117),
+    sensors without a mount, stuck sensors. Exit 0 when clean (warnings allowed), 1 on errors.
+
+    Examples:
+
+      sonarmap validate robot.bag
+
+      sonarmap validate log.mcap --json
+    """
+    from formats import open_log
+    from pipeline.validate import validate_log
+
+    cfg = _load(config, format=format, range_topics=range_topic, pose_topic=pose_topic)
+    with open_log(log, format, cfg) as reader:
+        report = validate_log(reader, cfg)
+    if json_out:
+        typer.echo(json.dumps(report.to_dict(), indent=2))
+    else:
+        typer.echo(report.format_table())
+    if not report.ok:
+        raise typer.Exit(EXIT_FAILURE)
+
+
+@app.command("config")
+@handle_errors
+def config_cmd(
+    config: ConfigOpt = None,
+    output: Annotated[
+        Optional[Path], typer.Option("--output", "-o", help="Write to this file instead of stdout.")
+    ] = None,
+) -> None:
+    """Print the configuration (defaults, or a file's effective values) as commented TOML.
+
+    Examples:
+
+      sonarmap config > sonarmap.toml
+
+      sonarmap config --config mine.toml
+    """
+    from formats.writers.atomic import atomic_write_text
+    from pipeline.config import dump_config, load_config
+    from pipeline.errors import OutputError
+
+    text = dump_config(load_config(config))
+    if output is None:
+        typer.echo(text, nl=False)
+        return
+    if output.exists():
+        raise OutputError("exists already, not overwriting", output)
+    atomic_write_text(output, text)
+
+
+def main() -> None:
+    """Console entry point."""
+    app()
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

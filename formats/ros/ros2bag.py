@@ -1,0 +1,390 @@
+"""ROS 2 bags (rosbag2: sqlite3 or MCAP storage) as a :class:`MessageSource`.
+
+A bag is a directory with ``metadata.yaml`` (versions 4-9) and one or more storage files,
+or a single ``.db3`` / ``.mcap`` file (optionally ``.zstd``-compressed) read without one.
+Topics and their ids always come from the storage files themselves: metadata topic
+order does not match the storage ids in real bags. Split bags are read file by file in
+``relative_file_paths`` order (sorted names without metadata); topics are merged across
+files by (name, type, definition). Compression: whole files (``compression_mode: FILE``) are
+decompressed to a temporary directory; per-message zstd (``MESSAGE``) on the fly.
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+import sqlite3
+import tempfile
+import weakref
+from collections.abc import Collection, Iterator
+from dataclasses import replace
+from pathlib import Path
+from typing import Any, Protocol
+from urllib.parse import quote
+
+import numpy as np
+import yaml
+
+from formats.ros.mcap_source import McapSource, normalize_msgtype
+from formats.ros.source import Connection, Encoding, RawBatch
+from pipeline.errors import FormatError
+
+_STORAGE_SUFFIXES = {".db3": "sqlite3", ".mcap": "mcap"}
+# Rows fetched from sqlite per batch: bounded memory whatever the bag size.
+SQLITE_BATCH_ROWS = 4096
+
+
+class _StorageFile(Protocol):
+    path: Path
+
+    @property
+    def connections(self) -> list[Connection]: ...
+
+    @property
+    def start_ns(self) -> int | None: ...
+
+    @property
+    def end_ns(self) -> int | None: ...
+
+    @property
+    def warnings(self) -> list[str]: ...
+
+    def raw_batches(self, connection_ids: Collection[int]) -> Iterator[RawBatch]: ...
+
+    def close(self) -> None: ...
+
+
+class Sqlite3File:
+    """One rosbag2 ``.db3`` file (old schema without definitions, or with
+    ``message_definitions``); connection ids are the ``topics`` table ids."""
+
+    def __init__(self, path: Path, display: Path | None = None) -> None:
+        self.path = path
+        self._name = display or path  # the path to name in errors (not a temp copy)
+        self._warnings: list[str] = []
+        if not path.is_file() or path.stat().st_size == 0:
+            what = "empty file (0 bytes)" if path.is_file() else "missing file"
+            raise FormatError(f"{what}, not a rosbag2 sqlite3 database", self._name)
+        uri = f"file:{quote(str(path.resolve()))}?mode=ro"
+        try:
+            self._db = sqlite3.connect(uri, uri=True, check_same_thread=False)
+        except sqlite3.Error as err:
+            raise FormatError(f"cannot open sqlite3 database: {err}", self._name) from err
+        try:
+            self._load()
+        except sqlite3.Error as err:
+            self._db.close()
+            raise FormatError(
+                f"not a readable rosbag2 sqlite3 database: {err}", self._name
+            ) from err
+        except BaseException:
+            self._db.close()
+            raise
+
+    def _load(self) -> None:
+        db = self._db
+        tables = {r[0] for r in db.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+        if not {"topics", "messages"} <= tables:
+            raise FormatError(
+                f"not a rosbag2 database: tables {sorted(tables)}, expected topics and messages",
+                self._name,
+            )
+        defs: dict[str, tuple[str, str]] = {}
+        if "message_definitions" in tables:
+            for typ, enc, text in db.execute(
+                "SELECT topic_type, encoding, encoded_message_definition FROM message_definitions"
+            ):
+                if typ and enc in ("ros2msg", "ros2idl"):
+                    defs[str(typ)] = (str(text), str(enc))
+        counts = dict(db.execute("SELECT topic_id, COUNT(*) FROM messages GROUP BY topic_id"))
+        t0, t1 = db.execute("SELECT MIN(timestamp), MAX(timestamp) FROM messages").fetchone()
+        self._start = None if t0 is None else int(t0)
+        self._end = None if t1 is None else int(t1)
+        self._connections: dict[int, Connection] = {}
+        for tid, name, typ, fmt in db.execute(
+            "SELECT id, name, type, serialization_format FROM topics ORDER BY id"
+        ):
+            msgdef, deffmt = defs.get(str(typ), ("", ""))
+            self._connections[int(tid)] = Connection(
+                id=int(tid),
+                topic=str(name),
+                msgtype=normalize_msgtype(str(typ)),
+                encoding=_encoding(str(fmt)),
+                msgdef=msgdef,
+                msgdef_format=deffmt,
+                count=int(counts.get(tid, 0)),
+            )
+
+    @property
+    def connections(self) -> list[Connection]:
+        return list(self._connections.values())
+
+    @property
+    def start_ns(self) -> int | None:
+        return self._start
+
+    @property
+    def end_ns(self) -> int | None:
+        return self._end
+
+    @property
+    def warnings(self) -> list[str]:
+        return self._warnings
+
+    def raw_batches(self, connection_ids: Collection[int]) -> Iterator[RawBatch]:
+        """Messages ordered by (timestamp, id), SQLITE_BATCH_ROWS rows at a time; each page
+        becomes one batch per topic sharing one buffer."""
+        ids = sorted({int(c) for c in connection_ids} & set(self._connections))
+        if not ids:
+            return
+        marks = ",".join("?" * len(ids))
+        # The timestamp index stores (timestamp, rowid): this streams without sorting.
+        cur = self._db.execute(
+            f"SELECT topic_id, timestamp, data FROM messages WHERE topic_id IN ({marks}) "
+            "ORDER BY timestamp, id",
+            ids,
+        )
+        done = 0
+        while True:
+            try:
+                rows = cur.fetchmany(SQLITE_BATCH_ROWS)
+            except sqlite3.Error as err:
+                self._warnings.append(
+                    f"database is corrupt after {done} messages ({err});"
+                    " the rest of this file is lost"
+                )
+                return
+            if not rows:
+                return
+            done += len(rows)
+            tids = np.fromiter((r[0] for r in rows), np.int64, len(rows))
+            times = np.fromiter((r[1] for r in rows), np.int64, len(rows))
+            blobs = [r[2] for r in rows]
+            lengths = np.fromiter(map(len, blobs), np.int64, len(rows))
+            offsets = np.cumsum(lengths) - lengths
+            buf = np.frombuffer(b"".join(blobs), np.uint8)
+            for tid in ids:
+                sel = np.flatnonzero(tids == tid)
+                if sel.size:
+                    yield RawBatch(
+                        self._connections[tid], times[sel], buf, offsets[sel], lengths[sel]
+                    )
+
+    def close(self) -> None:
+        self._db.close()
+
+
+def _encoding(fmt: str) -> Encoding:
+    if fmt in ("cdr", "ros1"):
+        return fmt  # type: ignore[return-value]
+    return "other"
+
+
+class Ros2BagSource:
+    """A rosbag2 bag directory, or a single storage file.
+
+    ``format_name`` is ``'ros2-sqlite3'`` or ``'ros2-mcap'``.
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self._warnings: list[str] = []
+        self._files: list[_StorageFile] = []
+        self._tmpdir: Path | None = None
+        self._finalizer: Any = None
+        try:
+            self._open()
+        except BaseException:
+            self.close()
+            raise
+
+    # -- opening -------------------------------------------------------------------------
+
+    def _open(self) -> None:
+        path = self.path
+        compression_mode = ""
+        if path.is_dir():
+            meta = path / "metadata.yaml"
+            if meta.is_file():
+                storage, names, compression_mode = self._read_metadata(meta)
+                files = [path / n for n in names]
+            else:
+                files = sorted(
+                    (p for p in path.iterdir() if _storage_of(p) is not None),
+                    key=_natural_key,
+                )
+                if not files:
+                    raise FormatError("no metadata.yaml and no .db3/.mcap files", path)
+                kinds = {_storage_of(p) for p in files}
+                if len(kinds) > 1:
+                    raise FormatError("both .db3 and .mcap files and no metadata.yaml", path)
+                storage = str(kinds.pop())
+        elif path.is_file():
+            kind = _storage_of(path)
+            if kind is None:
+                raise FormatError(
+                    "not a ROS 2 bag: expected a directory, .db3, .mcap (or .zstd of those)",
+                    path,
+                )
+            storage, files = kind, [path]
+        else:
+            raise FormatError("no such file or directory", path)
+        for f in files:
+            if not f.is_file():
+                raise FormatError(f"storage file {f.name} listed in the bag is missing", f)
+        self.format_name = f"ros2-{storage}"
+        self._message_zstd = compression_mode == "MESSAGE"
+        for f in files:
+            local = self._decompressed(f) if f.suffix == ".zstd" else f
+            self._files.append(
+                McapSource(local) if storage == "mcap" else Sqlite3File(local, display=f)
+            )
+        self._merge()
+
+    def _read_metadata(self, meta: Path) -> tuple[str, list[str], str]:
+        try:
+            doc = yaml.safe_load(meta.read_text("utf-8"))
+            info = doc["rosbag2_bagfile_information"]
+            version = int(info["version"])
+            storage = str(info.get("storage_identifier") or "sqlite3")
+            names = [str(n) for n in info["relative_file_paths"]]
+            mode = str(info.get("compression_mode") or "").upper()
+            fmt = str(info.get("compression_format") or "")
+        except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError) as err:
+            raise FormatError(f"unreadable rosbag2 metadata ({_reason(err)})", meta) from err
+        if version < 1 or version > 9:
+            raise FormatError(f"unsupported rosbag2 metadata version {version}", meta)
+        if storage not in ("sqlite3", "mcap"):
+            raise FormatError(f"unsupported storage {storage!r} (sqlite3, mcap)", meta)
+        if mode not in ("", "NONE", "FILE", "MESSAGE"):
+            raise FormatError(f"unsupported compression_mode {mode!r}", meta)
+        if mode in ("FILE", "MESSAGE") and fmt != "zstd":
+            raise FormatError(f"unsupported compression_format {fmt!r} (zstd)", meta)
+        return storage, names, mode
+
+    def _decompressed(self, src: Path) -> Path:
+        """A zstd-compressed storage file decompressed into this source's temp dir."""
+        import zstandard
+
+        if self._tmpdir is None:
+            self._tmpdir = Path(tempfile.mkdtemp(prefix="sonarmap-ros2-"))
+            self._finalizer = weakref.finalize(self, shutil.rmtree, self._tmpdir, True)
+        dst = self._tmpdir / src.name[: -len(".zstd")]
+        try:
+            with src.open("rb") as fin, dst.open("wb") as fout:
+                zstandard.ZstdDecompressor().copy_stream(fin, fout)
+        except (OSError, zstandard.ZstdError) as err:
+            raise FormatError(f"cannot decompress zstd file ({_reason(err)})", src) from err
+        if dst.stat().st_size == 0:
+            raise FormatError("cannot decompress zstd file (no data in it)", src)
+        return dst
+
+    def _merge(self) -> None:
+        """One connection per (topic, type, encoding, definition) over all files; ids from
+        the first file that has it, new ids after the largest for ones that appear later."""
+        self._map: list[dict[int, int]] = []  # per file: storage id → our id
+        merged: dict[tuple[str, str, str, str], Connection] = {}
+        for f in self._files:
+            taken = {c.id for c in merged.values()}
+            local: dict[int, int] = {}
+            for c in f.connections:
+                # The definition is part of the key: decoders must see each file's own.
+                key = (c.topic, c.msgtype, c.encoding, c.msgdef)
+                have = merged.get(key)
+                if have is None:
+                    cid = c.id if c.id not in taken else max(taken | {0}) + 1
+                    taken.add(cid)
+                    merged[key] = replace(c, id=cid)
+                else:
+                    merged[key] = replace(have, count=have.count + c.count)
+                local[c.id] = merged[key].id
+            self._map.append(local)
+        self._connections = {c.id: c for c in sorted(merged.values(), key=lambda c: c.id)}
+        starts = [f.start_ns for f in self._files if f.start_ns is not None]
+        ends = [f.end_ns for f in self._files if f.end_ns is not None]
+        self._start = min(starts) if starts else None
+        self._end = max(ends) if ends else None
+
+    # -- MessageSource -------------------------------------------------------------------
+
+    @property
+    def connections(self) -> list[Connection]:
+        return list(self._connections.values())
+
+    @property
+    def start_ns(self) -> int | None:
+        return self._start
+
+    @property
+    def end_ns(self) -> int | None:
+        return self._end
+
+    @property
+    def warnings(self) -> list[str]:
+        out = list(self._warnings)
+        for f in self._files:
+            out += [f"{f.path.name}: {w}" for w in f.warnings]
+        return out
+
+    def raw_batches(self, connection_ids: Collection[int]) -> Iterator[RawBatch]:
+        """Messages of the given connections, file by file, in log order within a file."""
+        wanted = {int(c) for c in connection_ids}
+        for f, local in zip(self._files, self._map, strict=True):
+            ids = [sid for sid, cid in local.items() if cid in wanted]
+            if not ids:
+                continue
+            for raw in f.raw_batches(ids):
+                conn = self._connections[local[raw.connection.id]]
+                if self._message_zstd:
+                    raw = _decompress_messages(raw)
+                yield RawBatch(conn, raw.log_time_ns, raw.buffer, raw.offsets, raw.lengths)
+
+    def close(self) -> None:
+        for f in self._files:
+            f.close()
+        self._files = []
+        if self._finalizer is not None:
+            self._finalizer()
+
+    def __enter__(self) -> Ros2BagSource:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _decompress_messages(raw: RawBatch) -> RawBatch:
+    """The batch with every message zstd-decompressed (``compression_mode: MESSAGE``)."""
+    import zstandard
+
+    dec = zstandard.ZstdDecompressor()
+    out: list[bytes] = []
+    for i in range(len(raw)):
+        try:
+            out.append(dec.decompress(raw.message(i)))
+        except zstandard.ZstdError as err:
+            raise FormatError(
+                f"message {i} of topic {raw.connection.topic}: bad zstd compression ({err})"
+            ) from err
+    lengths = np.fromiter(map(len, out), np.int64, len(out))
+    return RawBatch(
+        raw.connection,
+        raw.log_time_ns,
+        np.frombuffer(b"".join(out), np.uint8),
+        np.cumsum(lengths) - lengths,
+        lengths,
+    )
+
+
+def _storage_of(p: Path) -> str | None:
+    name = p.name[: -len(".zstd")] if p.name.endswith(".zstd") else p.name
+    return _STORAGE_SUFFIXES.get(Path(name).suffix) if p.is_file() else None
+
+
+def _natural_key(p: Path) -> list[Any]:
+    """bag_2 before bag_10."""
+    return [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", p.name)]
+
+
+def _reason(err: BaseException) -> str:
+    return " ".join((str(err) or type(err).__name__).split())

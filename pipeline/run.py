@@ -1,0 +1,394 @@
+"""``run()``: a log in, a map directory out — the pipeline as named stages.
+
+1. **ingest** — open the log (:mod:`formats`), pass 1 survey (:mod:`pipeline.ingest`);
+2. **pose_sync** — each reading's robot pose and sonar geometry (:mod:`pipeline.pose_sync`);
+3. **scan_building** — readings grouped into scans (:mod:`pipeline.scans`);
+4. **mapping** — the mapper (:mod:`pipeline.mapper`), Andersone's method or the baseline;
+5. **outputs** — map.pgm/yaml, map.png, features.parquet, metrics.json, config.toml,
+   reports, written into a temporary directory renamed into place when complete.
+
+Stages 2-4 run interleaved over the streamed readings; each stage's seconds are summed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import time
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from formats import open_log
+from formats.contract import RangeBatch
+from pipeline import __version__
+from pipeline.config import Config, dump_config
+from pipeline.errors import ConfigError, InputError
+from pipeline.ingest import Survey, ordered_ranges, survey
+from pipeline.mapper import Mapper, make_mapper
+from pipeline.mapper.types import GridSpec, MapSnapshot, Scan
+from pipeline.metrics import (
+    RunMetrics,
+    StageTimer,
+    map_cells,
+    peak_rss_mb,
+    sha256_of,
+)
+from pipeline.pose_sync import POSE_REASONS, POSE_OK, interpolate_poses, sonar_geometry
+from pipeline.reading_quality import REASONS
+from pipeline.scans import ScanBuilder, ScanKeys
+from pipeline.sensors import SensorTable, resolve_sensors
+
+log = logging.getLogger("sonarmap")
+
+Progress = Callable[[int, int], None]  # (readings done, readings total)
+
+
+@dataclass
+class RunResult:
+    """What a run produced: where, its metrics and the final map."""
+
+    out_dir: Path
+    metrics: RunMetrics
+    snapshot: MapSnapshot
+
+
+@dataclass
+class _MappingState:
+    readings_seen: int
+    dropped: Counter[str]
+    per_sensor: Counter[int]
+    scans: int
+
+
+def run(
+    log_path: str | Path,
+    out_dir: str | Path,
+    config: Config,
+    *,
+    format: str | None = None,
+    force: bool = False,
+    compare_correction: bool = False,
+    progress: Progress | None = None,
+) -> RunResult:
+    """Map one log into ``out_dir``. Raises SonarmapError subclasses on bad input."""
+    from formats.writers.atomic import OutputDir
+
+    log_path = Path(log_path)
+    if compare_correction and config.mapper.method != "andersone":
+        raise ConfigError("--compare-correction needs mapper.method = 'andersone'")
+    timer = StageTimer()
+    t_start = time.perf_counter()
+    with OutputDir(Path(out_dir), force=force) as out:
+        with timer.stage("ingest"):
+            reader = open_log(log_path, format, config)
+        with reader:
+            with timer.stage("ingest"):
+                sv = survey(reader)
+                info = reader.info()
+            sensors = resolve_sensors(
+                sv.sensor_names,
+                sv.mounts,
+                config,
+                used=[sv.ranges.per_sensor.get(i, 0) > 0 for i in range(len(sv.sensor_names))],
+            )
+            grid = grid_for(sv, sensors, config)
+            log.info(
+                "%s: %d readings from %d sensors, %d poses; grid %dx%d at %.3f m",
+                log_path, sv.ranges.count, len(sv.sensor_names), len(sv.track),
+                grid.width, grid.height, grid.resolution,
+            )
+            mappers: dict[str, Mapper] = {"main": make_mapper(config.mapper, grid)}
+            if compare_correction:
+                off = dataclasses.replace(config.mapper, feature_correction=False)
+                mappers["no_correction"] = make_mapper(off, grid)
+            state = _map_stream(reader, sv, sensors, mappers, config, timer, progress)
+        with timer.stage("mapping"):
+            snapshots = {k: m.snapshot() for k, m in mappers.items()}
+        metrics = _metrics(log_path, info.format, info.duration_s, sv, sensors, mappers,
+                           snapshots, state, config)
+        timer.seconds["total"] = time.perf_counter() - t_start
+        with timer.stage("outputs"):
+            _write_outputs(out, config, sv, snapshots, metrics, timer)
+    return RunResult(Path(out_dir), metrics, snapshots["main"])
+
+
+def grid_for(sv: Survey, sensors: SensorTable, config: Config) -> GridSpec:
+    """The grid: ``[grid] extent`` if given, else the poses' box grown by the sonars' reach."""
+    g = config.grid
+    if g.extent:
+        x0, y0, x1, y1 = g.extent
+    else:
+        reach_candidates = [sv.ranges.max_range_m, sensors.default_max]
+        reach_candidates += [v for v in sensors.max_override.tolist() if not math.isnan(v)]
+        finite = [v for v in reach_candidates if not math.isnan(v) and math.isfinite(v)]
+        if not finite:
+            raise InputError(
+                "cannot size the grid: no sensor reports a max range; set [grid] extent "
+                "or [sensors] max_range"
+            )
+        offsets = np.hypot(sensors.mount_x, sensors.mount_y)
+        offset = float(np.nanmax(offsets)) if np.isfinite(offsets).any() else 0.0
+        reach = max(finite) + offset + g.margin
+        t = sv.track
+        x0, x1 = float(t.x.min()) - reach, float(t.x.max()) + reach
+        y0, y1 = float(t.y.min()) - reach, float(t.y.max()) + reach
+    grid = GridSpec.covering(x0, y0, x1, y1, g.resolution)
+    cells = grid.width * grid.height
+    if cells > g.max_cells:
+        raise ConfigError(
+            f"grid of {grid.width}x{grid.height} = {cells} cells exceeds grid.max_cells = "
+            f"{g.max_cells}; use a coarser grid.resolution or a [grid] extent"
+        )
+    return grid
+
+
+def _map_stream(
+    reader: Any,
+    sv: Survey,
+    sensors: SensorTable,
+    mappers: dict[str, Mapper],
+    config: Config,
+    timer: StageTimer,
+    progress: Progress | None,
+) -> _MappingState:
+    """Stages 2-4 over the time-ordered reading stream."""
+    track = sv.track
+    offset_ns = round(config.pose_sync.time_offset_s * 1e9)
+    max_gap_ns = round(config.pose_sync.max_pose_gap_s * 1e9)
+    builder = ScanBuilder(ScanKeys(config.scans, track))
+    state = _MappingState(0, Counter(), Counter(), 0)
+    total = sv.ranges.count
+    stream = ordered_ranges(reader)
+    while True:
+        with timer.stage("ingest"):
+            item = next(stream, None)
+        if item is None:
+            break
+        batch, late = item
+        state.dropped["late"] += late
+        state.readings_seen += len(batch) + late
+        if len(batch) == 0:
+            continue
+        with timer.stage("pose_sync"):
+            scan_ids, readings = _sync(batch, track, sensors, offset_ns, max_gap_ns, state)
+        with timer.stage("scan_building"):
+            scans = list(builder.push(scan_ids, readings))
+        with timer.stage("mapping"):
+            _integrate(mappers, scans)
+        if progress is not None:
+            progress(state.readings_seen, total)
+    with timer.stage("mapping"):
+        _integrate(mappers, list(builder.flush()))
+    state.scans = builder.count
+    return state
+
+
+def _integrate(mappers: dict[str, Mapper], scans: list[Scan]) -> None:
+    for scan in scans:
+        for m in mappers.values():
+            m.integrate(scan)
+
+
+def _sync(
+    batch: RangeBatch,
+    track: Any,
+    sensors: SensorTable,
+    offset_ns: int,
+    max_gap_ns: int,
+    state: _MappingState,
+) -> tuple[np.ndarray, Scan]:
+    """Pose sync of one chunk: drop readings without a pose, resolve world geometry."""
+    look = interpolate_poses(track, batch.t_ns + offset_ns, max_gap_ns)
+    codes, counts = np.unique(look.reason, return_counts=True)
+    for c, n in zip(codes.tolist(), counts.tolist(), strict=True):
+        if c != POSE_OK:
+            state.dropped[POSE_REASONS[c]] += n
+    ok = look.reason == POSE_OK
+    b = batch.take(ok)
+    sid = b.sensor_id
+    ids, per = np.unique(sid, return_counts=True)
+    state.per_sensor.update(dict(zip(ids.tolist(), per.tolist(), strict=True)))
+    fov, lo, hi = sensors.apply_limits(b)
+    if np.isnan(fov).any():
+        bad = sorted({sensors.names[i] for i in sid[np.isnan(fov)].tolist()})
+        raise InputError(
+            f"no beam width (fov) for sensor(s) {', '.join(bad)}: the log carries none; set "
+            f"fov_deg in [sensors] or [[sensors.mounts]]"
+        )
+    ox, oy, alpha = sonar_geometry(
+        look.x[ok], look.y[ok], look.yaw[ok],
+        sensors.mount_x[sid], sensors.mount_y[sid], sensors.mount_yaw[sid],
+    )
+    scan = Scan(
+        t_ns=b.t_ns, sensor_id=sid, range_m=b.range_m, origin_x=ox, origin_y=oy, alpha=alpha,
+        fov=fov, min_range=lo, max_range=hi,
+    )
+    return b.scan_id, scan
+
+
+def _metrics(
+    log_path: Path,
+    fmt: str,
+    duration_s: float,
+    sv: Survey,
+    sensors: SensorTable,
+    mappers: dict[str, Mapper],
+    snapshots: dict[str, MapSnapshot],
+    state: _MappingState,
+    config: Config,
+) -> RunMetrics:
+    main = mappers["main"]
+    counters = main.counters.as_dict()
+    dropped = {name: int(state.dropped.get(name, 0)) for name in list(POSE_REASONS.values())[1:]}
+    dropped["late"] = int(state.dropped.get("late", 0))
+    for name in list(REASONS.values())[1:]:
+        dropped[name] = counters.get(f"skipped_{name}", 0)
+    mean_var, mean_major = main.feature_variance()
+    snap = snapshots["main"]
+    track = sv.track
+    sensor_rows = [
+        {
+            "name": n,
+            "readings": int(sv.ranges.per_sensor.get(i, 0)),
+            "readings_mapped": int(state.per_sensor.get(i, 0)),
+            "mount": [sensors.mount_x[i], sensors.mount_y[i], sensors.mount_yaw[i]],
+            "mount_source": sensors.source[i],
+        }
+        for i, n in enumerate(sensors.names)
+    ]
+    comparison = None
+    if "no_correction" in mappers:
+        comparison = {
+            label: _ablation_row(mappers[key], snapshots[key])
+            for label, key in (("with_correction", "main"), ("without_correction", "no_correction"))
+        }
+    return RunMetrics(
+        input={
+            "path": str(log_path),
+            "name": log_path.name,
+            "sha256": sha256_of(log_path),
+            "format": fmt,
+            "duration_s": duration_s,
+            "start_ns": sv.ranges.t_min,
+            "end_ns": sv.ranges.t_max,
+        },
+        run={
+            "tool_version": __version__,
+            "method": config.mapper.method,
+            "feature_correction": config.mapper.feature_correction,
+            "config_hash": config.hash(),
+            "scan_policy": config.scans.policy,
+        },
+        counts={
+            "readings": sv.ranges.count,
+            "readings_pose_synced": int(sum(state.per_sensor.values())),
+            "readings_used": counters.get("readings_used", 0),
+            "readings_stamp_backwards": sv.ranges.backwards,
+            "poses": len(track),
+            "poses_stamp_backwards": track.backwards,
+            "poses_duplicate_stamp": track.duplicates,
+            "scans": state.scans,
+            **{k: v for k, v in counters.items() if not k.startswith("skipped_") and k not in ("readings", "readings_used", "scans")},
+            "features": len(snap.features),
+        },
+        dropped=dropped,
+        paper_metric={
+            "mean_feature_variance_m2": mean_var,
+            "mean_major_axis_variance_m2": mean_major,
+            "features": len(snap.features),
+        },
+        map=map_cells(snap),
+        trajectory={
+            "path_length_m": track.path_length(),
+            "pose_frames": [track.parent_frame, track.child_frame],
+            "start_ns": int(track.t_ns[0]),
+            "end_ns": int(track.t_ns[-1]),
+        },
+        sensors=sensor_rows,
+        comparison=comparison,
+    )
+
+
+def _ablation_row(mapper: Mapper, snap: MapSnapshot) -> dict[str, Any]:
+    c = mapper.counters.as_dict()
+    mv, mm = mapper.feature_variance()
+    f = snap.features
+    return {
+        "mean_feature_variance_m2": mv,
+        "mean_major_axis_variance_m2": mm,
+        "features": len(f),
+        "features_created": c.get("features_created", 0),
+        "features_merged": c.get("features_merged", 0),
+        "features_corrected": c.get("features_corrected", 0),
+        "features_deleted": c.get("features_deleted", 0),
+        "features_protected": c.get("features_protected", 0),
+        "cells_occupied": map_cells(snap)["cells_occupied"],
+    }
+
+
+def _write_outputs(
+    out: Any,
+    config: Config,
+    sv: Survey,
+    snapshots: dict[str, MapSnapshot],
+    metrics: RunMetrics,
+    timer: StageTimer,
+) -> None:
+    from formats.writers.features_parquet import write_features
+    from formats.writers.map_png import write_map_png
+    from formats.writers.nav2_map import write_nav2_map
+    from formats.writers.report import write_reports
+
+    snap = snapshots["main"]
+    traj = np.column_stack([sv.track.x, sv.track.y])
+    write_nav2_map(out.path("map.yaml"), snap.probability, snap.grid)
+    title = f"{metrics.input['name']} — {config.mapper.method}"
+    write_map_png(out.path("map.png"), snap, trajectory_xy=traj, features=snap.features, title=title)
+    write_features(
+        out.path("features.parquet"),
+        snap.features,
+        metadata={
+            "frame": sv.track.parent_frame or "map",
+            "resolution_m": repr(snap.grid.resolution),
+            "config_hash": config.hash(),
+            "tool_version": __version__,
+            "method": config.mapper.method,
+            "source_sha256": metrics.input["sha256"],
+        },
+    )
+    (out.path("config.toml")).write_text(dump_config(config), encoding="utf-8")
+    images = {"with_correction": "map.png"}
+    if "no_correction" in snapshots:
+        other = snapshots["no_correction"]
+        write_map_png(
+            out.path("map_no_correction.png"), other, trajectory_xy=traj, features=other.features,
+            title=f"{metrics.input['name']} — without feature correction",
+        )
+        images["without_correction"] = "map_no_correction.png"
+    readings_per_sensor = {row["name"]: row["readings"] for row in metrics.sensors}
+    comparison = None
+    if metrics.comparison is not None:
+        comparison = {**metrics.comparison, "images": images}
+    timer.seconds.setdefault("outputs", 0.0)
+    rate = metrics.counts["readings"] / max(timer.seconds.get("total", 0.0), 1e-9)
+    metrics.timing = {
+        "stage_seconds": {k: round(v, 4) for k, v in timer.seconds.items()},
+        "readings_per_s": round(rate, 1),
+        "peak_rss_mb": round(peak_rss_mb(), 1),
+    }
+    (out.path("metrics.json")).write_text(metrics.to_json(), encoding="utf-8")
+    write_reports(
+        out.path("."),
+        metrics=metrics.to_dict(),
+        map_png=out.path("map.png"),
+        features=snap.features,
+        readings_per_sensor=readings_per_sensor,
+        dropped_by_reason=metrics.dropped,
+        comparison=comparison,
+    )

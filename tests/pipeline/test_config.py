@@ -1,0 +1,68 @@
+from __future__ import annotations
+
+import tomllib
+
+import pytest
+
+from pipeline.config import Config, config_from_dict, dump_config, load_config
+from pipeline.errors import ConfigError
+
+
+def test_defaults_are_the_documented_ones():
+    c = load_config(None)
+    m = c.mapper
+    assert (m.sigma_d0, m.k_d, m.c_a, m.match_distance, m.kappa_free) == (0.01, 0.01, 2.0, 0.15, 2.0)
+    assert (m.n_particles, m.keep_fraction, m.protect_times) == (200, 0.05, 3)
+    assert (m.p_free, m.p_clamp_min, m.p_clamp_max, m.p_occ) == (0.35, 0.12, 0.97, 0.9)
+    assert m.clear_on_max_range is False and m.feature_correction is True
+    assert c.grid.resolution == 0.05 and c.scans.window_s == 0.2
+    assert c.scans.max_travel_m == 0.10 and c.scans.max_turn_deg == 10.0
+    assert c.pose_sync.max_pose_gap_s == 0.5
+    assert m.sigma_floor(0.05) == 0.025
+
+
+def test_dump_round_trips_through_toml(tmp_path):
+    cfg = config_from_dict({"mapper": {"feature_correction": False}, "sensors": {"preset": "pioneer-p3dx",
+                            "mounts": [{"name": "s", "x": 0.1, "yaw_deg": 90.0}]}})
+    text = dump_config(cfg)
+    assert "# N, particles drawn per corrected feature" in text
+    p = tmp_path / "c.toml"
+    p.write_text(text)
+    again = load_config(p)
+    assert again == cfg and again.hash() == cfg.hash()
+    assert tomllib.loads(dump_config(Config()))["mapper"]["method"] == "andersone"
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        ({"mapper": {"bogus": 1}}, r"unknown key 'mapper.bogus'"),
+        ({"mapperx": {}}, r"unknown key 'mapperx'"),
+        ({"mapper": {"n_particles": "many"}}, r"'mapper.n_particles' must be an integer"),
+        ({"mapper": {"feature_correction": 1}}, r"must be true or false"),
+        ({"mapper": {"p_free": 0.7}}, r"'mapper.p_free' must be < 0.5"),
+        ({"mapper": {"p_occ": 1.5}}, r"'mapper.p_occ' must be a probability"),
+        ({"mapper": {"method": "magic"}}, r"'mapper.method' must be one of"),
+        ({"grid": {"resolution": 0}}, r"'grid.resolution' must be > 0"),
+        ({"grid": {"extent": [0, 0, -1, 1]}}, r"xmin < xmax"),
+        ({"sensors": {"min_range": 3.0, "max_range": 1.0}}, r"min_range' must be < max_range"),
+        ({"sensors": {"preset": "roomba"}}, r"'sensors.preset' must be one of"),
+        ({"sensors": {"mounts": [{"name": "a"}, {"name": "a"}]}}, r"duplicate names"),
+        ({"scans": {"policy": "never"}}, r"'scans.policy' must be one of"),
+    ],
+)
+def test_bad_values_are_refused_with_the_key(data, message):
+    with pytest.raises(ConfigError, match=message):
+        config_from_dict(data)
+
+
+def test_file_errors_name_the_file(tmp_path):
+    p = tmp_path / "bad.toml"
+    p.write_text("[mapper\n")
+    with pytest.raises(ConfigError, match=r"bad\.toml: invalid TOML"):
+        load_config(p)
+    p.write_text("[mapper]\nk_d = -1\n")
+    with pytest.raises(ConfigError, match=r"bad\.toml: 'mapper.k_d' must be >= 0"):
+        load_config(p)
+    with pytest.raises(ConfigError, match=r"missing\.toml: configuration file not found"):
+        load_config(tmp_path / "missing.toml")
