@@ -281,6 +281,16 @@ def config_cmd(
     atomic_write_text(output, text)
 
 
+def _register_commands() -> None:
+    """Commands that live in their own modules (each adds itself to ``app``)."""
+    from cli import simulate
+
+    simulate.register(app)
+
+
+_register_commands()
+
+
 def main() -> None:
     """Console entry point."""
     app()

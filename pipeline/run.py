@@ -348,13 +348,13 @@ def _write_outputs(
     snap = snapshots["main"]
     traj = np.column_stack([sv.track.x, sv.track.y])
     write_nav2_map(out.path("map.yaml"), snap.probability, snap.grid)
-    title = f"{metrics.input['name']} — {config.mapper.method}"
+    title = f"{metrics.input['name']} - {config.mapper.method}"
     write_map_png(out.path("map.png"), snap, trajectory_xy=traj, features=snap.features, title=title)
     write_features(
         out.path("features.parquet"),
         snap.features,
         metadata={
-            "frame": sv.track.parent_frame or "map",
+            "pose_parent_frame": sv.track.parent_frame,
             "resolution_m": repr(snap.grid.resolution),
             "config_hash": config.hash(),
             "tool_version": __version__,
@@ -368,7 +368,7 @@ def _write_outputs(
         other = snapshots["no_correction"]
         write_map_png(
             out.path("map_no_correction.png"), other, trajectory_xy=traj, features=other.features,
-            title=f"{metrics.input['name']} — without feature correction",
+            title=f"{metrics.input['name']} - without feature correction",
         )
         images["without_correction"] = "map_no_correction.png"
     readings_per_sensor = {row["name"]: row["readings"] for row in metrics.sensors}
@@ -384,7 +384,7 @@ def _write_outputs(
     }
     (out.path("metrics.json")).write_text(metrics.to_json(), encoding="utf-8")
     write_reports(
-        out.path("."),
+        out.tmp_dir,
         metrics=metrics.to_dict(),
         map_png=out.path("map.png"),
         features=snap.features,

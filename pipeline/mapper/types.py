@@ -37,8 +37,9 @@ class GridSpec:
     @staticmethod
     def covering(xmin: float, ymin: float, xmax: float, ymax: float, resolution: float) -> GridSpec:
         """The smallest grid aligned to ``resolution`` that covers the given box."""
-        ox = np.floor(xmin / resolution) * resolution
-        oy = np.floor(ymin / resolution) * resolution
+        # Rounded so origins print cleanly in map.yaml (-4.6, not -4.6000000000000005).
+        ox = round(float(np.floor(xmin / resolution) * resolution), 9)
+        oy = round(float(np.floor(ymin / resolution) * resolution), 9)
         w = int(np.ceil((xmax - ox) / resolution - 1e-9))
         h = int(np.ceil((ymax - oy) / resolution - 1e-9))
         return GridSpec(float(ox), float(oy), float(resolution), max(w, 1), max(h, 1))
