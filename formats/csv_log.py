@@ -565,7 +565,9 @@ class CsvLogReader:
         self._cfg_limits, self._default_limits = configured_limits(config)
         self._log_limits: dict[str, tuple[float, float, float]] = {}
         self._mounts: dict[str, SensorMount] | None = None
-        if c.layout == "set":
+        # A directory can only be a set of files: read it as one whatever `layout` says.
+        self.layout = "set" if self.path.is_dir() else c.layout
+        if self.layout == "set":
             folder = self.path if self.path.is_dir() else self.path.parent
             self.ranges_path = folder / c.ranges_file
             self.poses_path: Path | None = folder / c.poses_file
@@ -577,13 +579,7 @@ class CsvLogReader:
                         f"CSV log set has no {p.name} (set [input.csv] ranges_file/poses_file)",
                         folder,
                     )
-        elif c.layout == "single":
-            if self.path.is_dir():
-                raise FormatError(
-                    "is a directory; a single-file CSV log is a file "
-                    "(set [input.csv] layout = 'set' for a directory of files)",
-                    self.path,
-                )
+        elif self.layout == "single":
             self.ranges_path, self.poses_path, self.sensors_path = self.path, None, None
         else:
             raise FormatError(f"unknown [input.csv] layout {c.layout!r}", self.path)
@@ -621,7 +617,7 @@ class CsvLogReader:
         if self._closed:
             raise FormatError("reader is closed", self.path)
         want = set(kinds)
-        if self.csv.layout == "single":
+        if self.layout == "single":
             yield from self._single(want)
             return
         mounts = self._load_sensors()
@@ -806,7 +802,7 @@ class CsvLogReader:
         t_min: int | None = None
         t_max: int | None = None
         kinds = {RangeBatch: "ranges", PoseBatch: "poses", MountBatch: "sensors"}
-        if self.csv.layout == "single":
+        if self.layout == "single":
             counts[(self.ranges_path.name, "ranges")] = 0
             counts[(self.ranges_path.name, "poses")] = 0
         for fname, n_rows, batch in self._stream(ALL_KINDS):
@@ -830,7 +826,7 @@ class CsvLogReader:
         notes = [f"{readings} range readings from {len(self.sensor_names)} sensors"]
         if self.sensor_names:
             notes.append(f"sensors: {', '.join(self.sensor_names)}")
-        if self.csv.layout == "single":
+        if self.layout == "single":
             notes.append("poses = the distinct (t, x, y, yaw) rows")
         return LogInfo(
             path=str(self.path),

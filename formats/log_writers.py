@@ -42,6 +42,9 @@ _COMPRESSION: dict[str, tuple[str, ...]] = {
     "ros1": ("none", "bz2", "lz4"),
     "mcap": ("none", "lz4", "zstd"),
     "mcap-ros1": ("none", "lz4", "zstd"),
+    # rosbag2 file-level compression: each storage file becomes <name>.zstd.
+    "ros2": ("none", "zstd"),
+    "ros2-mcap": ("none", "zstd"),
 }
 
 RANGE_TOPIC = "/sonar"
@@ -386,7 +389,7 @@ def _write_ros2(c: LogContent, path: Path, fmt: str, compression: str) -> None:
         QosReliability,
         QosTime,
     )
-    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
 
     ts = typestore("cdr")
     plugin = StoragePlugin.MCAP if fmt == "ros2-mcap" else StoragePlugin.SQLITE3
@@ -405,7 +408,11 @@ def _write_ros2(c: LogContent, path: Path, fmt: str, compression: str) -> None:
             False,
         )
 
-    with Writer(path, version=9, storage_plugin=plugin) as writer:
+    writer = Writer(path, version=9, storage_plugin=plugin)
+    if compression == "zstd":
+        writer.set_compression(CompressionMode.FILE, CompressionFormat.ZSTD)
+    writer.open()
+    try:
         conns = {
             TF_STATIC_TOPIC: writer.add_connection(
                 TF_STATIC_TOPIC,
@@ -428,6 +435,8 @@ def _write_ros2(c: LogContent, path: Path, fmt: str, compression: str) -> None:
         }
         for topic, stamp, data in _messages(c, "cdr"):
             writer.write(conns[topic], stamp, data)
+    finally:
+        writer.close()
 
 
 def _write_mcap(c: LogContent, path: Path, fmt: str, compression: str) -> None:

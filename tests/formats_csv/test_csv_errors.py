@@ -145,8 +145,9 @@ def test_missing_path(tmp_path: Path) -> None:
         CsvLogReader(tmp_path / "nope.csv", make_config())
 
 
-def test_single_layout_refuses_a_directory(tmp_path: Path) -> None:
-    with pytest.raises(FormatError, match=r"is a directory.*layout = 'set'"):
+def test_a_directory_is_read_as_a_set_whatever_the_layout(tmp_path: Path) -> None:
+    # layout defaults to 'single', but a directory can only be a set of files.
+    with pytest.raises(FormatError, match=r"CSV log set has no ranges\.csv"):
         CsvLogReader(tmp_path, make_config())
 
 

@@ -1,0 +1,604 @@
+"""ROS 1 bags (rosbag format v2.0) as a :class:`~formats.ros.source.MessageSource`.
+
+Our own parser rather than rosbags' reader: a :class:`RawBatch` is one decompressed chunk
+buffer plus per-message offsets/lengths (zero-copy), which the numpy decoders need.
+
+Format (http://wiki.ros.org/Bags/Format/2.0): ``#ROSBAG V2.0\\n``, then records
+``<header_len u32><header: (field_len u32, name=value)*><data_len u32><data>``. The bag
+header record (op 0x03) holds ``index_pos``; chunks (op 0x05, compression none/bz2/lz4
+— lz4 is the LZ4 *frame* format roslz4 writes) contain connection (0x07) and message
+(0x02) records and are each followed by index data records (0x04: time + offset of each
+message in the uncompressed chunk); at ``index_pos`` come the connection records and one
+chunk info record (0x06) per chunk.
+
+A bag whose index is missing (recording killed before ``rosbag reindex``) or cut off is
+read by scanning the intact records, with one line in :attr:`Ros1BagSource.warnings`.
+"""
+
+from __future__ import annotations
+
+import bz2
+import struct
+from collections.abc import Collection, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, BinaryIO
+
+import lz4.frame
+import numpy as np
+import numpy.typing as npt
+
+from formats.ros.source import Connection, RawBatch
+from pipeline.errors import FormatError
+
+if TYPE_CHECKING:
+    from formats.ros.reader import RosLogReader
+    from pipeline.config import Config
+
+MAGIC = b"#ROSBAG V2.0\n"
+
+OP_MSGDATA = 0x02
+OP_BAGHEADER = 0x03
+OP_IDXDATA = 0x04
+OP_CHUNK = 0x05
+OP_CHUNKINFO = 0x06
+OP_CONNECTION = 0x07
+
+_U32 = struct.Struct("<I")
+_INDEX_DTYPE = np.dtype([("sec", "<u4"), ("nsec", "<u4"), ("offset", "<u4")])
+_COUNT_DTYPE = np.dtype([("conn", "<u4"), ("count", "<u4")])
+# A record header longer than this is garbage, not a header (the biggest real ones are
+# connection headers with message definitions, which live in the record *data*).
+_MAX_HEADER = 1 << 20
+
+
+class _Corrupt(Exception):
+    """A record does not parse (internal; turned into FormatError or a warning)."""
+
+
+@dataclass
+class _Chunk:
+    """One chunk: where it is, its time span and per-connection message counts.
+
+    ``index`` is filled when the bag was scanned (no usable index): per connection the
+    log times (ns) and record offsets in the uncompressed chunk. ``partial`` marks a
+    chunk cut off by the end of the file, of which only the intact records are used.
+    """
+
+    pos: int
+    start_ns: int
+    end_ns: int
+    counts: dict[int, int]
+    index: dict[int, tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]] | None = None
+    partial: bool = False
+
+
+@dataclass
+class _ConnRecord:
+    id: int
+    topic: str
+    fields: dict[str, bytes]
+    count: int = 0
+
+
+@dataclass
+class _ScanResult:
+    conns: dict[int, _ConnRecord] = field(default_factory=dict)
+    chunks: list[_Chunk] = field(default_factory=list)
+    end: int = 0  # end of the last intact record
+    salvaged: int = 0  # messages recovered from a chunk cut off by the end of the file
+
+
+def normalize_msgtype(name: str) -> str:
+    """'sensor_msgs/Range' → 'sensor_msgs/msg/Range' (ROS 2 style); others unchanged."""
+    parts = name.split("/")
+    if len(parts) == 2 and parts[0] and parts[1]:
+        return f"{parts[0]}/msg/{parts[1]}"
+    return name
+
+
+def parse_header(data: bytes | memoryview) -> dict[str, bytes]:
+    """Fields of a record header (``name=value`` entries, each prefixed by its u32 length)."""
+    mv = memoryview(data)
+    fields: dict[str, bytes] = {}
+    pos, end = 0, len(mv)
+    while pos < end:
+        if pos + 4 > end:
+            raise _Corrupt("header field length cut off")
+        (n,) = _U32.unpack_from(mv, pos)
+        pos += 4
+        if n > end - pos:
+            raise _Corrupt(f"header field of {n} bytes overruns the header")
+        entry = bytes(mv[pos : pos + n])
+        pos += n
+        eq = entry.find(b"=")
+        if eq <= 0:
+            raise _Corrupt("header field without 'name='")
+        try:
+            name = entry[:eq].decode("ascii")
+        except UnicodeDecodeError as err:
+            raise _Corrupt("header field name is not ASCII") from err
+        fields[name] = entry[eq + 1 :]
+    return fields
+
+
+def _u32(fields: dict[str, bytes], name: str) -> int:
+    v = fields.get(name)
+    if v is None or len(v) != 4:
+        raise _Corrupt(f"header field '{name}' missing or not 4 bytes")
+    return int(_U32.unpack(v)[0])
+
+
+def _u64(fields: dict[str, bytes], name: str) -> int:
+    v = fields.get(name)
+    if v is None or len(v) != 8:
+        raise _Corrupt(f"header field '{name}' missing or not 8 bytes")
+    return int(struct.unpack("<Q", v)[0])
+
+
+def _time(fields: dict[str, bytes], name: str) -> int:
+    """A ROS time field (u32 sec, u32 nsec) in ns."""
+    v = fields.get(name)
+    if v is None or len(v) != 8:
+        raise _Corrupt(f"header field '{name}' missing or not 8 bytes")
+    sec, nsec = struct.unpack("<II", v)
+    return int(sec) * 1_000_000_000 + int(nsec)
+
+
+def _op(fields: dict[str, bytes]) -> int:
+    v = fields.get("op")
+    if v is None or len(v) != 1:
+        raise _Corrupt("record without a one-byte 'op' field")
+    return v[0]
+
+
+def _decompress(compression: str, data: bytes, size: int, partial: bool) -> bytes:
+    """Uncompressed chunk data; ``partial`` accepts a cut-off stream (returns what decodes)."""
+    try:
+        if compression == "none":
+            out = data
+        elif compression == "bz2":
+            out = bz2.BZ2Decompressor().decompress(data) if partial else bz2.decompress(data)
+        elif compression == "lz4":
+            if partial:
+                out = lz4.frame.LZ4FrameDecompressor().decompress(data)
+            else:
+                out = lz4.frame.decompress(data)
+        else:
+            raise _Corrupt(f"unknown chunk compression '{compression}'")
+    except (OSError, ValueError, RuntimeError, EOFError) as err:
+        raise _Corrupt(f"{compression} chunk does not decompress ({err})") from err
+    if not partial and len(out) != size:
+        raise _Corrupt(f"chunk decompresses to {len(out)} bytes, header says {size}")
+    return out
+
+
+def _conn_record(header: dict[str, bytes], data: bytes) -> _ConnRecord:
+    cid = _u32(header, "conn")
+    topic = header.get("topic", b"").decode("utf-8", "replace")
+    fields = parse_header(data)
+    if "type" not in fields:
+        raise _Corrupt(f"connection {cid} has no 'type'")
+    return _ConnRecord(cid, topic, fields)
+
+
+class Ros1BagSource:
+    """A ROS 1 bag file: connections from the index, raw messages chunk by chunk.
+
+    Opening reads the bag header and the index at its end (connections and chunk infos);
+    messages are read by :meth:`raw_batches`, one decompressed chunk at a time.
+    Raises :class:`FormatError` naming the file for a 0-byte file, a file that is not a
+    bag, or a corrupt bag header.
+    """
+
+    format_name = "ros1"
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self._warnings: list[str] = []
+        try:
+            self._file: BinaryIO = self.path.open("rb")
+        except OSError as err:
+            raise FormatError(f"cannot open: {err.strerror or err}", self.path) from err
+        try:
+            self._size = self.path.stat().st_size
+            self._open()
+        except BaseException:
+            self._file.close()
+            raise
+
+    # ------------------------------------------------------------------ opening
+
+    def _open(self) -> None:
+        if self._size == 0:
+            raise FormatError("empty file (0 bytes), not a ROS 1 bag", self.path)
+        head = self._read_at(0, len(MAGIC))
+        if head != MAGIC:
+            if head.startswith(b"#ROSBAG V"):
+                version = head[9:].split(b"\n")[0].decode("ascii", "replace")
+                raise FormatError(
+                    f"rosbag format version {version} is not supported (only 2.0)", self.path
+                )
+            raise FormatError("not a ROS 1 bag (no '#ROSBAG V2.0' magic line)", self.path)
+        try:
+            header, _data, end = self._record_at(len(MAGIC))
+            if _op(header) != OP_BAGHEADER:
+                raise _Corrupt("first record is not the bag header")
+            index_pos = _u64(header, "index_pos")
+            conn_count = _u32(header, "conn_count")
+            chunk_count = _u32(header, "chunk_count")
+        except _Corrupt as err:
+            raise FormatError(f"corrupt bag header ({err})", self.path) from err
+        self._data_start = end
+
+        reason = ""
+        if index_pos == 0:
+            reason = "bag is not indexed (index_pos 0, recording not closed)"
+        elif index_pos < end or index_pos > self._size:
+            reason = f"index position {index_pos} is outside the file ({self._size} bytes)"
+        else:
+            try:
+                conns, chunks = self._read_index(index_pos, conn_count, chunk_count)
+            except _Corrupt as err:
+                reason = f"index at byte {index_pos} is unreadable ({err})"
+        if reason:
+            scan = self._scan()
+            conns, chunks = scan.conns, scan.chunks
+            lost = self._size - scan.end
+            n = sum(c.count for c in conns.values())
+            cut = f" ({scan.salvaged} of them from a cut-off chunk)" if scan.salvaged else ""
+            self._warnings.append(
+                f"{self.path}: {reason}: read by scanning, {n} messages recovered{cut}, "
+                f"{lost} bytes at the end lost"
+            )
+        self._chunks = sorted(chunks, key=lambda c: (c.start_ns, c.pos))
+        self._connections = [
+            Connection(
+                id=c.id,
+                topic=c.topic,
+                msgtype=normalize_msgtype(c.fields["type"].decode("utf-8", "replace")),
+                encoding="ros1",
+                msgdef=c.fields.get("message_definition", b"").decode("utf-8", "replace"),
+                msgdef_format="ros1msg",
+                count=c.count,
+                md5sum=c.fields.get("md5sum", b"").decode("ascii", "replace"),
+            )
+            for c in sorted(conns.values(), key=lambda c: c.id)
+        ]
+        self._by_id = {c.id: c for c in self._connections}
+
+    def _read_at(self, pos: int, n: int) -> bytes:
+        self._file.seek(pos)
+        return self._file.read(n)
+
+    def _record_at(self, pos: int) -> tuple[dict[str, bytes], bytes, int]:
+        """Header fields, data and end position of the record at ``pos`` in the file."""
+        raw = self._read_at(pos, 4)
+        if len(raw) < 4:
+            raise _Corrupt(f"record at byte {pos} cut off")
+        (hlen,) = _U32.unpack(raw)
+        if hlen > _MAX_HEADER:
+            raise _Corrupt(f"record at byte {pos} has an implausible header length {hlen}")
+        hdr = self._file.read(hlen + 4)
+        if len(hdr) < hlen + 4:
+            raise _Corrupt(f"record at byte {pos} cut off")
+        header = parse_header(hdr[:hlen])
+        (dlen,) = _U32.unpack_from(hdr, hlen)
+        data = self._file.read(dlen)
+        if len(data) < dlen:
+            raise _Corrupt(f"record at byte {pos} cut off")
+        return header, data, pos + 8 + hlen + dlen
+
+    def _read_index(
+        self, index_pos: int, conn_count: int, chunk_count: int
+    ) -> tuple[dict[int, _ConnRecord], list[_Chunk]]:
+        conns: dict[int, _ConnRecord] = {}
+        chunks: list[_Chunk] = []
+        pos = index_pos
+        while len(conns) < conn_count or len(chunks) < chunk_count:
+            header, data, pos = self._record_at(pos)
+            op = _op(header)
+            if op == OP_CONNECTION:
+                rec = _conn_record(header, data)
+                conns[rec.id] = rec
+            elif op == OP_CHUNKINFO:
+                if _u32(header, "ver") != 1:
+                    raise _Corrupt("unsupported chunk info version")
+                n = _u32(header, "count")
+                if len(data) != 8 * n:
+                    raise _Corrupt("chunk info data has the wrong length")
+                arr = np.frombuffer(data, _COUNT_DTYPE)
+                counts = {int(c): int(k) for c, k in zip(arr["conn"], arr["count"], strict=True)}
+                chunk_pos = _u64(header, "chunk_pos")
+                if not self._data_start <= chunk_pos < index_pos:
+                    raise _Corrupt(f"chunk position {chunk_pos} outside the data section")
+                chunks.append(
+                    _Chunk(
+                        chunk_pos, _time(header, "start_time"), _time(header, "end_time"), counts
+                    )
+                )
+            else:
+                raise _Corrupt(f"unexpected record op {op:#x} in the index")
+        for ch in chunks:
+            for cid, k in ch.counts.items():
+                if cid not in conns:
+                    raise _Corrupt(f"chunk info names unknown connection {cid}")
+                conns[cid].count += k
+        return conns, chunks
+
+    def _scan(self) -> _ScanResult:
+        """Walk the records from the start, keeping every intact one (no index needed)."""
+        res = _ScanResult(end=self._data_start)
+        pos = self._data_start
+        while pos < self._size:
+            try:
+                header, data, end = self._record_at(pos)
+                op = _op(header)
+            except _Corrupt:
+                res.salvaged = self._scan_partial_chunk(pos, res)
+                break
+            if op == OP_CHUNK:
+                try:
+                    raw = _decompress(
+                        header.get("compression", b"").decode("ascii", "replace"),
+                        data,
+                        _u32(header, "size"),
+                        partial=False,
+                    )
+                except _Corrupt:
+                    break
+                self._index_chunk(pos, raw, res, partial=False)
+            elif op == OP_CONNECTION:
+                try:
+                    rec = _conn_record(header, data)
+                except _Corrupt:
+                    break
+                res.conns.setdefault(rec.id, rec)
+            pos = end
+            res.end = end
+        return res
+
+    def _scan_partial_chunk(self, pos: int, res: _ScanResult) -> int:
+        """Recover the intact messages of a chunk cut off by the end of the file."""
+        data = self._partial_chunk_data(pos)
+        if data is None:
+            return 0
+        return self._index_chunk(pos, data, res, partial=True)
+
+    def _partial_chunk_data(self, pos: int) -> bytes | None:
+        raw = self._read_at(pos, 4)
+        if len(raw) < 4:
+            return None
+        (hlen,) = _U32.unpack(raw)
+        if hlen > _MAX_HEADER:
+            return None
+        hdr = self._file.read(hlen + 4)
+        if len(hdr) < hlen + 4:
+            return None
+        try:
+            header = parse_header(hdr[:hlen])
+            if _op(header) != OP_CHUNK:
+                return None
+            compression = header.get("compression", b"").decode("ascii", "replace")
+            return _decompress(compression, self._file.read(), 0, partial=True)
+        except _Corrupt:
+            return None
+
+    def _index_chunk(self, pos: int, raw: bytes, res: _ScanResult, *, partial: bool) -> int:
+        """Index the message records of an uncompressed chunk; returns messages found."""
+        times: dict[int, list[int]] = {}
+        offsets: dict[int, list[int]] = {}
+        mv = memoryview(raw)
+        off, n = 0, len(raw)
+        # Python loop: only on the fallback path for bags without a usable index.
+        while off + 4 <= n:
+            (hlen,) = _U32.unpack_from(mv, off)
+            if off + 8 + hlen > n:
+                break
+            try:
+                header = parse_header(mv[off + 4 : off + 4 + hlen])
+                op = _op(header)
+            except _Corrupt:
+                break
+            (dlen,) = _U32.unpack_from(mv, off + 4 + hlen)
+            end = off + 8 + hlen + dlen
+            if end > n:
+                break
+            try:
+                if op == OP_MSGDATA:
+                    cid = _u32(header, "conn")
+                    times.setdefault(cid, []).append(_time(header, "time"))
+                    offsets.setdefault(cid, []).append(off)
+                elif op == OP_CONNECTION:
+                    rec = _conn_record(header, bytes(mv[off + 8 + hlen : end]))
+                    res.conns.setdefault(rec.id, rec)
+            except _Corrupt:
+                break
+            off = end
+        index = {
+            cid: (np.asarray(t, np.int64), np.asarray(offsets[cid], np.int64))
+            for cid, t in times.items()
+            if cid in res.conns
+        }
+        if not index:
+            return 0
+        counts = {cid: int(t.shape[0]) for cid, (t, _o) in index.items()}
+        for cid, k in counts.items():
+            res.conns[cid].count += k
+        start = min(int(t.min()) for t, _o in index.values())
+        stop = max(int(t.max()) for t, _o in index.values())
+        res.chunks.append(_Chunk(pos, start, stop, counts, index, partial))
+        return sum(counts.values())
+
+    # ------------------------------------------------------------------ MessageSource
+
+    @property
+    def connections(self) -> list[Connection]:
+        """Connections in id order (several may share a topic)."""
+        return list(self._connections)
+
+    @property
+    def start_ns(self) -> int | None:
+        """Log time of the first message (ns), None for a bag without messages."""
+        return min((c.start_ns for c in self._chunks), default=None)
+
+    @property
+    def end_ns(self) -> int | None:
+        """Log time of the last message (ns), None for a bag without messages."""
+        return max((c.end_ns for c in self._chunks), default=None)
+
+    @property
+    def warnings(self) -> list[str]:
+        """One line per loss found while reading (missing index, truncation)."""
+        return list(self._warnings)
+
+    @property
+    def chunk_count(self) -> int:
+        """Number of (intact) chunks."""
+        return len(self._chunks)
+
+    def raw_batches(self, connection_ids: Collection[int]) -> Iterator[RawBatch]:
+        """Messages of the given connections in log order: chunks by start time, within a
+        chunk one batch per connection (id order), sorted by log time (stable).
+
+        One decompressed chunk is held at a time — except where chunks overlap in time
+        (bags merged by tools; ``rosbag record`` never writes such), which are merged
+        into one buffer so their messages still come out in time order. A chunk the index
+        points to that does not parse raises :class:`FormatError`.
+        """
+        wanted = sorted({int(c) for c in connection_ids} & self._by_id.keys())
+        if not wanted:
+            return
+        chunks = [ch for ch in self._chunks if any(ch.counts.get(c, 0) for c in wanted)]
+        group: list[_Chunk] = []
+        group_end = 0
+        for chunk in chunks:
+            if group and chunk.start_ns >= group_end:
+                yield from self._group_batches(group, wanted)
+                group = []
+            group_end = max(group_end, chunk.end_ns) if group else chunk.end_ns
+            group.append(chunk)
+        if group:
+            yield from self._group_batches(group, wanted)
+
+    def _group_batches(self, group: list[_Chunk], wanted: list[int]) -> list[RawBatch]:
+        """Batches of a run of chunks that overlap in time (usually just one chunk)."""
+        bufs: list[npt.NDArray[np.uint8]] = []
+        parts: dict[int, list[tuple[npt.NDArray[np.int64], ...]]] = {}
+        base = 0
+        for chunk in group:
+            present = [c for c in wanted if chunk.counts.get(c, 0) > 0]
+            try:
+                buf, index = self._load_chunk(chunk, present)
+                for cid in present:
+                    if cid in index:
+                        t, start, length = self._locate(buf, *index[cid])
+                        parts.setdefault(cid, []).append((t, start + base, length))
+            except _Corrupt as err:
+                raise FormatError(f"chunk at byte {chunk.pos}: {err}", self.path) from err
+            bufs.append(buf)
+            base += buf.shape[0]
+        buffer = bufs[0] if len(bufs) == 1 else np.concatenate(bufs)
+        out = []
+        for cid in sorted(parts):
+            t, start, length = (np.concatenate(col) for col in zip(*parts[cid], strict=True))
+            if t.size > 1 and bool(np.any(np.diff(t) < 0)):
+                order = np.argsort(t, kind="stable")
+                t, start, length = t[order], start[order], length[order]
+            out.append(RawBatch(self._by_id[cid], t, buffer, start, length))
+        return out
+
+    def _load_chunk(
+        self, chunk: _Chunk, present: list[int]
+    ) -> tuple[
+        npt.NDArray[np.uint8], dict[int, tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]]
+    ]:
+        if chunk.partial:
+            data = self._partial_chunk_data(chunk.pos)
+            if data is None:  # pragma: no cover - it decoded while scanning
+                raise _Corrupt("cut-off chunk no longer decodes")
+            assert chunk.index is not None
+            return np.frombuffer(data, np.uint8), chunk.index
+        header, data, end = self._record_at(chunk.pos)
+        if _op(header) != OP_CHUNK:
+            raise _Corrupt("no chunk record at this position")
+        compression = header.get("compression", b"").decode("ascii", "replace")
+        raw = _decompress(compression, data, _u32(header, "size"), partial=False)
+        buf = np.frombuffer(raw, np.uint8)
+        if chunk.index is not None:
+            return buf, chunk.index
+        return buf, self._read_chunk_index(end, chunk, set(present))
+
+    def _read_chunk_index(
+        self, pos: int, chunk: _Chunk, present: set[int]
+    ) -> dict[int, tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]]:
+        """The index data records that follow a chunk: (log times ns, record offsets)."""
+        index: dict[int, tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]] = {}
+        for _ in range(len(chunk.counts)):
+            header, data, pos = self._record_at(pos)
+            if _op(header) != OP_IDXDATA:
+                raise _Corrupt("index data record missing after the chunk")
+            if _u32(header, "ver") != 1:
+                raise _Corrupt("unsupported index data version")
+            cid, count = _u32(header, "conn"), _u32(header, "count")
+            if len(data) != 12 * count:
+                raise _Corrupt("index data has the wrong length")
+            if cid not in present:
+                continue
+            arr = np.frombuffer(data, _INDEX_DTYPE)
+            t = arr["sec"].astype(np.int64) * 1_000_000_000 + arr["nsec"].astype(np.int64)
+            index[cid] = (t, arr["offset"].astype(np.int64))
+        return index
+
+    @staticmethod
+    def _locate(
+        buf: npt.NDArray[np.uint8],
+        times: npt.NDArray[np.int64],
+        rec_offsets: npt.NDArray[np.int64],
+    ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+        """(log times, data offsets, data lengths) of message records at ``rec_offsets``."""
+        n = buf.shape[0]
+        if rec_offsets.size and (rec_offsets.min() < 0 or rec_offsets.max() + 8 > n):
+            raise _Corrupt(f"index offset outside the {n}-byte chunk")
+        hlen = _gather_u32(buf, rec_offsets)
+        dpos = rec_offsets + 4 + hlen
+        if dpos.size and dpos.max() + 4 > n:
+            raise _Corrupt("message record header overruns the chunk")
+        dlen = _gather_u32(buf, dpos)
+        start = dpos + 4
+        if start.size and (start + dlen).max() > n:
+            raise _Corrupt("message data overruns the chunk")
+        return times, start, dlen
+
+    def close(self) -> None:
+        """Close the file."""
+        self._file.close()
+
+    def __enter__(self) -> Ros1BagSource:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _gather_u32(buf: npt.NDArray[np.uint8], pos: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:
+    """Little-endian u32 values at byte positions ``pos`` of ``buf`` (vectorised: a view
+    of the buffer with a 1-byte stride, then one fancy-index copy)."""
+    n = buf.shape[0] - 3
+    if pos.size == 0 or n <= 0:
+        return np.empty(0, np.int64)
+    items = np.ndarray(shape=(n,), dtype="<u4", buffer=buf, strides=(1,))
+    return items[pos].astype(np.int64)
+
+
+def open_ros1_bag(path: str | Path, config: Config | None = None) -> RosLogReader:
+    """A :class:`~formats.ros.reader.RosLogReader` over a ROS 1 bag file."""
+    from formats.ros.reader import RosLogReader
+    from pipeline.config import Config
+
+    source = Ros1BagSource(path)
+    try:
+        return RosLogReader(source, config if config is not None else Config())
+    except BaseException:
+        source.close()
+        raise

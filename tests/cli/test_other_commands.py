@@ -1,0 +1,66 @@
+"""`info`, `validate`, `config`, `simulate`, `--version`, `--help`."""
+
+from __future__ import annotations
+
+import json
+import tomllib
+
+import pytest
+
+from cli.app import app
+from pipeline import __version__
+from pipeline.config import Config, dump_config
+from pathlib import Path
+
+SAMPLES = Path(__file__).resolve().parents[2] / "sample_logs"
+
+
+def test_version(runner):
+    result = runner.invoke(app, ["--version"])
+    assert result.exit_code == 0 and result.output.strip() == f"sonarmap {__version__}"
+
+
+@pytest.mark.parametrize("command", ["run", "info", "validate", "config", "simulate"])
+def test_every_command_has_help_with_examples(runner, command):
+    result = runner.invoke(app, [command, "--help"])
+    assert result.exit_code == 0
+    assert "Examples:" in result.output and "sonarmap " + command in result.output
+
+
+def test_config_prints_the_defaults_as_commented_toml(runner):
+    result = runner.invoke(app, ["config"])
+    assert result.exit_code == 0
+    assert result.output == dump_config(Config())
+    assert tomllib.loads(result.output)["mapper"]["n_particles"] == 200
+
+
+def test_info_lists_topics_and_counts(runner):
+    result = runner.invoke(app, ["info", str(SAMPLES / "office" / "office.bag"), "--json"])
+    assert result.exit_code == 0, result.output
+    info = json.loads(result.output)
+    counts = {t["name"]: t["count"] for t in info["topics"]}
+    assert counts["/tf_static"] == 1 and counts["/sonar"] > 1000 and counts["/odom"] > 100
+    assert info["format"] == "ros1" and info["range_topics"] == ["/sonar"] and info["pose_topic"] == "/odom"
+    table = runner.invoke(app, ["info", str(SAMPLES / "office" / "office.mcap")])
+    assert "sensor_msgs/msg/Range" in table.output and "Duration:" in table.output
+
+
+def test_validate_clean_log_exits_0_and_broken_exits_1(runner, tmp_path):
+    clean = runner.invoke(app, ["validate", str(SAMPLES / "office" / "office.mcap")])
+    assert clean.exit_code == 0, clean.output
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t,x,y,yaw,sensor,range\n1,0,0,0,s,nan\n2,0,0,0,s,1.0\n1.5,0,0,0,s,-2\n")
+    broken = runner.invoke(app, ["validate", str(bad), "--json"])
+    assert broken.exit_code == 1
+    codes = {f["code"] for f in json.loads(broken.output)["findings"]}
+    assert {"nan_readings", "negative_readings", "stamps_backwards", "unmounted_sensor"} <= codes
+
+
+def test_simulate_writes_log_and_truth_and_refuses_to_overwrite(runner, tmp_path):
+    out = tmp_path / "c.mcap"
+    args = ["simulate", str(SAMPLES / "worlds" / "corridor.toml"), "-o", str(out), "--ring-rate", "2"]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    assert {p.name for p in tmp_path.iterdir()} == {"c.mcap", "c.truth.yaml", "c.truth.pgm", "c.truth.csv"}
+    again = runner.invoke(app, args)
+    assert again.exit_code == 1 and "exists already" in again.output
