@@ -294,7 +294,7 @@ def test_bad_format_compression_and_content(tmp_path: Path) -> None:
     c = _content()
     with pytest.raises(ConfigError, match="unknown log format 'bag'"):
         write_log(c, tmp_path / "x", "bag")
-    with pytest.raises(ConfigError, match="format 'ros2' takes compression \\['none'\\]"):
+    with pytest.raises(ConfigError, match="format 'ros2' takes compression \\['none', 'zstd'\\]"):
         write_log(c, tmp_path / "x", "ros2", compression="lz4")
     with pytest.raises(OutputError, match="parent directory does not exist"):
         write_log(c, tmp_path / "no" / "x.bag", "ros1")
