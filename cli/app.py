@@ -196,8 +196,9 @@ def _info_table(li: Any) -> str:
             return "-"
         import datetime as dt
 
-        t = dt.datetime.fromtimestamp(ns / 1e9, tz=dt.UTC)
-        return f"{t:%Y-%m-%d %H:%M:%S}.{ns % 1_000_000_000:09d} UTC ({ns / 1e9:.9f})"
+        sec, frac = divmod(ns, 1_000_000_000)  # integer ns: no float rounding in the print
+        t = dt.datetime.fromtimestamp(sec, tz=dt.UTC)
+        return f"{t:%Y-%m-%d %H:%M:%S}.{frac:09d} UTC ({sec}.{frac:09d})"
 
     lines = [
         f"Files:        {li.path}",

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
@@ -34,7 +34,7 @@ def emulate(
         str, typer.Option("--format", "-f", help=f"Output format: {', '.join(_FORMATS)}.")
     ] = "mcap",
     preset: Annotated[
-        Optional[str],
+        str | None,
         typer.Option(
             "--preset",
             help="Sonar ring preset (pioneer-p3dx, udacity-8sonar); default: the config's "
@@ -42,35 +42,50 @@ def emulate(
         ),
     ] = None,
     config: Annotated[
-        Optional[Path],
-        typer.Option("--config", "-c", help="TOML configuration ([sensors], [grid], [input]).",
-                     dir_okay=False),
+        Path | None,
+        typer.Option(
+            "--config",
+            "-c",
+            help="TOML configuration (sensors, grid, input sections).",
+            dir_okay=False,
+        ),
     ] = None,
     max_range: Annotated[
-        Optional[float],
-        typer.Option("--max-range", help="Sonar max range for every sonar, m (default: the "
-                     "mounts', 5.0 for the Pioneer)."),
+        float | None,
+        typer.Option(
+            "--max-range",
+            help="Sonar max range for every sonar, m (default: the mounts', 5.0 for the Pioneer).",
+        ),
     ] = None,
     fov_deg: Annotated[
-        Optional[float],
-        typer.Option("--fov-deg", help="Sonar beam width for every sonar, degrees (default: "
-                     "the mounts', 30 for the Pioneer)."),
+        float | None,
+        typer.Option(
+            "--fov-deg",
+            help="Sonar beam width for every sonar, degrees (default: "
+            "the mounts', 30 for the Pioneer).",
+        ),
     ] = None,
     resolution: Annotated[
-        Optional[float],
-        typer.Option("--resolution", "-r", help="Cell size of the laser reference map, m "
-                     "(default: [grid] resolution, 0.05)."),
+        float | None,
+        typer.Option(
+            "--resolution",
+            "-r",
+            help="Cell size of the laser reference map, m (default: [grid] resolution, 0.05).",
+        ),
     ] = None,
     full_cone: Annotated[
         bool,
-        typer.Option("--full-cone", help="Emit only sonars whose whole cone the laser sees "
-                     "(default: those whose beam axis it sees)."),
+        typer.Option(
+            "--full-cone",
+            help="Emit only sonars whose whole cone the laser sees "
+            "(default: those whose beam axis it sees).",
+        ),
     ] = False,
     max_scans: Annotated[
-        Optional[int], typer.Option("--max-scans", min=1, help="Use only the first N scans.")
+        int | None, typer.Option("--max-scans", min=1, help="Use only the first N scans.")
     ] = None,
     laser_topic: Annotated[
-        Optional[str], typer.Option("--laser-topic", help="LaserScan topic (ROS logs).")
+        str | None, typer.Option("--laser-topic", help="LaserScan topic (ROS logs).")
     ] = None,
     compression: Annotated[
         str,

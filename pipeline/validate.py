@@ -38,7 +38,7 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
-from formats.contract import ALL_KINDS, LogReader, MountBatch, PoseBatch, RangeBatch, SensorMount
+from formats.contract import Kind, LogReader, MountBatch, PoseBatch, RangeBatch, SensorMount
 from pipeline.config import Config
 from pipeline.reading_quality import (
     MAX_RANGE,
@@ -367,7 +367,15 @@ def validate_log(reader: LogReader, config: Config) -> ValidationReport:
     table: SensorTable | None = None
     eps = config.mapper.eps_max
 
-    for batch in reader.batches(ALL_KINDS):
+    # A log without a pose source or without range topics is a finding, not a crash:
+    # stream only the kinds the log has (the readers raise TopicError for the others).
+    info = reader.info()
+    kinds: list[Kind] = ["mounts"]
+    if info.pose_topic:
+        kinds.append("poses")
+    if info.range_topics:
+        kinds.append("ranges")
+    for batch in reader.batches(kinds):
         if isinstance(batch, MountBatch):
             log_mounts.update(batch.mounts)
         elif isinstance(batch, PoseBatch):

@@ -64,3 +64,23 @@ def test_simulate_writes_log_and_truth_and_refuses_to_overwrite(runner, tmp_path
     assert {p.name for p in tmp_path.iterdir()} == {"c.mcap", "c.truth.yaml", "c.truth.pgm", "c.truth.csv"}
     again = runner.invoke(app, args)
     assert again.exit_code == 1 and "exists already" in again.output
+
+
+def test_validate_a_real_log_without_poses_reports_instead_of_crashing(runner):
+    tiago = Path(__file__).resolve().parents[1] / "data" / "ros1" / "tiago-sonar.bag"
+    result = runner.invoke(app, ["validate", str(tiago), "--json"])
+    assert result.exit_code == 1
+    report = json.loads(result.output)
+    codes = [f["code"] for f in report["findings"]]
+    assert "no_poses" in codes and codes.count("unmounted_sensor") == 3
+
+
+def test_info_prints_exact_nanosecond_stamps(runner):
+    tiago = Path(__file__).resolve().parents[1] / "data" / "ros1" / "tiago-sonar.bag"
+    result = runner.invoke(app, ["info", str(tiago)])
+    assert result.exit_code == 0
+    start = next(line for line in result.output.splitlines() if line.startswith("Start:"))
+    # Same nanoseconds in the calendar time and in the epoch seconds.
+    frac = start.split(".")[1][:9]
+    assert start.rstrip(")").endswith(frac)
+    assert "609 msgs" in result.output

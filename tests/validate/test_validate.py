@@ -272,8 +272,8 @@ class _FakeReader:
         self.sensor_names = ["s0"]
         self.skew_ns = np.round(np.asarray(skew_s) * 1e9).astype(np.int64)
 
-    def info(self) -> LogInfo:  # pragma: no cover - not used
-        raise NotImplementedError
+    def info(self) -> LogInfo:
+        return LogInfo(str(self.path), "fake", None, None, 0, [], ["/sonar"], "/odom")
 
     def batches(self, kinds: Sequence[Kind] = ALL_KINDS) -> Iterator[Batch]:
         n = self.skew_ns.shape[0]
