@@ -126,7 +126,7 @@ def run(
 
     Examples:
 
-      sonarmap run sample_logs/office.mcap -o out/office
+      sonarmap run sample_logs/office/office.mcap -o out/office
 
       sonarmap run robot.bag -o out/robot --range-topic /sonar --pose-topic /odom
 
@@ -284,9 +284,10 @@ def config_cmd(
 
 def _register_commands() -> None:
     """Commands that live in their own modules (each adds itself to ``app``)."""
-    from cli import simulate
+    from cli import evaluate, simulate
 
     simulate.register(app)
+    evaluate.register(app)
 
 
 _register_commands()

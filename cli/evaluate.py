@@ -61,7 +61,7 @@ def evaluate(
 
     if output is not None:
         # A run directory is immutable: results go next to it, never into it.
-        if output.resolve().parent == run_dir.resolve():
+        if output.resolve().is_relative_to(run_dir.resolve()):
             raise OutputError("will not write into the run directory (it is immutable)", output)
         if (output.exists() or output.is_symlink()) and not force:
             raise OutputError("exists already; use --force to replace", output)

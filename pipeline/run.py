@@ -277,6 +277,7 @@ def _metrics(
             "duration_s": duration_s,
             "start_ns": sv.ranges.t_min,
             "end_ns": sv.ranges.t_max,
+            "max_range_m": sv.ranges.max_range_m,
         },
         run={
             "tool_version": __version__,
