@@ -284,9 +284,10 @@ def config_cmd(
 
 def _register_commands() -> None:
     """Commands that live in their own modules (each adds itself to ``app``)."""
-    from cli import evaluate, simulate
+    from cli import emulate, evaluate, simulate
 
     simulate.register(app)
+    emulate.register(app)
     evaluate.register(app)
 
 

@@ -70,7 +70,7 @@ def emulate(
         typer.Option(
             "--resolution",
             "-r",
-            help="Cell size of the laser reference map, m (default: [grid] resolution, 0.05).",
+            help="Cell size of the laser reference map, m (default: grid.resolution of the config, 0.05).",
         ),
     ] = None,
     full_cone: Annotated[
@@ -86,6 +86,14 @@ def emulate(
     ] = None,
     laser_topic: Annotated[
         str | None, typer.Option("--laser-topic", help="LaserScan topic (ROS logs).")
+    ] = None,
+    laser_max_range: Annotated[
+        float | None,
+        typer.Option(
+            "--laser-max-range",
+            help="CARMEN laser max, m: readings at or above are no return (default: PARAM "
+            "robot_front_laser_max, else 81.83).",
+        ),
     ] = None,
     compression: Annotated[
         str,
@@ -119,6 +127,7 @@ def emulate(
         require_full_cone=full_cone,
         max_scans=max_scans,
         laser_topic=laser_topic,
+        laser_max_range=laser_max_range,
         map_resolution=resolution,
         compression=compression,
     )

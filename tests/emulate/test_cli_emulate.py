@@ -1,0 +1,85 @@
+"""The ``sonarmap emulate`` command: outputs, summary, error exit codes."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+from emulate_helpers import INTEL
+from typer.testing import CliRunner
+
+from cli.emulate import register
+
+
+def app() -> typer.Typer:
+    a = typer.Typer()
+
+    @a.callback()
+    def _root() -> None:
+        """test app"""
+
+    register(a)
+    return a
+
+
+def test_emulate_writes_log_map_and_trajectory(tmp_path: Path) -> None:
+    out = tmp_path / "intel.mcap"
+    res = CliRunner().invoke(
+        app(),
+        [
+            "emulate",
+            str(INTEL),
+            "-o",
+            str(out),
+            "--max-scans",
+            "20",
+            "--fov-deg",
+            "25",
+            "--max-range",
+            "4",
+            "--resolution",
+            "0.1",
+            "--compression",
+            "zstd",
+            "--laser-max-range",
+            "10",
+        ],
+    )
+    assert res.exit_code == 0, res.output
+    assert "emulated 160 readings of 8 sonars from 20 laser scans" in res.output
+    assert "not emitted: sonar_8" in res.output
+    assert "laser max 10 m" in res.output
+    for name in ("intel.mcap", "intel.laser.yaml", "intel.laser.pgm", "intel.truth.csv"):
+        assert (tmp_path / name).is_file()
+    assert "resolution: 0.1\n" in (tmp_path / "intel.laser.yaml").read_text()
+
+
+def test_errors_exit_1_with_one_line(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.log"
+    bad.write_text("FLASER 2 1.0 1.0 0 0 0 0 0 0 1.0 host\n")
+    res = CliRunner().invoke(app(), ["emulate", str(bad), "-o", str(tmp_path / "x.mcap")])
+    assert res.exit_code == 1
+    assert "bad.log: line 1: FLASER has 12 fields, expected 13 for 2 beams" in res.output
+    assert not (tmp_path / "x.mcap").exists()
+    res = CliRunner().invoke(
+        app(),
+        [
+            "emulate",
+            str(INTEL),
+            "-o",
+            str(tmp_path / "y.mcap"),
+            "--preset",
+            "nope",
+            "--max-scans",
+            "2",
+        ],
+    )
+    assert res.exit_code == 1
+    assert "unknown preset 'nope'" in res.output
+
+
+def test_bad_format_is_a_usage_error(tmp_path: Path) -> None:
+    res = CliRunner().invoke(
+        app(), ["emulate", str(INTEL), "-o", str(tmp_path / "x"), "--format", "png"]
+    )
+    assert res.exit_code == 2
