@@ -7,7 +7,7 @@ import json
 import logging
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any, Optional
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
@@ -26,20 +26,20 @@ app = typer.Typer(
 )
 
 ConfigOpt = Annotated[
-    Optional[Path],
+    Path | None,
     typer.Option("--config", "-c", help="TOML configuration file (see `sonarmap config`).",
                  dir_okay=False),
 ]
 FormatOpt = Annotated[
-    Optional[str],
+    str | None,
     typer.Option("--format", "-f", help="Log format: ros1, ros2, mcap, csv (default: detect)."),
 ]
 RangeTopicOpt = Annotated[
-    Optional[list[str]],
+    list[str] | None,
     typer.Option("--range-topic", help="Range topic to map (repeatable; default: discover)."),
 ]
 PoseTopicOpt = Annotated[
-    Optional[str],
+    str | None,
     typer.Option("--pose-topic", help="Pose topic (Odometry/PoseStamped or /tf)."),
 ]
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")]
@@ -108,11 +108,11 @@ def run(
     range_topic: RangeTopicOpt = None,
     pose_topic: PoseTopicOpt = None,
     method: Annotated[
-        Optional[str],
+        str | None,
         typer.Option("--method", "-m", help="andersone (the paper's method) or classic."),
     ] = None,
     resolution: Annotated[
-        Optional[float], typer.Option("--resolution", "-r", help="Grid cell size, m.")
+        float | None, typer.Option("--resolution", "-r", help="Grid cell size, m.")
     ] = None,
     compare_correction: Annotated[
         bool,
@@ -258,7 +258,7 @@ def validate(
 def config_cmd(
     config: ConfigOpt = None,
     output: Annotated[
-        Optional[Path], typer.Option("--output", "-o", help="Write to this file instead of stdout.")
+        Path | None, typer.Option("--output", "-o", help="Write to this file instead of stdout.")
     ] = None,
 ) -> None:
     """Print the configuration (defaults, or a file's effective values) as commented TOML.

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
@@ -23,11 +23,11 @@ def register(app: typer.Typer) -> None:
             typer.Option("--format", "-f", help="mcap, ros1, ros2, ros2-mcap, mcap-ros1, csv, csv-set."),
         ] = "mcap",
         waypoints: Annotated[
-            Optional[Path],
+            Path | None,
             typer.Option("--waypoints", "-w", help="Waypoints CSV (x,y); default <world>.waypoints.csv."),
         ] = None,
         config: Annotated[
-            Optional[Path],
+            Path | None,
             typer.Option("--config", "-c", help="Config whose [sensors] mounts/preset define the ring."),
         ] = None,
         seed: Annotated[int, typer.Option(help="Random seed.")] = 0,

@@ -26,7 +26,7 @@ from __future__ import annotations
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal, Protocol, Union, runtime_checkable
+from typing import Literal, Protocol, runtime_checkable
 
 import numpy as np
 import numpy.typing as npt
@@ -167,7 +167,7 @@ class MountBatch:
         return len(self.mounts)
 
 
-Batch = Union[RangeBatch, PoseBatch, MountBatch]
+Batch = RangeBatch | PoseBatch | MountBatch
 
 
 @dataclass(frozen=True)

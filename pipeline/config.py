@@ -67,6 +67,17 @@ class MapperConfig:
     protect_times: int = _doc(
         "features measured at least this often are protected from deletion (§4)", default=3
     )
+    split_guard: bool = _doc(
+        "a refit whose survivors' mean falls in a free cell of the scan counts as cleared "
+        "(deleted unless protected) instead of refitting across the free cone; the paper "
+        "does not cover this case (§4; false = eqs. 9-10 literally)",
+        default=True,
+    )
+    refit_positions: Literal["particle", "cell"] = _doc(
+        "eqs. 9-10 refit from the survivors' own positions ('particle') or their cell "
+        "centres ('cell', adds ~res²/12 of rounding variance at every refit) (§4)",
+        default="particle",
+    )
     sigma_min: float = _doc(
         "σ_min, covariance floor, m; 0 = half a grid cell (§4)", default=0.0
     )

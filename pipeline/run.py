@@ -39,7 +39,7 @@ from pipeline.metrics import (
     peak_rss_mb,
     sha256_of,
 )
-from pipeline.pose_sync import POSE_REASONS, POSE_OK, interpolate_poses, sonar_geometry
+from pipeline.pose_sync import POSE_OK, POSE_REASONS, interpolate_poses, sonar_geometry
 from pipeline.reading_quality import REASONS
 from pipeline.scans import ScanBuilder, ScanKeys
 from pipeline.sensors import SensorTable, resolve_sensors
@@ -329,6 +329,7 @@ def _ablation_row(mapper: Mapper, snap: MapSnapshot) -> dict[str, Any]:
         "features_corrected": c.get("features_corrected", 0),
         "features_deleted": c.get("features_deleted", 0),
         "features_protected": c.get("features_protected", 0),
+        "features_split": c.get("features_split", 0),
         "cells_occupied": map_cells(snap)["cells_occupied"],
     }
 
@@ -364,18 +365,21 @@ def _write_outputs(
         },
     )
     (out.path("config.toml")).write_text(dump_config(config), encoding="utf-8")
-    images = {"with_correction": "map.png"}
+    labels = {"with_correction": "with feature correction",
+              "without_correction": "without feature correction"}
+    images = {labels["with_correction"]: "map.png"}
     if "no_correction" in snapshots:
         other = snapshots["no_correction"]
         write_map_png(
             out.path("map_no_correction.png"), other, trajectory_xy=traj, features=other.features,
             title=f"{metrics.input['name']} - without feature correction",
         )
-        images["without_correction"] = "map_no_correction.png"
+        images[labels["without_correction"]] = "map_no_correction.png"
     readings_per_sensor = {row["name"]: row["readings"] for row in metrics.sensors}
     comparison = None
     if metrics.comparison is not None:
-        comparison = {**metrics.comparison, "images": images}
+        comparison = {labels[k]: v for k, v in metrics.comparison.items()}
+        comparison["images"] = images
     timer.seconds.setdefault("outputs", 0.0)
     rate = metrics.counts["readings"] / max(timer.seconds.get("total", 0.0), 1e-9)
     metrics.timing = {

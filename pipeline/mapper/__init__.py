@@ -1,0 +1,28 @@
+"""The mapping method (ALGORITHM.md §1-5) and the classic baseline (§8), pure numpy.
+
+``make_mapper(config, grid)`` picks :class:`AndersoneMapper` or :class:`ClassicMapper` by
+``config.method``; both follow the :class:`Mapper` protocol. Module map:
+``reading_features`` (eqs. 1-4), ``feature_set`` (eqs. 5-8 + spatial index),
+``free_space`` (§3), ``correction`` (§4), ``occupancy`` (§5), ``grid_raster`` (shapes →
+cells), ``andersone`` / ``classic`` (the mappers).
+"""
+
+from __future__ import annotations
+
+from pipeline.config import MapperConfig
+from pipeline.errors import ConfigError
+from pipeline.mapper.andersone import AndersoneMapper
+from pipeline.mapper.classic import ClassicMapper
+from pipeline.mapper.protocol import Mapper
+from pipeline.mapper.types import GridSpec
+
+__all__ = ["AndersoneMapper", "ClassicMapper", "Mapper", "make_mapper"]
+
+
+def make_mapper(config: MapperConfig, grid: GridSpec) -> Mapper:
+    """The mapper named by ``config.method`` ('andersone' or 'classic')."""
+    if config.method == "classic":
+        return ClassicMapper(config, grid)
+    if config.method == "andersone":
+        return AndersoneMapper(config, grid)
+    raise ConfigError(f"'mapper.method' must be 'andersone' or 'classic', got {config.method!r}")

@@ -87,6 +87,7 @@ class MapperCounters:
     features_corrected: int = 0  # refit from surviving particles
     features_deleted: int = 0
     features_protected: int = 0  # >95 % particles deleted but measured_times >= protect_times
+    features_split: int = 0  # split_guard: survivors' mean in a free cell (also deleted/protected)
     cells_freed: int = 0  # sum over scans of the free-space scan's cell count
 
     def as_dict(self) -> dict[str, int]:

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import json
 import tomllib
+from pathlib import Path
 
 import pytest
 
 from cli.app import app
 from pipeline import __version__
 from pipeline.config import Config, dump_config
-from pathlib import Path
 
 SAMPLES = Path(__file__).resolve().parents[2] / "sample_logs"
 

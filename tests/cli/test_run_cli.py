@@ -14,6 +14,7 @@ import pytest
 
 from cli.app import app
 from formats.writers.nav2_map import load_nav2_map
+
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLES = ROOT / "sample_logs"
 
@@ -23,7 +24,7 @@ OUTPUTS = {"map.pgm", "map.yaml", "map.png", "features.parquet", "metrics.json",
 SAMPLE_RUNS = [
     ("office.mcap", [str(SAMPLES / "office" / "office.mcap")], "mcap"),
     ("office.bag", [str(SAMPLES / "office" / "office.bag")], "ros1"),
-    ("office_ros2", [str(SAMPLES / "office" / "office_ros2")], "ros2"),
+    ("office_ros2", [str(SAMPLES / "office" / "office_ros2")], "ros2-sqlite3"),
     ("office_csv", [str(SAMPLES / "office" / "office_csv")], "csv"),
     ("udacity", [str(SAMPLES / "udacity-8sonar"), "--config",
                  str(SAMPLES / "udacity-8sonar" / "sonarmap.toml")], "csv"),

@@ -1,0 +1,576 @@
+"""``run_batch()``: many logs mapped in parallel on Dask, one task per log.
+
+Each log is mapped exactly as ``sonarmap run`` would (:func:`pipeline.run.run`) into
+``OUT/<name>/``. The engine is ``dask.distributed``: a local cluster of single-threaded
+worker processes (default), or an existing cluster reached by its scheduler address.
+Only paths, the configuration (a plain dict) and small result dicts travel through the
+scheduler; each worker opens and streams its own input.
+
+Resume: a finished log's directory holds ``.sonarmap-done.json`` (input sha256, config
+hash and its summary values). The marker is written into a staging directory before it is
+swapped into place, so a directory under the final name with a marker is always complete;
+one without a marker (a plain ``sonarmap run`` output) is re-mapped and replaced. A log
+whose input sha256 and config hash match its marker is skipped unless ``rerun``.
+
+Failure isolation: a log that raises :class:`~pipeline.errors.SonarmapError` is recorded
+with its one-line message; any other exception with its type, message and traceback (the
+traceback is logged); the other logs complete. The summary (``summary.parquet``,
+``summary.md``, one row per log sorted by path) is written atomically at the end.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import io
+import json
+import logging
+import os
+import secrets
+import shutil
+import time
+import traceback
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+from typing import Any
+
+from pipeline.config import Config, config_from_dict, load_config
+from pipeline.errors import ConfigError, FormatError, InputError, OutputError, SonarmapError
+
+log = logging.getLogger("sonarmap.batch")
+
+MARKER = ".sonarmap-done.json"
+SUMMARY_PARQUET = "summary.parquet"
+SUMMARY_MD = "summary.md"
+MARKER_VERSION = 1
+SCHEDULER_TIMEOUT_S = 10.0  # connecting to an existing scheduler (--scheduler)
+
+BatchProgress = Callable[[int, int], None]  # (logs finished, logs total)
+
+# A file detected as CSV is only taken as a log when directory search finds it if it
+# is not one of these (looks_like_csv accepts any text with two fields per line).
+_NOT_LOG_SUFFIXES = frozenset(
+    {".md", ".rst", ".toml", ".yaml", ".yml", ".json", ".html", ".htm", ".py", ".cfg",
+     ".ini", ".xml", ".pgm", ".sh", ".in"}
+)
+_HEADERLESS_SUFFIXES = frozenset({".csv", ".tsv", ".txt", ".dat", ".log"})
+_SINGLE_COLUMNS = frozenset({"t", "x", "y", "yaw", "sensor", "range"})
+_RESERVED_NAMES = frozenset({SUMMARY_PARQUET, SUMMARY_MD})
+
+
+# --------------------------------------------------------------------------- results
+
+
+@dataclass
+class LogOutcome:
+    """One summary row: a log and what happened to it.
+
+    ``duration_s`` is the log's own duration (s); ``seconds`` the wall time spent on it in
+    this batch (s). Mapping values are None when the log failed.
+    """
+
+    path: str
+    name: str
+    status: str  # "ok", "failed" or "skipped"
+    error: str | None = None
+    duration_s: float | None = None
+    readings: int | None = None
+    features: int | None = None
+    mean_feature_variance_m2: float | None = None
+    mapped_area_m2: float | None = None
+    seconds: float = 0.0
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> LogOutcome:
+        names = {f.name for f in fields(cls)}
+        return cls(**{k: v for k, v in d.items() if k in names})
+
+
+@dataclass
+class BatchResult:
+    """What a batch did: one outcome per log (sorted by path) and where the summary is."""
+
+    out_dir: Path
+    outcomes: list[LogOutcome]
+    summary_parquet: Path
+    summary_md: Path
+
+    def count(self, status: str) -> int:
+        return sum(o.status == status for o in self.outcomes)
+
+    @property
+    def failures(self) -> list[LogOutcome]:
+        return [o for o in self.outcomes if o.status == "failed"]
+
+    @property
+    def ok(self) -> bool:
+        """True when no log failed (skipped logs are finished ones)."""
+        return not self.failures
+
+
+# --------------------------------------------------------------------------- finding logs
+
+
+def read_manifest(path: Path) -> list[Path]:
+    """The paths a manifest lists: one per line, ``#`` comments and blank lines ignored,
+    relative paths taken relative to the manifest's directory."""
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except FileNotFoundError as err:
+        raise InputError("manifest not found", path) from err
+    except (OSError, UnicodeDecodeError) as err:
+        raise InputError(f"cannot read manifest: {err}", path) from err
+    out: list[Path] = []
+    for line in text.splitlines():
+        s = line.strip()
+        if not s or s.startswith("#"):
+            continue  # only whole-line comments: a path may contain '#'
+        p = Path(s).expanduser()
+        out.append(p if p.is_absolute() else Path(path).parent / p)
+    return out
+
+
+def is_sonarmap_output(d: Path) -> bool:
+    """Whether a directory is an output of sonarmap (a run's or a batch's)."""
+    return (
+        (d / MARKER).is_file()
+        or ((d / "metrics.json").is_file() and (d / "features.parquet").is_file())
+        or ((d / SUMMARY_PARQUET).is_file() and (d / SUMMARY_MD).is_file())
+    )
+
+
+def _is_log_dir(d: Path, config: Config) -> bool:
+    """A directory that is one log: a rosbag2 bag or a CSV log set."""
+    from formats.csv_log import looks_like_csv
+
+    return (d / "metadata.yaml").is_file() or looks_like_csv(d, config)
+
+
+def _is_log_file(f: Path, config: Config) -> bool:
+    """Whether directory search takes ``f`` as a log: its content must be a known format,
+    and a CSV must be a single-layout log (right header, or a data-file suffix)."""
+    from formats import detect_format
+
+    if ".truth." in f.name or f.suffix.lower() in _NOT_LOG_SUFFIXES:
+        return False
+    try:
+        fmt = detect_format(f)
+    except FormatError:
+        return False
+    if fmt != "csv":
+        return True
+    csv = config.input.csv
+    if csv.layout != "single":
+        return False  # set layouts are directories, found as such
+    if not csv.header:
+        return f.suffix.lower() in _HEADERLESS_SUFFIXES
+    return _single_header_ok(f, csv.delimiter)
+
+
+def _single_header_ok(f: Path, delimiter: str) -> bool:
+    try:
+        with f.open("r", encoding="utf-8", errors="replace") as fh:
+            for line in fh:
+                s = line.strip()
+                if not s or s.startswith("#"):
+                    continue
+                parts = s.split() if delimiter == "whitespace" else s.split(delimiter)
+                names = {p.strip().strip('"').lower() for p in parts}
+                return names >= _SINGLE_COLUMNS
+    except OSError:
+        return False
+    return False
+
+
+def _search(d: Path, config: Config, skip: set[Path]) -> Iterator[Path]:
+    """Logs under directory ``d``, recursively, in sorted order."""
+    try:
+        entries = sorted(d.iterdir(), key=lambda p: p.name)
+    except OSError as err:
+        raise InputError(f"cannot list directory: {err.strerror or err}", d) from err
+    for e in entries:
+        if e.name.startswith(".") or e.resolve() in skip:
+            continue  # hidden: staging and temporary dirs, VCS metadata
+        if e.is_dir():
+            if is_sonarmap_output(e):
+                continue
+            if _is_log_dir(e, config):
+                yield e
+            else:
+                yield from _search(e, config, skip)
+        elif e.is_file() and _is_log_file(e, config):
+            yield e
+
+
+def find_logs(
+    inputs: Sequence[Path],
+    config: Config,
+    *,
+    manifests: Sequence[Path] = (),
+    exclude: Sequence[Path] = (),
+) -> list[Path]:
+    """The logs a batch maps, deduplicated and sorted by absolute path.
+
+    Files named directly or in a manifest are taken as they are (a failure to read them
+    is that log's failure). Directories are one log when they are a rosbag2 bag (a
+    ``metadata.yaml``) or a CSV log set, else searched recursively for files whose content
+    is a log; hidden entries, ``*.truth.*`` files, sonarmap's own outputs and ``exclude``
+    (the batch's output directory) are skipped.
+    """
+    skip = {Path(p).resolve() for p in exclude}
+    named = [Path(p) for p in inputs]
+    for m in manifests:
+        named += read_manifest(Path(m))
+    found: dict[Path, Path] = {}
+    for p in named:
+        ap = Path(os.path.abspath(p))
+        if ap.is_dir() and not _is_log_dir(ap, config):
+            for f in _search(ap, config, skip):
+                found.setdefault(f.resolve(), Path(os.path.abspath(f)))
+        else:
+            found.setdefault(ap.resolve(), ap)
+    return sorted(found.values(), key=str)
+
+
+def output_names(paths: Sequence[Path]) -> dict[Path, str]:
+    """Output directory name of each log: the file stem (or directory name); names that
+    collide (case-insensitively, or with the summary files) all get ``-<8 hex of the
+    sha256 of the path>``, so a name depends only on its own path and its peers."""
+    base = {p: (p.name if p.is_dir() else p.stem) or "log" for p in paths}
+    counts: dict[str, int] = {}
+    for n in base.values():
+        counts[n.casefold()] = counts.get(n.casefold(), 0) + 1
+    out = {}
+    for p, n in base.items():
+        if counts[n.casefold()] > 1 or n in _RESERVED_NAMES or n.startswith("."):
+            digest = hashlib.sha256(str(p).encode()).hexdigest()[:8]
+            n = f"{n}-{digest}"
+        out[p] = n
+    return out
+
+
+# --------------------------------------------------------------------------- the worker
+
+
+def _map_one(
+    path: str, out_dir: str, name: str, config: dict[str, Any], rerun: bool
+) -> dict[str, Any]:
+    """Map one log into ``out_dir/name`` (runs on a Dask worker); never raises.
+
+    Returns a :class:`LogOutcome` as a dict, plus ``traceback`` (text) for unexpected
+    exceptions.
+    """
+    t0 = time.perf_counter()
+    try:
+        row = _map_one_checked(Path(path), Path(out_dir), name, config, rerun)
+    except SonarmapError as err:
+        row = LogOutcome(path, name, "failed", error=str(err))
+    except Exception as err:  # a bug or an unforeseen library error: record, go on
+        msg = " ".join(f"{type(err).__name__}: {err}".split())
+        return {**asdict(LogOutcome(path, name, "failed", error=msg,
+                                    seconds=time.perf_counter() - t0)),
+                "traceback": traceback.format_exc()}
+    row.seconds = time.perf_counter() - t0
+    return asdict(row)
+
+
+def _map_one_checked(
+    path: Path, out_dir: Path, name: str, config: dict[str, Any], rerun: bool
+) -> LogOutcome:
+    from pipeline.metrics import sha256_of
+    from pipeline.run import run
+
+    cfg = config_from_dict(config)
+    if not path.exists():
+        raise InputError("no such file or directory", path)
+    final = out_dir / name
+    config_hash = cfg.hash()
+    marker = None if rerun else read_marker(final)
+    if (
+        marker is not None
+        and marker.get("config_hash") == config_hash
+        and marker.get("input_sha256") == sha256_of(path)  # hashed only when it can matter
+    ):
+        saved = marker.get("row")
+        saved = saved if isinstance(saved, dict) else {}
+        return LogOutcome.from_dict(
+            {**saved, "path": str(path), "name": name, "status": "skipped", "error": None}
+        )
+    _remove_stale_staging(out_dir, name)
+    staging = out_dir / f".{name}.run-{os.getpid()}-{secrets.token_hex(4)}"
+    try:
+        result = run(path, staging, cfg)
+        m = result.metrics
+        row = LogOutcome(
+            path=str(path),
+            name=name,
+            status="ok",
+            duration_s=_num(m.input.get("duration_s")),
+            readings=int(m.counts["readings"]),
+            features=int(m.counts["features"]),
+            mean_feature_variance_m2=_num(m.paper_metric.get("mean_feature_variance_m2")),
+            mapped_area_m2=_num(m.map.get("mapped_area_m2")),
+        )
+        marker_data = {
+            "marker_version": MARKER_VERSION,
+            "input_sha256": m.input["sha256"],
+            "config_hash": config_hash,
+            "tool_version": m.run.get("tool_version"),
+            "row": {k: v for k, v in asdict(row).items()
+                    if k not in ("path", "status", "error", "seconds")},
+        }
+        from formats.writers.atomic import atomic_write_text
+
+        atomic_write_text(staging / MARKER, json.dumps(marker_data, indent=2) + "\n")
+        _swap_into_place(staging, final)
+    finally:
+        _remove_tree(staging)
+    return row
+
+
+def _num(v: Any) -> float | None:
+    """A finite float, else None (NaN metrics of a log without features)."""
+    if v is None:
+        return None
+    f = float(v)
+    return f if f == f and abs(f) != float("inf") else None
+
+
+def read_marker(run_dir: Path) -> dict[str, Any] | None:
+    """The resume marker of a finished log's output directory, or None (absent/unreadable)."""
+    try:
+        data = json.loads((run_dir / MARKER).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return data if isinstance(data, dict) else None
+
+
+def _swap_into_place(staging: Path, final: Path) -> None:
+    """Rename the complete ``staging`` directory to ``final``, replacing an old one; the
+    final name never holds a partial run (old moved aside, new renamed in, old deleted)."""
+    if final.is_symlink() or (final.exists() and not final.is_dir()):
+        raise OutputError("exists and is not a directory; not replacing it", final)
+    old: Path | None = None
+    try:
+        if final.exists():
+            old = final.parent / f".{final.name}.old-{os.getpid()}-{secrets.token_hex(4)}"
+            os.rename(final, old)
+        try:
+            os.rename(staging, final)
+        except OSError:
+            if old is not None:
+                os.rename(old, final)  # put the previous complete output back
+            raise
+    except OSError as err:
+        raise OutputError(f"cannot move the finished output into place: {err}", final) from err
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+def _remove_tree(p: Path) -> None:
+    if p.is_dir() and not p.is_symlink():
+        shutil.rmtree(p, ignore_errors=True)
+
+
+def _remove_stale_staging(out_dir: Path, name: str) -> None:
+    """Leftovers of an interrupted earlier batch for this log (hidden siblings)."""
+    for pattern in (f".{name}.run-*", f"..{name}.run-*", f".{name}.old-*"):
+        for p in out_dir.glob(pattern):
+            _remove_tree(p)
+
+
+# --------------------------------------------------------------------------- the driver
+
+
+@contextlib.contextmanager
+def _client(workers: int | None, scheduler: str | None) -> Iterator[Any]:
+    """A Dask client: to ``scheduler`` if given, else to a new local process cluster."""
+    with _quiet_dask():
+        yield from _client_inner(workers, scheduler)
+
+
+@contextlib.contextmanager
+def _quiet_dask() -> Iterator[None]:
+    """Dask logs cluster life (INFO) to the root handler; keep only its errors unless
+    sonarmap itself logs at DEBUG (``-vv``)."""
+    dlog = logging.getLogger("distributed")
+    old = dlog.level
+    if logging.getLogger("sonarmap").getEffectiveLevel() > logging.DEBUG:
+        dlog.setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        dlog.setLevel(old)
+
+
+def _client_inner(workers: int | None, scheduler: str | None) -> Iterator[Any]:
+    from distributed import Client, LocalCluster
+
+    if scheduler:
+        try:
+            client = Client(scheduler, timeout=SCHEDULER_TIMEOUT_S, set_as_default=False)
+        except (OSError, TimeoutError, ValueError) as err:
+            raise ConfigError(
+                f"cannot connect to the Dask scheduler at {scheduler}: {err}"
+            ) from err
+        with client:
+            yield client
+        return
+    n = workers if workers is not None else (os.cpu_count() or 1)
+    if n < 1:
+        raise ConfigError(f"--workers must be >= 1, got {n}")
+    with (
+        LocalCluster(
+            n_workers=n,
+            threads_per_worker=1,
+            processes=True,
+            host="127.0.0.1",
+            dashboard_address=None,
+            silence_logs=logging.ERROR,
+            # No per-worker memory cap: the nanny would kill a worker mapping a big log at
+            # 95 % of total/N; the operating system is the judge instead.
+            memory_limit=0,
+        ) as cluster,
+        Client(cluster, set_as_default=False) as client,
+    ):
+        yield client
+
+
+def run_batch(
+    inputs: list[Path],
+    out_dir: Path,
+    config_path: Path | None,
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    rerun: bool = False,
+    progress: BatchProgress | None = None,
+    manifests: Sequence[Path] = (),
+) -> BatchResult:
+    """Map every log of ``inputs`` (files, directories) and ``manifests`` into
+    ``out_dir/<name>/``; write ``summary.parquet`` and ``summary.md``.
+
+    Raises SonarmapError only for problems of the whole batch (bad configuration, no logs
+    found, unreachable scheduler, unwritable output directory); a log's failure is a row.
+    """
+    from distributed import as_completed
+
+    cfg = load_config(config_path)
+    out_dir = Path(os.path.abspath(out_dir))
+    if out_dir.exists() and not out_dir.is_dir():
+        raise OutputError("exists and is not a directory", out_dir)
+    logs = find_logs(inputs, cfg, manifests=manifests, exclude=[out_dir])
+    if not logs:
+        where = ", ".join(str(p) for p in [*inputs, *manifests]) or "(no inputs)"
+        raise InputError(f"no logs found in {where}")
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise OutputError(f"cannot create output directory: {err.strerror or err}", out_dir) from err
+    names = output_names(logs)
+    cfg_dict = cfg.to_dict()
+    total = len(logs)
+    rows: list[LogOutcome] = []
+    if progress is not None:
+        progress(0, total)
+    with _client(workers, scheduler) as client:
+        futures = {
+            client.submit(_map_one, str(p), str(out_dir), names[p], cfg_dict, rerun,
+                          pure=False, key=f"sonarmap-{names[p]}-{secrets.token_hex(4)}"): p
+            for p in logs
+        }
+        try:
+            for fut in as_completed(futures, loop=client.loop):
+                p = futures[fut]
+                rows.append(_collect(fut, p, names[p]))
+                if progress is not None:
+                    progress(len(rows), total)
+        except BaseException:
+            client.cancel(list(futures))  # interrupted: finished logs keep their markers
+            raise
+    rows.sort(key=lambda r: r.path)
+    pq_path, md_path = write_summary(out_dir, rows)
+    return BatchResult(out_dir, rows, pq_path, md_path)
+
+
+def _collect(fut: Any, path: Path, name: str) -> LogOutcome:
+    """A finished task's outcome; a task that died (worker killed) is a failed row."""
+    try:
+        d = fut.result()
+    except Exception as err:
+        log.error("%s: task failed on the cluster: %s: %s", path, type(err).__name__, err)
+        return LogOutcome(str(path), name, "failed",
+                          error=" ".join(f"{type(err).__name__}: {err}".split()))
+    tb = d.pop("traceback", None)
+    if tb:
+        log.error("%s: unexpected error while mapping\n%s", path, tb.rstrip())
+    return LogOutcome.from_dict(d)
+
+
+# --------------------------------------------------------------------------- summary
+
+
+def summary_table(rows: Sequence[LogOutcome]) -> Any:
+    """The summary as a pyarrow Table (one row per log, in the given order)."""
+    import pyarrow as pa
+
+    schema = pa.schema([
+        pa.field("path", pa.string(), nullable=False),
+        pa.field("name", pa.string(), nullable=False),
+        pa.field("status", pa.string(), nullable=False),
+        pa.field("error", pa.string()),
+        pa.field("duration_s", pa.float64(), metadata={"unit": "s"}),
+        pa.field("readings", pa.int64()),
+        pa.field("features", pa.int64()),
+        pa.field("mean_feature_variance_m2", pa.float64(), metadata={"unit": "m^2"}),
+        pa.field("mapped_area_m2", pa.float64(), metadata={"unit": "m^2"}),
+        pa.field("seconds", pa.float64(), nullable=False, metadata={"unit": "s"}),
+    ])
+    cols = {f.name: [getattr(r, f.name) for r in rows] for f in schema}
+    return pa.table(cols, schema=schema)
+
+
+def write_summary(out_dir: Path, rows: Sequence[LogOutcome]) -> tuple[Path, Path]:
+    """Write ``summary.parquet`` and ``summary.md`` atomically; return their paths."""
+    import pyarrow.parquet as pq
+
+    from formats.writers.atomic import atomic_write_bytes, atomic_write_text
+
+    buf = io.BytesIO()
+    pq.write_table(summary_table(rows), buf, compression="zstd")
+    pq_path, md_path = out_dir / SUMMARY_PARQUET, out_dir / SUMMARY_MD
+    atomic_write_bytes(pq_path, buf.getvalue())
+    atomic_write_text(md_path, summary_markdown(rows))
+    return pq_path, md_path
+
+
+def summary_markdown(rows: Sequence[LogOutcome]) -> str:
+    """The summary as a Markdown document with one table row per log."""
+    counts = {s: sum(r.status == s for r in rows) for s in ("ok", "skipped", "failed")}
+    lines = [
+        "# sonarmap batch summary",
+        "",
+        f"{len(rows)} logs: {counts['ok']} mapped, {counts['skipped']} skipped (unchanged), "
+        f"{counts['failed']} failed.",
+        "",
+        "| log | status | duration (s) | readings | features | mean feature variance (m²) "
+        "| mapped area (m²) | wall (s) | path | error |",
+        "|---|---|--:|--:|--:|--:|--:|--:|---|---|",
+    ]
+    for r in rows:
+        cells = [
+            r.name, r.status, _fmt(r.duration_s, ".1f"), _fmt(r.readings, "d"),
+            _fmt(r.features, "d"), _fmt(r.mean_feature_variance_m2, ".4g"),
+            _fmt(r.mapped_area_m2, ".2f"), _fmt(r.seconds, ".2f"), r.path, r.error or "",
+        ]
+        lines.append("| " + " | ".join(_md_cell(c) for c in cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _fmt(v: float | int | None, spec: str) -> str:
+    return "" if v is None else format(v, spec)
+
+
+def _md_cell(text: str) -> str:
+    return text.replace("\\", "\\\\").replace("|", "\\|").replace("\n", " ")

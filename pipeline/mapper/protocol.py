@@ -1,0 +1,32 @@
+"""What every mapper offers the pipeline (the andersone method and the classic baseline)."""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+from pipeline.config import MapperConfig
+from pipeline.mapper.types import FeatureTable, GridSpec, MapperCounters, MapSnapshot, Scan
+
+
+class Mapper(Protocol):
+    """A mapper fed scan by scan; pure numpy, no I/O."""
+
+    config: MapperConfig
+    grid: GridSpec
+    counters: MapperCounters
+
+    def integrate(self, scan: Scan) -> None:
+        """Add one scan."""
+        ...
+
+    def snapshot(self) -> MapSnapshot:
+        """The map as it stands."""
+        ...
+
+    def feature_table(self) -> FeatureTable:
+        """The feature set sorted by id (empty for mappers without features)."""
+        ...
+
+    def feature_variance(self) -> tuple[float, float]:
+        """(mean trace(P)/2, mean largest eigenvalue), m²; (nan, nan) without features."""
+        ...

@@ -1,0 +1,162 @@
+"""§5 layers and eq. 12, determinism, the classic baseline (§8), the synthetic room (§7)."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mapper_helpers import build_scan, cell_centres
+
+from pipeline.config import MapperConfig
+from pipeline.errors import ConfigError
+from pipeline.mapper import AndersoneMapper, ClassicMapper, make_mapper
+from pipeline.mapper.occupancy import FreeLayer, logit
+from pipeline.mapper.synthetic import ring_scans, room_grid
+from pipeline.mapper.types import GridSpec
+
+CFG = MapperConfig()
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_free_layer_update_and_clamp() -> None:
+    layer = FreeLayer(GridSpec(0, 0, 1.0, 3, 1), 0.35, 0.12, 0.97)
+    ref = 0.0
+    for i in range(12):
+        layer.update(np.array([1]))
+        ref = min(max(ref + logit(0.35), logit(0.12)), logit(0.97))
+        assert layer.logodds[0, 1] == pytest.approx(ref, abs=1e-6)
+        if i == 0:
+            assert layer.logodds[0, 1] == np.float32(logit(0.35))
+    assert layer.logodds[0, 1] == np.float32(logit(0.12))  # clamped: stays revisable
+    assert layer.logodds[0, 0] == 0 and layer.observed.tolist() == [[False, True, False]]
+
+
+def test_unknown_is_nan_and_free_probability(grid) -> None:  # type: ignore[no-untyped-def]
+    m = AndersoneMapper(MapperConfig(feature_correction=False), grid)
+    snap = m.snapshot()
+    assert np.isnan(snap.probability).all() and not snap.observed.any()
+    assert snap.probability.dtype == np.float32 and snap.probability.shape == grid.shape
+    m.integrate(build_scan([3.0]))
+    snap = m.snapshot()
+    x, y = cell_centres(grid)
+    free_cell = (np.abs(x - 1.025) < 1e-9) & (np.abs(y - 0.025) < 1e-9)
+    assert snap.probability[free_cell][0] == pytest.approx(0.35, abs=1e-6)
+    behind = (np.abs(x - 4.025) < 1e-9) & (np.abs(y - 0.025) < 1e-9)
+    assert np.isnan(snap.probability[behind][0])
+    assert snap.observed.sum() == m.counters.cells_freed + np.count_nonzero(
+        snap.occupied & (snap.free_logodds == 0)
+    )
+
+
+def test_feature_ellipse_overrides_free_log_odds(grid) -> None:  # type: ignore[no-untyped-def]
+    m = AndersoneMapper(MapperConfig(feature_correction=False), grid)
+    for _ in range(10):  # drive the cells in front of the origin to the lower clamp
+        m.integrate(build_scan([4.0], ox=-2.0))
+    # A feature right inside that free region (as if put there by another sensor).
+    m.features.add(np.array([[0.0, 0.0]]), np.array([[0.01, 0.0, 0.01]]), np.array([0]))
+    snap = m.snapshot()
+    r, c = 100, 100  # the cell whose corner is (0, 0)
+    assert snap.free_logodds[r, c] == np.float32(logit(0.12))
+    assert snap.occupied[r, c] and snap.probability[r, c] == np.float32(0.9)
+    # 2σ ellipse = 0.2 m radius: the cell 0.225 m away is outside and keeps its free value.
+    assert not snap.occupied[r, c + 4]
+    assert snap.probability[r, c + 4] == pytest.approx(0.12, abs=1e-6)
+
+
+def test_tiny_ellipse_marks_its_mean_cell(grid) -> None:  # type: ignore[no-untyped-def]
+    m = AndersoneMapper(CFG, grid)
+    m.features.add(np.array([[0.01, 0.02]]), np.array([[1e-8, 0.0, 1e-8]]), np.array([0]))
+    snap = m.snapshot()
+    assert np.argwhere(snap.occupied).tolist() == [[100, 100]]
+
+
+def _run(cfg: MapperConfig, n: int = 60):  # type: ignore[no-untyped-def]
+    m = make_mapper(cfg, room_grid())
+    for s in ring_scans(n):
+        m.integrate(s)
+    return m
+
+
+def test_same_seed_same_state_other_seed_differs() -> None:
+    a, b, c = _run(CFG), _run(CFG), _run(MapperConfig(seed=1))
+    ta, tb, tc = a.feature_table(), b.feature_table(), c.feature_table()
+    for col in ("id", "x", "y", "cov_xx", "cov_xy", "cov_yy", "measured_times"):
+        np.testing.assert_array_equal(getattr(ta, col), getattr(tb, col))
+    sa, sb = a.snapshot(), b.snapshot()
+    assert sa.probability.tobytes() == sb.probability.tobytes()
+    assert sa.counters == sb.counters
+    assert len(ta) != len(tc) or not np.array_equal(ta.x, tc.x)
+
+
+def test_classic_marks_obstacle_occupied_and_cone_free(grid) -> None:  # type: ignore[no-untyped-def]
+    m = make_mapper(MapperConfig(method="classic"), grid)
+    assert isinstance(m, ClassicMapper)
+    for _ in range(3):
+        m.integrate(build_scan([2.0, 5.0], alpha=[0.0, math.pi / 2]))
+    snap = m.snapshot()
+    x, y = cell_centres(grid)
+    at = lambda px, py: (np.abs(x - px) < 1e-9) & (np.abs(y - py) < 1e-9)  # noqa: E731
+    p_occ = 1 - 1 / (1 + math.exp(min(3 * logit(0.7), logit(0.97))))
+    assert snap.probability[at(2.025, 0.025)][0] == pytest.approx(p_occ, abs=1e-6)
+    assert snap.occupied[at(2.025, 0.025)][0]
+    assert snap.probability[at(1.025, 0.025)][0] == pytest.approx(1 / (1 + math.exp(-3 * logit(0.35))), abs=1e-6)
+    assert not snap.occupied[at(1.025, 0.025)][0]
+    assert np.isnan(snap.probability[at(2.525, 0.025)][0])  # behind the obstacle
+    assert np.isnan(snap.probability[at(0.025, 1.025)][0])  # max-range reading ignored
+    assert len(m.feature_table()) == 0 and all(math.isnan(v) for v in m.feature_variance())
+    assert (m.counters.readings, m.counters.skipped_max_range, m.counters.readings_used) == (6, 3, 3)
+
+
+def test_make_mapper_rejects_unknown_method(grid) -> None:  # type: ignore[no-untyped-def]
+    assert isinstance(make_mapper(CFG, grid), AndersoneMapper)
+    with pytest.raises(ConfigError, match=r"mapper\.method"):
+        make_mapper(MapperConfig(method="nope"), grid)  # type: ignore[arg-type]
+
+
+def _room_variance(scans, **kw):  # type: ignore[no-untyped-def]
+    var = {}
+    for on in (True, False):
+        m = make_mapper(MapperConfig(feature_correction=on, **kw), room_grid())
+        for s in scans:
+            m.integrate(s)
+        var[on] = m.feature_variance()
+        snap = m.snapshot()
+        assert snap.occupied.any() and np.nanmax(snap.probability) == np.float32(0.9)
+    return var
+
+
+def test_room_correction_lowers_mean_feature_variance() -> None:
+    """The paper's §4 result on a synthetic room (16-sonar ring, 2 m sonars), defaults."""
+    var = _room_variance(ring_scans(250, max_range=2.0))
+    assert var[True][0] < 0.95 * var[False][0]
+    assert var[True][1] < var[False][1]
+
+
+def test_split_guard_keeps_long_range_refits_from_growing() -> None:
+    """With 5 m sonars, free cones cut wide features in two; the split guard clears those
+    instead of refitting across the cone, and the variance stays below the uncorrected one."""
+    var = _room_variance(ring_scans(250, max_range=5.0), split_guard=True)
+    assert var[True][0] < 0.95 * var[False][0]
+
+
+def test_cell_centre_refits_accumulate_rounding_variance() -> None:
+    """Why refit_positions defaults to 'particle': with cell centres, every refit adds
+    ~res²/12 per axis, and the paper's result no longer holds on the same room."""
+    scans = ring_scans(250, max_range=2.0)
+    particle = _room_variance(scans)[True][0]
+    cell = _room_variance(scans, refit_positions="cell")[True][0]
+    assert cell > 1.2 * particle
+
+
+def test_benchmark_smoke() -> None:
+    out = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "bench_mapper.py"), "--smoke"],
+        capture_output=True, text=True, timeout=120, check=True,
+    ).stdout
+    for name in ("andersone+correction", "andersone", "classic"):
+        assert f"{name} " in out
+    assert "readings/s" in out
