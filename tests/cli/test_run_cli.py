@@ -154,7 +154,7 @@ def test_compare_correction_reports_both(runner, tmp_path):
     assert on["features_corrected"] > 0 and off["features_corrected"] == 0
     assert on["mean_feature_variance_m2"] != off["mean_feature_variance_m2"]
     assert (out / "map_no_correction.png").exists()
-    assert "without correction" in (out / "report.md").read_text().lower()
+    assert "without feature correction" in (out / "report.md").read_text()
 
 
 def test_classic_method_has_no_features(runner, tmp_path):
