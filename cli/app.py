@@ -284,11 +284,12 @@ def config_cmd(
 
 def _register_commands() -> None:
     """Commands that live in their own modules (each adds itself to ``app``)."""
-    from cli import emulate, evaluate, simulate
+    from cli import batch, emulate, evaluate, simulate
 
     simulate.register(app)
     emulate.register(app)
     evaluate.register(app)
+    batch.register(app)
 
 
 _register_commands()
