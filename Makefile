@@ -8,7 +8,7 @@ STAMP  := $(VENV)/.installed-stamp
 DEMO_LOG := sample_logs/office/office.mcap
 DEMO_OUT := demo_out/office
 
-.PHONY: setup demo test lint typecheck unit bench fuzz goldens clean
+.PHONY: setup demo test lint typecheck unit bench fuzz goldens samples compare clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -c 'import sys; sys.exit("sonarmap needs Python 3.11+") if sys.version_info < (3, 11) else None'
@@ -36,6 +36,22 @@ test: lint typecheck unit
 
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks
+
+# Refresh the regression goldens on purpose (review `git diff sample_logs/goldens` after).
+goldens: $(STAMP)
+	$(BIN)/python sample_logs/goldens/refresh.py
+
+# Regenerate the simulated sample logs (deterministic).
+samples: $(STAMP)
+	SONARMAP=$(BIN)/sonarmap sample_logs/regenerate.sh
+
+# The method comparison on every sample log with a ground truth (README "Results").
+compare: $(STAMP)
+	$(BIN)/python benchmarks/compare_methods.py --figure docs/comparison.png --logs \
+	  sample_logs/office/office.mcap sample_logs/office/office.truth.yaml \
+	  sample_logs/corridor/corridor.mcap sample_logs/corridor/corridor.truth.yaml \
+	  sample_logs/orchard/orchard.mcap sample_logs/orchard/orchard.truth.yaml \
+	  sample_logs/intel-lab/intel.mcap sample_logs/intel-lab/intel.laser.yaml
 
 clean:
 	rm -rf $(VENV) demo_out build *.egg-info .pytest_cache .mypy_cache .ruff_cache
