@@ -188,9 +188,9 @@ def _map_stream(
 
 
 def _integrate(mappers: dict[str, Mapper], scans: list[Scan]) -> None:
-    for scan in scans:
-        for m in mappers.values():
-            m.integrate(scan)
+    # The mappers are independent: each takes the whole list (batched stateless work).
+    for m in mappers.values():
+        m.integrate_many(scans)
 
 
 def _sync(

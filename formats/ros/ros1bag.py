@@ -154,21 +154,23 @@ def _op(fields: dict[str, bytes]) -> int:
 
 def _decompress(compression: str, data: bytes, size: int, partial: bool) -> bytes:
     """Uncompressed chunk data; ``partial`` accepts a cut-off stream (returns what decodes)."""
+    # At most the declared size (+1 to notice more): a corrupt stream or size field must not
+    # make memory grow beyond what the header declares.
+    limit = size + 1
     try:
         if compression == "none":
             out = data
         elif compression == "bz2":
-            out = bz2.BZ2Decompressor().decompress(data) if partial else bz2.decompress(data)
+            out = bz2.BZ2Decompressor().decompress(data, max_length=limit)
         elif compression == "lz4":
-            if partial:
-                out = lz4.frame.LZ4FrameDecompressor().decompress(data)
-            else:
-                out = lz4.frame.decompress(data)
+            out = lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=limit)
         else:
             raise _Corrupt(f"unknown chunk compression '{compression}'")
     except (OSError, ValueError, RuntimeError, EOFError) as err:
         raise _Corrupt(f"{compression} chunk does not decompress ({err})") from err
-    if not partial and len(out) != size:
+    if partial:
+        return out[:size]
+    if len(out) != size:
         raise _Corrupt(f"chunk decompresses to {len(out)} bytes, header says {size}")
     return out
 
@@ -279,11 +281,17 @@ class Ros1BagSource:
         (hlen,) = _U32.unpack(raw)
         if hlen > _MAX_HEADER:
             raise _Corrupt(f"record at byte {pos} has an implausible header length {hlen}")
+        if pos + 8 + hlen > self._size:
+            raise _Corrupt(f"record at byte {pos} cut off")
         hdr = self._file.read(hlen + 4)
         if len(hdr) < hlen + 4:
             raise _Corrupt(f"record at byte {pos} cut off")
         header = parse_header(hdr[:hlen])
         (dlen,) = _U32.unpack_from(hdr, hlen)
+        # Checked before reading: read(n) allocates n bytes up front, and a corrupt length
+        # may declare up to 4 GiB in a file of a few KiB.
+        if pos + 8 + hlen + dlen > self._size:
+            raise _Corrupt(f"record at byte {pos} cut off")
         data = self._file.read(dlen)
         if len(data) < dlen:
             raise _Corrupt(f"record at byte {pos} cut off")
@@ -380,7 +388,8 @@ class Ros1BagSource:
             if _op(header) != OP_CHUNK:
                 return None
             compression = header.get("compression", b"").decode("ascii", "replace")
-            return _decompress(compression, self._file.read(), 0, partial=True)
+            size = _u32(header, "size")
+            return _decompress(compression, self._file.read(), size, partial=True)
         except _Corrupt:
             return None
 

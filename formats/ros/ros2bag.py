@@ -72,7 +72,8 @@ class Sqlite3File:
             raise FormatError(f"cannot open sqlite3 database: {err}", self._name) from err
         try:
             self._load()
-        except sqlite3.Error as err:
+        # A corrupt database can also hold values of the wrong type (int('') fails).
+        except (sqlite3.Error, TypeError, ValueError, OverflowError) as err:
             self._db.close()
             raise FormatError(
                 f"not a readable rosbag2 sqlite3 database: {err}", self._name
@@ -138,31 +139,37 @@ class Sqlite3File:
         if not ids:
             return
         marks = ",".join("?" * len(ids))
-        # The timestamp index stores (timestamp, rowid): this streams without sorting.
-        cur = self._db.execute(
-            f"SELECT topic_id, timestamp, data FROM messages WHERE topic_id IN ({marks}) "
-            "ORDER BY timestamp, id",
-            ids,
-        )
         done = 0
+        try:
+            # The timestamp index stores (timestamp, rowid): this streams without sorting.
+            cur = self._db.execute(
+                f"SELECT topic_id, timestamp, data FROM messages WHERE topic_id IN ({marks}) "
+                "ORDER BY timestamp, id",
+                ids,
+            )
+        except sqlite3.Error as err:
+            raise FormatError(f"cannot read messages: {err}", self._name) from err
         while True:
             try:
                 rows = cur.fetchmany(SQLITE_BATCH_ROWS)
-            except sqlite3.Error as err:
+                if not rows:
+                    return
+                tids = np.fromiter((r[0] for r in rows), np.int64, len(rows))
+                times = np.fromiter((r[1] for r in rows), np.int64, len(rows))
+                blobs = [r[2] for r in rows]
+                lengths = np.fromiter(map(len, blobs), np.int64, len(rows))
+                joined = b"".join(blobs)
+            # sqlite3.Error: corrupt pages; TypeError/ValueError: a corrupt row whose
+            # columns hold values of the wrong type (text data, NULL, ...).
+            except (sqlite3.Error, TypeError, ValueError, OverflowError) as err:
                 self._warnings.append(
-                    f"database is corrupt after {done} messages ({err});"
+                    f"database is corrupt after {done} messages ({_reason(err)});"
                     " the rest of this file is lost"
                 )
                 return
-            if not rows:
-                return
             done += len(rows)
-            tids = np.fromiter((r[0] for r in rows), np.int64, len(rows))
-            times = np.fromiter((r[1] for r in rows), np.int64, len(rows))
-            blobs = [r[2] for r in rows]
-            lengths = np.fromiter(map(len, blobs), np.int64, len(rows))
             offsets = np.cumsum(lengths) - lengths
-            buf = np.frombuffer(b"".join(blobs), np.uint8)
+            buf = np.frombuffer(joined, np.uint8)
             for tid in ids:
                 sel = np.flatnonzero(tids == tid)
                 if sel.size:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 import secrets
 import shutil
 from pathlib import Path, PurePath
@@ -16,7 +17,7 @@ from types import TracebackType
 
 from pipeline.errors import OutputError
 
-__all__ = ["OutputDir", "atomic_write_bytes", "atomic_write_text"]
+__all__ = ["OutputDir", "atomic_write_bytes", "atomic_write_text", "clean_stale_siblings"]
 
 
 def _fsync_path(path: Path) -> None:
@@ -31,6 +32,50 @@ def _fsync_path(path: Path) -> None:
 
 def _sibling_name(final: Path, tag: str) -> Path:
     return final.parent / f".{final.name}.{tag}-{os.getpid()}-{secrets.token_hex(4)}"
+
+
+def _pid_alive(pid: int) -> bool:
+    """Whether a process with this id exists (on this host)."""
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # exists, owned by someone else
+        return True
+    except OSError:
+        return True  # cannot tell: keep its files
+    return True
+
+
+_STALE = re.compile(r"\.(?P<name>.+)\.(?P<tag>tmp|old)-(?P<pid>\d+)-[0-9a-f]{8}")
+
+
+def clean_stale_siblings(final: Path) -> list[Path]:
+    """Remove what runs killed before they finished (SIGKILL, power loss) left next to
+    ``final``: ``.<name>.tmp-<pid>-<hex>`` directories of processes that no longer exist,
+    and ``.<name>.old-<pid>-<hex>`` ones when ``final`` itself exists. Returns what was
+    removed. Siblings of live processes (a concurrent run) are left alone.
+    """
+    removed: list[Path] = []
+    parent = final.parent
+    try:
+        entries = list(parent.iterdir())
+    except OSError:
+        return removed
+    for p in sorted(entries):
+        m = _STALE.fullmatch(p.name)
+        if m is None or m["name"] != final.name or p.is_symlink() or not p.is_dir():
+            continue
+        if _pid_alive(int(m["pid"])):
+            continue
+        # A dead run's old copy is only garbage once a newer complete run is in place.
+        if m["tag"] == "old" and not final.is_dir():
+            continue
+        shutil.rmtree(p, ignore_errors=True)
+        removed.append(p)
+    return removed
 
 
 def _remove(path: Path) -> None:
@@ -50,7 +95,8 @@ class OutputDir:
     exception propagates. With ``force`` an existing ``final`` directory is renamed aside,
     the new one renamed in, then the old one deleted — the final name never holds a partial
     run. Refuses (OutputError) an existing ``final`` without ``force``, a ``final`` that is
-    not a directory, and a ``final`` or parent that is a symlink.
+    not a directory, and a ``final`` or parent that is a symlink. Entering also removes the
+    stale temporary siblings of runs that were killed (:func:`clean_stale_siblings`).
     """
 
     def __init__(self, final: Path, force: bool = False) -> None:
@@ -88,6 +134,7 @@ class OutputDir:
             raise OutputError(f"cannot create parent directory: {err}", self.final.parent) from err
         # The symlink check again: mkdir may have just created the parent.
         self._check_final()
+        clean_stale_siblings(self.final)
         for _ in range(16):
             tmp = _sibling_name(self.final, "tmp")
             try:

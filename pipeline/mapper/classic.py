@@ -15,6 +15,8 @@ same scan gets the occupied update, as a hit in a point-cloud insertion override
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from pipeline import reading_quality as rq
@@ -74,11 +76,17 @@ class ClassicMapper:
         free &= ~occ
         occ2, free2 = occ.reshape(h, w), free.reshape(h, w)
         lo = self.logodds[r0 : r0 + h, c0 : c0 + w]
-        lo[free2] = np.clip(lo[free2] + self.l_free, self.l_min, self.l_max)
-        lo[occ2] = np.clip(lo[occ2] + self.l_occ, self.l_min, self.l_max)
+        # np.minimum/np.maximum: np.clip's values at a fraction of its call cost.
+        lo[free2] = np.minimum(np.maximum(lo[free2] + self.l_free, self.l_min), self.l_max)
+        lo[occ2] = np.minimum(np.maximum(lo[occ2] + self.l_occ, self.l_min), self.l_max)
         self.touched[r0 : r0 + h, c0 : c0 + w] |= occ2 | free2
         n_free = int(np.count_nonzero(free))
         self.counters.cells_freed += n_free
+
+    def integrate_many(self, scans: Sequence[Scan]) -> None:
+        """Add scans in order (as :meth:`integrate` on each)."""
+        for scan in scans:
+            self.integrate(scan)
 
     def snapshot(self) -> MapSnapshot:
         """Probability from the log-odds (NaN never touched); occupied = p > 0.5."""

@@ -35,7 +35,7 @@ the simulated office: mean feature variance 1.6e-2 m² with the literal refit, 8
 the guard, 1.3e-2 without correction).
 
 Cost: the touched test is a 3σ bounding-box test over the feature set's precomputed boxes
-(a few vector compares), then each candidate's 3σ ellipse is rasterised as row spans and
+(one vector compare), then each candidate's 3σ ellipse is rasterised as row spans and
 tested against the free window's per-row prefix counts (O(spans), not O(cells)).
 """
 
@@ -64,8 +64,9 @@ def touched_features(features: FeatureSet, free: FreeSpaceScan, grid: GridSpec) 
     y_lo = grid.origin_y + (free.row0 + 0.5) * res
     y_hi = grid.origin_y + (free.row0 + h - 0.5) * res
     # Dead slots hold an empty box, so they never pass.
-    box = features.box[:, : features.n]
-    near = (box[1] >= x_lo) & (box[0] <= x_hi) & (box[3] >= y_lo) & (box[2] <= y_hi)
+    # Boxes are stored as (x_hi, −x_lo, y_hi, −y_lo): overlap is all four ≥ these.
+    window = np.array([x_lo, -x_hi, y_lo, -y_hi])[:, None]
+    near = (features.box[:, : features.n] >= window).all(axis=0)
     slots = np.flatnonzero(near)
     if slots.shape[0] == 0:
         return slots.astype(np.int64)
@@ -108,39 +109,46 @@ def correct_features(
     l21 = np.divide(cov[:, 1], l11, out=np.zeros(f), where=l11 > 0)
     l22 = np.sqrt(np.maximum(cov[:, 2] - l21 * l21, 0.0))
     # Particles in grid units relative to the cell just before the free window (one cell
-    # of margin), transformed in place: p = z[0], q = z[1].
-    p, q = rng.standard_normal((2, f, n))
-    ax = (mean[:, 0] - grid.origin_x) * inv - (free.col0 - 1)
-    ay = (mean[:, 1] - grid.origin_y) * inv - (free.row0 - 1)
-    q *= (l22 * inv)[:, None]
-    q += ay[:, None]
-    q += (l21 * inv)[:, None] * p
-    p *= (l11 * inv)[:, None]
-    p += ax[:, None]
+    # of margin), both axes in one array z: p = z[0] (x, columns), q = z[1] (y, rows).
+    # Per element the arithmetic (and its order) is that of the axis-by-axis form
+    # p = l11/res·z0 + ax, q = (l22/res·z1 + ay) + (l21/res)·z0; stacking the axes only
+    # halves the numpy calls.
+    z = rng.standard_normal((2, f, n))
+    off = np.array([free.col0 - 1, free.row0 - 1], dtype=np.float64)
+    a = ((mean - _origin(grid)) * inv - off).T  # (2, f): ax, ay
+    cross = (l21 * inv)[:, None] * z[0]
+    scale = np.empty((2, f, 1))
+    scale[0, :, 0] = l11 * inv
+    scale[1, :, 0] = l22 * inv
+    z *= scale
+    z += a[:, :, None]
+    z[1] += cross
+    p, q = z
     # Each particle's cell decides whether it dies (step 2); the refit uses the survivors'
     # continuous positions, or their cell centres with refit_positions = "cell".
-    p_cell, q_cell = np.floor(p), np.floor(q)  # integer-valued cell index (window-relative, +1)
-    survive = _outside_free(free, q_cell, p_cell)
+    cells = np.floor(z)  # integer-valued cell index (window-relative, +1)
+    survive = _outside_free(free, cells)
     m = np.count_nonzero(survive, axis=1)
     refit = m >= config.keep_fraction * n
 
     if refit.any():
         if config.refit_positions == "cell":
-            p, q = p_cell + 0.5, q_cell + 0.5
+            z = cells + 0.5
         sv = survive.astype(np.float64)
         mr = m.astype(np.float64)
         with np.errstate(divide="ignore", invalid="ignore"):
-            gx = np.einsum("ij,ij->i", p, sv) / mr  # eq. 9, grid units
-            gy = np.einsum("ij,ij->i", q, sv) / mr
-            dx = (p - gx[:, None]) * sv
-            dy = (q - gy[:, None]) * sv
-            scale = res * res / np.maximum(mr - 1.0, 1.0)  # eq. 10, divisor M − 1
-            cxx = np.einsum("ij,ij->i", dx, dx) * scale
-            cyy = np.einsum("ij,ij->i", dy, dy) * scale
-            cxy = np.einsum("ij,ij->i", dx, dy) * scale
+            g = np.empty((2, f))  # eq. 9, grid units
+            g[0] = np.einsum("ij,ij->i", z[0], sv) / mr
+            g[1] = np.einsum("ij,ij->i", z[1], sv) / mr
+            dz = z - g[:, :, None]
+            dz *= sv
+            dx, dy = dz
+            scale_c = res * res / np.maximum(mr - 1.0, 1.0)  # eq. 10, divisor M − 1
+            cxx = np.einsum("ij,ij->i", dx, dx) * scale_c
+            cyy = np.einsum("ij,ij->i", dy, dy) * scale_c
+            cxy = np.einsum("ij,ij->i", dx, dy) * scale_c
             # Undo the window offset (p = 1 is the window's first column).
-            mx = grid.origin_x + (gx + (free.col0 - 1)) * res
-            my = grid.origin_y + (gy + (free.row0 - 1)) * res
+            mxy = _origin(grid)[:, None] + (g + off[:, None]) * res  # (2, f)
         tr = np.maximum(cxx + cyy, np.finfo(np.float64).tiny)
         det = cxx * cyy - cxy * cxy
         weak = (mr < 3) | (cxx <= 0) | (cyy <= 0) | (det <= _SINGULAR * tr * tr)
@@ -149,20 +157,19 @@ def correct_features(
         cyy = np.where(weak, cyy + floor, cyy)
         if config.split_guard:
             # The survivors lie on both sides of a free cone: their mean is in free space.
-            # The cell holding the mean of cell centres, window-relative + 1 like p, q.
-            in_row = np.floor(np.where(refit, gy, -1.0))
-            in_col = np.floor(np.where(refit, gx, -1.0))
-            split = refit & ~_outside_free(free, in_row, in_col)
+            # The cell holding the mean, window-relative + 1 like p, q.
+            in_cell = np.floor(np.where(refit, g, -1.0))
+            split = refit & ~_outside_free(free, in_cell)
             if split.any():
                 counters.features_split += int(split.sum())
                 refit &= ~split
         moved = slots[refit]
         if moved.shape[0]:
-            features.move(
-                moved,
-                np.stack([mx[refit], my[refit]], axis=-1),
-                np.stack([cxx[refit], cxy[refit], cyy[refit]], axis=-1),
-            )
+            new_cov = np.empty((f, 3))
+            new_cov[:, 0] = cxx
+            new_cov[:, 1] = cxy
+            new_cov[:, 2] = cyy
+            features.move(moved, mxy.T[refit], new_cov[refit])
             counters.features_corrected += int(moved.shape[0])
 
     lost = slots[~refit]
@@ -174,15 +181,20 @@ def correct_features(
         counters.features_deleted += int((~protected).sum())
 
 
-def _outside_free(free: FreeSpaceScan, row: F64, col: F64) -> B:
-    """Whether each cell is *not* in the free-space scan; ``row``/``col`` are integer-valued
-    cell indices relative to the window, plus one (so the window starts at 1). Cells
-    outside the window (or the grid) are not free."""
+def _origin(grid: GridSpec) -> F64:
+    """The grid origin (x, y), m, as an array."""
+    return np.array([grid.origin_x, grid.origin_y])
+
+
+def _outside_free(free: FreeSpaceScan, cells: F64) -> B:
+    """Whether each cell is *not* in the free-space scan; ``cells[0]``/``cells[1]`` are
+    integer-valued column/row indices relative to the window, plus one (so the window
+    starts at 1), of any shape. Cells outside the window (or the grid) are not free."""
     h, w = free.mask.shape
     # A border around the window absorbs every cell outside it after clipping.
-    lr = np.minimum(np.maximum(row, 0.0), h + 1.0)
-    lc = np.minimum(np.maximum(col, 0.0), w + 1.0)
-    lr *= w + 2
-    lr += lc
-    out: B = free.padded_outside.reshape(-1)[lr.astype(np.intp)]
+    hi = np.array([w + 1.0, h + 1.0]).reshape((2,) + (1,) * (cells.ndim - 1))
+    c = np.minimum(np.maximum(cells, 0.0), hi)
+    flat = c[1] * (w + 2)
+    flat += c[0]
+    out: B = free.padded_outside.reshape(-1)[flat.astype(np.intp)]
     return out

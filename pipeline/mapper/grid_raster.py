@@ -70,8 +70,9 @@ def _rows_for(lo_y: F64, hi_y: F64, grid: GridSpec) -> tuple[I64, I64]:
     r0 = np.ceil((lo_y - grid.origin_y) / res - 0.5)
     r1 = np.floor((hi_y - grid.origin_y) / res - 0.5)
     # Inputs are finite (the mapper skips readings with non-finite geometry).
-    r0 = np.clip(r0, 0, grid.height)
-    r1 = np.clip(r1, -1, grid.height - 1)
+    # np.minimum/np.maximum rather than np.clip: same values, a fraction of the call cost.
+    r0 = np.minimum(np.maximum(r0, 0), grid.height)
+    r1 = np.minimum(np.maximum(r1, -1), grid.height - 1)
     return r0.astype(np.int64), r1.astype(np.int64)
 
 
@@ -82,8 +83,8 @@ def _finish(owner: I64, row: I64, ox: F64, lo: F64, hi: F64, ok: np.ndarray, gri
         c0 = np.ceil((ox + lo - grid.origin_x) / res - 0.5)
         c1 = np.floor((ox + hi - grid.origin_x) / res - 0.5)
         ok = ok & (c0 <= c1) & (c1 >= 0) & (c0 <= grid.width - 1)
-    c0 = np.clip(c0[ok], 0, grid.width - 1).astype(np.int64)
-    c1 = np.clip(c1[ok], 0, grid.width - 1).astype(np.int64)
+    c0 = np.minimum(np.maximum(c0[ok], 0), grid.width - 1).astype(np.int64)
+    c1 = np.minimum(np.maximum(c1[ok], 0), grid.width - 1).astype(np.int64)
     return Spans(owner[ok], row[ok], c0, c1)
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Protocol
 
 from pipeline.config import MapperConfig
@@ -17,6 +18,10 @@ class Mapper(Protocol):
 
     def integrate(self, scan: Scan) -> None:
         """Add one scan."""
+        ...
+
+    def integrate_many(self, scans: Sequence[Scan]) -> None:
+        """Add scans in order (the same result as ``integrate`` on each, faster)."""
         ...
 
     def snapshot(self) -> MapSnapshot:
