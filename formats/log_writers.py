@@ -514,21 +514,35 @@ def _write_rows(path: Path, header: list[str], cols: list[list[str]]) -> None:
         f.write("\n".join(lines) + "\n")
 
 
-def _range_cols(c: LogContent, order: I64) -> tuple[list[str], list[list[str]]]:
+def _range_cols(
+    c: LogContent, order: I64, *, limits: bool = True
+) -> tuple[list[str], list[list[str]]]:
     r = c.ranges
     names = np.array(c.sensor_names, dtype=object)
-    header = ["sensor", "range", "fov", "min_range", "max_range"]
-    cols = [
-        names[r.sensor_id[order]].tolist(),
-        _f(r.range_m[order]),
-        _f(r.fov_rad[order]),
-        _f(r.min_range_m[order]),
-        _f(r.max_range_m[order]),
-    ]
+    header = ["sensor", "range"]
+    cols = [names[r.sensor_id[order]].tolist(), _f(r.range_m[order])]
+    if limits:
+        header += ["fov", "min_range", "max_range"]
+        cols += [_f(r.fov_rad[order]), _f(r.min_range_m[order]), _f(r.max_range_m[order])]
     if len(r) and bool((r.scan_id >= 0).any()):
         header.append("scan")
         cols.append([str(v) for v in r.scan_id[order].tolist()])
     return header, cols
+
+
+def _limits_per_sensor(c: LogContent) -> bool:
+    """Whether fov, min and max range are constant per sensor (so sensors.csv holds them)."""
+    r = c.ranges
+    if len(r) == 0:
+        return True
+    _, first = np.unique(r.sensor_id, return_index=True)
+    lookup = np.zeros(int(r.sensor_id.max()) + 1, dtype=np.int64)
+    lookup[r.sensor_id[first]] = first
+    ref = lookup[r.sensor_id]
+    return all(
+        np.array_equal(col, col[ref], equal_nan=True)
+        for col in (r.fov_rad, r.min_range_m, r.max_range_m)
+    )
 
 
 def _check_names(c: LogContent) -> None:
@@ -554,7 +568,8 @@ def _write_csv_set(c: LogContent, path: Path, fmt: str, compression: str) -> Non
     _check_names(c)
     path.mkdir()
     order = _range_order(c)
-    header, cols = _range_cols(c, order)
+    # Limits that never change per sensor live in sensors.csv only (a third of the size).
+    header, cols = _range_cols(c, order, limits=not _limits_per_sensor(c))
     _write_rows(path / "ranges.csv", ["t", *header], [format_time_s(c.ranges.t_ns[order]), *cols])
     p = c.poses
     po = np.argsort(p.t_ns, kind="stable")

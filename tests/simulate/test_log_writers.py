@@ -243,8 +243,9 @@ def test_csv_set_layout(tmp_path: Path) -> None:
     assert sorted(p.name for p in out.iterdir()) == ["poses.csv", "ranges.csv", "sensors.csv"]
     with (out / "ranges.csv").open(newline="") as f:
         ranges = list(csv.DictReader(f))
-    assert list(ranges[0]) == ["t", "sensor", "range", "fov", "min_range", "max_range", "scan"]
-    assert len(ranges) == 7 and ranges[2]["min_range"] == "0.2"
+    # Limits are constant per sensor here, so only sensors.csv carries them.
+    assert list(ranges[0]) == ["t", "sensor", "range", "scan"]
+    assert len(ranges) == 7 and ranges[2]["sensor"] == "r"
     with (out / "poses.csv").open(newline="") as f:
         poses = list(csv.reader(f))
     assert poses[0] == ["t", "x", "y", "yaw"]
@@ -255,6 +256,16 @@ def test_csv_set_layout(tmp_path: Path) -> None:
     assert float(sensors["left_sonar"]["yaw"]) == math.pi / 2
     assert float(sensors["r"]["min_range"]) == 0.2
     assert float(sensors["front"]["fov"]) == math.radians(30)
+
+
+def test_csv_set_keeps_per_reading_limits_when_they_vary(tmp_path: Path) -> None:
+    c = _content()
+    c.ranges.max_range_m[3] = 4.0  # one reading of 'front' with another r_max
+    out = write_log(c, tmp_path / "run", "csv-set")
+    with (out / "ranges.csv").open(newline="") as f:
+        ranges = list(csv.DictReader(f))
+    assert list(ranges[0]) == ["t", "sensor", "range", "fov", "min_range", "max_range", "scan"]
+    assert [r["max_range"] for r in ranges][2:4] == ["5.0", "4.0"]
 
 
 def test_time_formatting_is_exact() -> None:
