@@ -595,7 +595,8 @@ class McapSource:
             if rec.size == 0:
                 continue
             size = buf.shape[0]
-            ok = (rec >= 0) & (rec + _RECORD_HEAD + _MESSAGE_HEAD <= size)
+            # Compared without adding to rec: a corrupt offset near 2**63 would overflow.
+            ok = (rec >= 0) & (rec <= size - _RECORD_HEAD - _MESSAGE_HEAD)
             if ok.all():
                 length = _u64_at(buf, rec + 1)
                 ok = (
