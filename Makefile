@@ -24,7 +24,7 @@ demo: $(STAMP)
 	@echo "open $(DEMO_OUT)/report.html (map: $(DEMO_OUT)/map.png, nav2: $(DEMO_OUT)/map.yaml)"
 
 lint: $(STAMP)
-	$(BIN)/ruff check pipeline formats cli tests benchmarks
+	$(BIN)/ruff check pipeline formats cli tests benchmarks fuzz sample_logs
 
 typecheck: $(STAMP)
 	$(BIN)/mypy
@@ -36,6 +36,10 @@ test: lint typecheck unit
 
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks
+
+# Thousands of mutated logs per format through every reader (about 12 minutes).
+fuzz: $(STAMP)
+	$(BIN)/python -m fuzz.run_fuzz --examples 1000
 
 # Refresh the regression goldens on purpose (review `git diff sample_logs/goldens` after).
 goldens: $(STAMP)

@@ -104,8 +104,8 @@ def rosbags_reader(bag: Path) -> tuple[int, float]:
     return n, total
 
 
-def bench_mcap_ros2(smoke: bool = False) -> None:
-    """Print messages/s of both readers and their ratio."""
+def bench_mcap_ros2(smoke: bool = False) -> dict[str, float]:
+    """Print messages/s of both readers and their ratio; returns them."""
     n_scans = 300 if smoke else 29_412  # × 17 messages ≈ 5k / 500k
     with tempfile.TemporaryDirectory() as tmp:
         bag = Path(tmp) / "bag"
@@ -123,6 +123,8 @@ def bench_mcap_ros2(smoke: bool = False) -> None:
             print(f"{name:24s} {n:8d} msgs {dt:7.2f} s {n / dt:12,.0f} msg/s  checksum {total:.3f}")
         assert abs(rows[0][2] - rows[1][2]) < 1e-3 * max(1.0, abs(rows[1][2])), "checksums differ"
         print(f"ratio: {rows[0][1] / rows[1][1]:.1f}x (target >= 10x)")
+    return {"messages": float(count), "sonarmap": rows[0][1], "rosbags": rows[1][1],
+            "speedup": rows[0][1] / rows[1][1]}
 
 
 if __name__ == "__main__":

@@ -13,6 +13,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
+import numpy.typing as npt
 
 from formats.contract import LogReader, MountBatch, PoseBatch, RangeBatch, SensorMount
 from pipeline.errors import InputError
@@ -30,7 +31,7 @@ class RangeSummary:
     max_range_m: float = float("nan")  # largest finite r_max any reading carries
     backwards: int = 0  # readings whose stamp is older than an earlier one of the same sensor
 
-    def add(self, b: RangeBatch, last_t: dict[int, int]) -> None:
+    def add(self, b: RangeBatch, stamps: StampOrder) -> None:
         n = len(b)
         if n == 0:
             return
@@ -45,20 +46,36 @@ class RangeSummary:
         if finite.size:
             m = float(finite.max())
             self.max_range_m = m if np.isnan(self.max_range_m) else max(self.max_range_m, m)
-        # Stamps going backwards per sensor (header stamps, REP: monotonic per frame).
-        order = np.argsort(b.sensor_id, kind="stable")
+        self.backwards += int(stamps.backwards(b).sum())
+
+
+class StampOrder:
+    """Header stamps going backwards, per sensor, in log order.
+
+    A reading whose stamp is older than an earlier stamp of the same sensor jumped
+    backwards (clock reset, a replayed message): both passes flag the same readings, pass 1
+    counts them and pass 2 drops them (``dropped.stamp_backwards`` in metrics.json).
+    """
+
+    def __init__(self) -> None:
+        self._last: dict[int, int] = {}
+
+    def backwards(self, b: RangeBatch) -> npt.NDArray[np.bool_]:
+        """Mask of the batch's readings that went backwards; updates the per-sensor state."""
+        out = np.zeros(len(b), dtype=bool)
+        order = np.argsort(b.sensor_id, kind="stable")  # each sensor's readings in log order
         sid, t = b.sensor_id[order], b.t_ns[order]
         starts = np.flatnonzero(np.r_[True, sid[1:] != sid[:-1]])
-        for k, s in enumerate(starts.tolist()):
-            e = int(starts[k + 1]) if k + 1 < len(starts) else len(sid)
+        ends = np.r_[starts[1:], len(sid)]
+        for s, e in zip(starts.tolist(), ends.tolist(), strict=True):
             key = int(sid[s])
             seg = t[s:e]
-            prev = last_t.get(key)
+            prev = self._last.get(key)
             head = seg[:1] if prev is None else np.array([prev], dtype=np.int64)
             before = np.maximum.accumulate(np.r_[head, seg[:-1]])  # max of all earlier stamps
-            self.backwards += int((seg < before).sum())
-            run = np.maximum.accumulate(np.r_[head, seg])
-            last_t[key] = int(run[-1])
+            out[order[s:e]] = seg < before
+            self._last[key] = int(max(before[-1], seg[-1]))
+        return out
 
 
 @dataclass
@@ -76,10 +93,10 @@ def survey(reader: LogReader) -> Survey:
     poses: list[PoseBatch] = []
     mounts: dict[str, SensorMount] = {}
     summary = RangeSummary()
-    last_t: dict[int, int] = {}
+    stamps = StampOrder()
     for batch in reader.batches(("poses", "mounts", "ranges")):
         if isinstance(batch, RangeBatch):
-            summary.add(batch, last_t)
+            summary.add(batch, stamps)
         elif isinstance(batch, PoseBatch):
             if len(batch):
                 poses.append(batch)
@@ -95,50 +112,63 @@ def survey(reader: LogReader) -> Survey:
     return Survey(track, mounts, summary, list(reader.sensor_names))
 
 
-def ordered_ranges(
-    reader: LogReader, reorder_window_ns: int = 2_000_000_000
-) -> Iterator[tuple[RangeBatch, int]]:
-    """Pass 2: readings in time order, as ``(batch, late_count)`` chunks.
+@dataclass
+class RangeChunk:
+    """Time-ordered readings released by :func:`ordered_ranges`, with what was dropped
+    on the way since the previous chunk."""
 
-    Logs interleave topics and connections chunk by chunk, so batches are not globally
-    sorted. Readings are held until the stream has moved ``reorder_window_ns`` past them,
-    then released sorted (stable, so equal stamps keep log order). A reading older than
-    what was already released is *late*: it is dropped and counted, since its scan has
-    already been mapped.
+    batch: RangeBatch
+    late: int = 0
+    backwards: int = 0
+
+
+def ordered_ranges(reader: LogReader, reorder_window_ns: int = 2_000_000_000) -> Iterator[RangeChunk]:
+    """Pass 2: readings in time order, in chunks.
+
+    Readings whose header stamp jumped backwards (see :class:`StampOrder`) are dropped and
+    counted. Logs interleave topics and connections chunk by chunk, so batches are not
+    globally sorted: readings are held until the stream has moved ``reorder_window_ns``
+    past them, then released sorted (stable, so equal stamps keep log order). A reading
+    older than what was already released is *late*: it is dropped and counted, since its
+    scan has already been mapped.
     """
+    stamps = StampOrder()
     pending: list[RangeBatch] = []
     released_up_to: int | None = None
     newest: int | None = None
     for batch in reader.batches(("ranges",)):
         if not isinstance(batch, RangeBatch) or len(batch) == 0:
             continue
+        back = stamps.backwards(batch)
+        backwards = int(back.sum())
+        if backwards:
+            batch = batch.take(~back)
         late = 0
-        if released_up_to is not None:
+        if released_up_to is not None and len(batch):
             is_late = batch.t_ns < released_up_to
             late = int(is_late.sum())
             if late:
                 batch = batch.take(~is_late)
-        pending.append(batch)
-        bmax = int(batch.t_ns.max()) if len(batch) else None
-        if bmax is not None:
+        if len(batch):
+            pending.append(batch)
+            bmax = int(batch.t_ns.max())
             newest = bmax if newest is None else max(newest, bmax)
-        if newest is None:
-            continue
-        cut = newest - reorder_window_ns
-        merged = RangeBatch.concat(pending)
-        ready = merged.t_ns < cut
-        if ready.any():
-            out = merged.take(ready)
-            pending = [merged.take(~ready)]
-            order = np.argsort(out.t_ns, kind="stable")
-            released_up_to = int(out.t_ns[order[-1]])
-            yield out.take(order), late
-        else:
-            pending = [merged]
-            if late:
-                yield RangeBatch.concat([]), late
+        ready_chunk: RangeBatch | None = None
+        if newest is not None and pending:
+            merged = RangeBatch.concat(pending)
+            ready = merged.t_ns < newest - reorder_window_ns
+            if ready.any():
+                out = merged.take(ready)
+                pending = [merged.take(~ready)]
+                order = np.argsort(out.t_ns, kind="stable")
+                released_up_to = int(out.t_ns[order[-1]])
+                ready_chunk = out.take(order)
+            else:
+                pending = [merged]
+        if ready_chunk is not None or late or backwards:
+            yield RangeChunk(ready_chunk if ready_chunk is not None else RangeBatch.concat([]),
+                             late, backwards)
     if pending:
         merged = RangeBatch.concat(pending)
         if len(merged):
-            order = np.argsort(merged.t_ns, kind="stable")
-            yield merged.take(order), 0
+            yield RangeChunk(merged.take(np.argsort(merged.t_ns, kind="stable")))

@@ -168,9 +168,10 @@ def _map_stream(
             item = next(stream, None)
         if item is None:
             break
-        batch, late = item
-        state.dropped["late"] += late
-        state.readings_seen += len(batch) + late
+        batch = item.batch
+        state.dropped["late"] += item.late
+        state.dropped["stamp_backwards"] += item.backwards
+        state.readings_seen += len(batch) + item.late + item.backwards
         if len(batch) == 0:
             continue
         with timer.stage("pose_sync"):
@@ -245,6 +246,7 @@ def _metrics(
     counters = main.counters.as_dict()
     dropped = {name: int(state.dropped.get(name, 0)) for name in list(POSE_REASONS.values())[1:]}
     dropped["late"] = int(state.dropped.get("late", 0))
+    dropped["stamp_backwards"] = int(state.dropped.get("stamp_backwards", 0))
     for name in list(REASONS.values())[1:]:
         dropped[name] = counters.get(f"skipped_{name}", 0)
     mean_var, mean_major = main.feature_variance()

@@ -123,7 +123,6 @@ def correct_features(
     z *= scale
     z += a[:, :, None]
     z[1] += cross
-    p, q = z
     # Each particle's cell decides whether it dies (step 2); the refit uses the survivors'
     # continuous positions, or their cell centres with refit_positions = "cell".
     cells = np.floor(z)  # integer-valued cell index (window-relative, +1)

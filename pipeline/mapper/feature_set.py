@@ -47,6 +47,19 @@ from pipeline.mapper.types import F64, I64, FeatureTable, GridSpec
 _MAX_BUCKETS = 4_000_000  # bounds the index's memory on very large grids (32 MB of int64)
 _OFFS = np.array([-1, 0, 1], dtype=np.int64)
 _BIG = np.iinfo(np.int64).max
+_INF1 = np.array([np.inf])
+_BIG1 = np.array([_BIG], dtype=np.int64)
+_UPPER: dict[int, npt.NDArray[np.bool_]] = {}
+
+
+def _upper(k: int) -> npt.NDArray[np.bool_]:
+    """The strictly upper triangular ``k × k`` mask ``[i, j] = i < j`` (cached, read-only)."""
+    mask = _UPPER.get(k)
+    if mask is None:
+        mask = np.triu(np.ones((k, k), dtype=np.bool_), k=1)
+        mask.flags.writeable = False
+        _UPPER[k] = mask
+    return mask
 
 
 def kalman_merge(mu_f: F64, p_f: F64, mu_z: F64, p_z: F64) -> tuple[F64, F64]:
@@ -246,7 +259,10 @@ class FeatureSet:
             order = np.argsort(rows, kind="stable")
             rs = rows[order]
             idx = np.arange(rs.shape[0])
-            first = np.maximum.accumulate(np.where(np.r_[True, rs[1:] != rs[:-1]], idx, 0))
+            head = np.empty(rs.shape[0], dtype=np.bool_)
+            head[0] = True
+            np.not_equal(rs[1:], rs[:-1], out=head[1:])
+            first = np.maximum.accumulate(np.where(head, idx, 0))
             rank = np.empty_like(idx)
             rank[order] = idx - first
         pos = self._fill[rows] + rank
@@ -287,7 +303,7 @@ class FeatureSet:
         order = np.argsort(b, kind="stable")  # slots ascending within a bucket
         s, b = slots[order], b[order]
         idx = np.arange(s.shape[0])
-        start = np.r_[True, b[1:] != b[:-1]]
+        start = np.concatenate(([True], b[1:] != b[:-1]))
         first = np.maximum.accumulate(np.where(start, idx, 0))
         pos = idx - first
         row = np.cumsum(start)  # row 0 stays the empty row
@@ -334,10 +350,10 @@ class FeatureSet:
         # Per point: the minimum distance, then the lowest slot at that distance. A point
         # without candidates starts at ``total``: the appended sentinel answers it.
         starts = np.cumsum(per) - per
-        dmin = np.minimum.reduceat(np.append(d, np.inf), starts)
+        dmin = np.minimum.reduceat(np.concatenate((d, _INF1)), starts)
         dmin[per == 0] = np.inf
         key = np.where(d == np.repeat(dmin, per), s, _BIG)
-        smin = np.minimum.reduceat(np.append(key, _BIG), starts)
+        smin = np.minimum.reduceat(np.concatenate((key, _BIG1)), starts)
         return np.where(dmin < np.inf, smin, -1), dmin
 
     # ------------------------------------------------------------------ merging
@@ -371,7 +387,8 @@ class FeatureSet:
                 pos[k:][hit] = mu_f
                 near = np.hypot(pos[:, None, 0] - q[None, :, 0], pos[:, None, 1] - q[None, :, 1])
                 near = near < reach
-                seen = np.triu(near[:k] | near[k:], k=1)  # [i, j], i < j
+                seen = near[:k] | near[k:]
+                seen &= _upper(k)  # [i, j], i < j
                 conflict = np.flatnonzero(seen.any(axis=0))
                 if conflict.shape[0]:
                     n_ok = int(conflict[0])

@@ -162,8 +162,8 @@ def free_space_scan(
 
 
 # Cells of windows (int64 difference array) built at once by ``unions_of_spans``: bounds
-# the temporary memory of a batch (~64 MB) while keeping the numpy call count per scan low.
-_BATCH_CELLS = 8_000_000
+# the temporary memory of a batch (~8 MB per array) while keeping the numpy call count per scan low.
+_BATCH_CELLS = 1_000_000
 
 
 def free_space_scans(

@@ -15,6 +15,7 @@ import sys
 import tempfile
 import tomllib
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[2]
 GOLDENS = Path(__file__).resolve().parent
@@ -25,9 +26,12 @@ def sonarmap(*args: str) -> None:
     subprocess.run([sys.executable, "-m", "cli", *args], cwd=ROOT, check=True)
 
 
-def _edit_json(path: Path, edit: object) -> None:
-    data = json.loads(path.read_text())
-    edit(data)  # type: ignore[operator]
+def _read(path: Path) -> dict[str, Any]:
+    data: dict[str, Any] = json.loads(path.read_text())
+    return data
+
+
+def _write(path: Path, data: dict[str, Any]) -> None:
     path.write_text(json.dumps(data, indent=2) + "\n")
 
 
@@ -44,13 +48,16 @@ def main() -> None:
             for name in KEEP:
                 shutil.copy2(run_dir / name, dest / name)
             # Goldens hold only what reruns reproduce: no timing, no temporary paths.
-            _edit_json(dest / "metrics.json", lambda m: m.pop("timing", None))
+            metrics = _read(dest / "metrics.json")
+            metrics.pop("timing", None)
+            _write(dest / "metrics.json", metrics)
             if "truth" in e:
                 ev = dest / "evaluation.json"
                 sonarmap("evaluate", str(run_dir), "--truth", e["truth"], "--trajectory",
                          e["trajectory"], "--output", str(ev), "--json")
-                rel = str(dest.relative_to(ROOT))
-                _edit_json(ev, lambda m: m.update(run_dir=rel))
+                evaluation = _read(ev)
+                evaluation["run_dir"] = str(dest.relative_to(ROOT))
+                _write(ev, evaluation)
         print(f"refreshed {dest.relative_to(ROOT)}")
 
 

@@ -74,3 +74,15 @@ def test_sonar_geometry_applies_the_mount_in_the_robot_frame():
     assert ox[0] == pytest.approx(1.0 - 0.2)
     assert oy[0] == pytest.approx(2.0 + 0.1)
     assert a[0] == pytest.approx(0.0)
+
+
+def test_stamps_going_backwards_are_flagged_per_sensor_across_batches():
+    from formats.contract import make_range_batch
+    from pipeline.ingest import StampOrder
+
+    order = StampOrder()
+    a = make_range_batch([10, 20, 15, 30], [0, 0, 0, 1], 1.0, 0.5, 0.1, 5.0)
+    assert order.backwards(a).tolist() == [False, False, True, False]
+    # Sensor 1 at 25 < 30 went back; sensor 0 at 21 > 20 did not (15 never raised the max).
+    b = make_range_batch([21, 25, 5], [0, 1, 2], 1.0, 0.5, 0.1, 5.0)
+    assert order.backwards(b).tolist() == [False, True, False]

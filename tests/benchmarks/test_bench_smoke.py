@@ -1,0 +1,69 @@
+"""The benchmark runner on tiny inputs (keeps ``python -m benchmarks`` from rotting).
+
+Speed is not asserted: the figures only have to exist and be positive, the table to hold
+every section, and the simulated benchmark log to be deterministic and cached.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+if str(ROOT) not in sys.path:  # benchmarks/ is not an installed package
+    sys.path.insert(0, str(ROOT))
+
+from benchmarks import bench_end_to_end as e2e  # noqa: E402
+
+
+def test_runner_smoke_prints_every_section(tmp_path: Path) -> None:
+    env = {**os.environ, "SONARMAP_BENCH_CACHE": str(tmp_path / "cache")}
+    results = tmp_path / "RESULTS.md"
+    out = subprocess.run(
+        [sys.executable, "-m", "benchmarks", "--smoke", "--results", str(results)],
+        cwd=ROOT, env=env, capture_output=True, text=True, timeout=300, check=True,
+    ).stdout
+    rows = [line.split("|")[1:-1] for line in out.splitlines() if line.startswith("| ")]
+    rows = [[c.strip() for c in r] for r in rows if r[0].strip() != "section"]
+    sections = {r[0] for r in rows}
+    assert sections == {"readers", "mapper", "e2e", "scaling"}
+    by_case = {r[1]: r for r in rows}
+    # Readers: 6 s ROS 1 bags (16 × 10 Hz + 50 Hz odometry) and the 5k-message ROS 2 bag.
+    assert "ros1 lz4: 1260 msgs, sonarmap" in by_case
+    assert "ros2 mcap: 5100 msgs, sonarmap" in by_case
+    assert by_case["ros1 lz4: 1260 msgs, sonarmap"][4].endswith("x rosbags")
+    # Mapper: the three methods against OctoMap, on the same 320 readings.
+    for label in ("full method (correction on)", "without correction", "classic log-odds baseline"):
+        row = by_case[f"320 readings, {label}"]
+        assert float(row[2].replace(",", "")) > 0 and row[4].endswith("x octomap")
+    # End to end: the 20 s log of 16 sonars at 10 Hz, every stage share, shares sum to 100 %.
+    assert "sonarmap run, 1x log (3200 readings, MCAP zstd)" in by_case
+    shares = [float(r[2]) for r in rows if r[1].startswith("share: ")]
+    assert len(shares) == 5 and sum(shares) == pytest.approx(100.0, abs=0.1)
+    assert "0.5x log (1600 readings)" in by_case
+    assert "2x log peak RSS" in by_case
+    text = results.read_text(encoding="utf-8")
+    assert text.startswith("# Benchmark results") and "Machine: " in text
+    assert "| mapper | 320 readings, full method (correction on) |" in text
+
+
+def test_benchmark_log_is_deterministic_and_cached(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("SONARMAP_BENCH_CACHE", str(tmp_path))
+    spec = e2e.LogSpec(seconds=5.0)
+    log = e2e.cached_log(spec, verbose=False)
+    assert log == tmp_path / spec.key / "log.mcap"
+    assert spec.key == "v1-office-5s-seed1-ring10hz-zstd"
+    digest = hashlib.sha256(log.read_bytes()).hexdigest()
+    mtime = log.stat().st_mtime_ns
+    assert e2e.cached_log(spec, verbose=False) == log  # reused, not regenerated
+    assert log.stat().st_mtime_ns == mtime
+    again = tmp_path / "again.mcap"
+    assert e2e.simulate_log(spec, again) == 800  # 5 s × 16 sonars × 10 Hz
+    assert hashlib.sha256(again.read_bytes()).hexdigest() == digest
