@@ -11,20 +11,13 @@ cone as a fan of rays one cell apart at the echo distance with ``insertPointClou
 (max-range readings skipped, as the mappers do by default). Prints readings/s, the ratio
 to OctoMap, and the §7 mean feature variance with/without correction and split guard.
 
-Figures (100k readings, 2-core machine shared with other jobs, so ±30 %; OctoMap ran at
-6.2k readings/s in the same run), readings/s at 32 | 16 readings per scan:
-
-* full method (correction, spec: snapped refit): 6.4k | 3.1k (before: 3.8-4.6k at 16, with
-  the continuous refit, which touched ~40 features per scan instead of ~160)
-* full method + split_guard: 7.5k | 3.2k
-* without correction: 21.7k | 15.7k (before: 14.1-14.8k at 16)
-* classic: 24.0k | 17.6k (before: 7.2-7.8k at 16)
-
-Mean feature variance (trace/2, m², 32/scan): correction 0.302 (7900 features), with
-split_guard 0.0068 (5877), without correction 0.0018 (1150). The 10× OctoMap target is not
-reached. cProfile (32/scan): correction ≈ 50 % (N = 200 particles for each of the ~100-160
-features touched per scan; 400 normals ≈ 4 µs per feature), merge ≈ 35 % (the snapped
-refit makes the feature set ~7× larger, with crowded buckets), touched test ≈ 15 %.
+Figures: see ``benchmarks/RESULTS.md`` (``python -m benchmarks`` runs this at 32/scan
+beside the other benchmarks). Last full run, 100k readings at 32/scan, 2-core machine
+shared with other jobs: OctoMap 8.0k readings/s; full method 17.7k (2.2× OctoMap; 6.4k
+before ``integrate_many`` and the call-count work); without correction 53.9k (6.7×);
+classic 26.6k (3.3×). The 10× OctoMap target is not reached by the full method: its cost
+is numpy call overhead per scan (merge rounds, correction of ~27 touched features), see
+RESULTS.md.
 """
 
 from __future__ import annotations

@@ -27,8 +27,10 @@ from pipeline.mapper.reading_features import classify_scan, count_readings, read
 from pipeline.mapper.types import I64, FeatureTable, GridSpec, MapperCounters, MapSnapshot, Scan
 
 # Scans whose stateless work (classification, reading features, free-space rasters) is
-# done in one vectorised pass by ``integrate_many``.
-_GROUP = 256
+# done in one vectorised pass by ``integrate_many``: enough to amortise the numpy call
+# overhead, small enough to keep the pass's temporaries to ~15 MB (measured: 64 is as
+# fast as 256, whose one-hour run peaked 25 MB higher).
+_GROUP = 64
 
 
 def concat_scans(scans: Sequence[Scan]) -> tuple[Scan, I64]:
