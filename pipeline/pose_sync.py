@@ -65,26 +65,32 @@ def build_pose_track(batches: Sequence[PoseBatch]) -> PoseTrack:
     if not batches:
         empty = np.empty(0)
         return PoseTrack(np.empty(0, np.int64), empty, empty, empty, "", "")
-    t = np.concatenate([b.t_ns for b in batches]).astype(np.int64)
-    x = np.concatenate([b.x for b in batches]).astype(np.float64)
-    y = np.concatenate([b.y for b in batches]).astype(np.float64)
-    yaw = np.concatenate([b.yaw for b in batches]).astype(np.float64)
+    # Memory: one concatenated copy per column; the masks are combined into one before
+    # any filtered copy is made (pose tracks are the one input kept whole).
+    t = np.concatenate([b.t_ns for b in batches]).astype(np.int64, copy=False)
     # A stamp below the running maximum of the stamps before it went backwards.
     running = np.maximum.accumulate(t)
-    forward = np.ones(t.shape, bool)
-    forward[1:] = t[1:] >= running[:-1]
-    backwards = int((~forward).sum())
-    t, x, y, yaw = t[forward], x[forward], y[forward], yaw[forward]
     keep = np.ones(t.shape, bool)
-    keep[1:] = t[1:] != t[:-1]
-    duplicates = int((~keep).sum())
-    finite = np.isfinite(x) & np.isfinite(y) & np.isfinite(yaw)
-    keep &= finite
+    keep[1:] = t[1:] >= running[:-1]
+    del running
+    backwards = int((~keep).sum())
+    # Exact duplicates of the previous kept stamp keep their first pose.
+    kept_t = t[keep]
+    first = np.ones(kept_t.shape, bool)
+    first[1:] = kept_t[1:] != kept_t[:-1]
+    duplicates = int((~first).sum())
+    keep[np.flatnonzero(keep)[~first]] = False
+    del kept_t, first
+    x = np.concatenate([b.x for b in batches]).astype(np.float64, copy=False)
+    y = np.concatenate([b.y for b in batches]).astype(np.float64, copy=False)
+    yaw = np.concatenate([b.yaw for b in batches]).astype(np.float64, copy=False)
+    keep &= np.isfinite(x) & np.isfinite(y) & np.isfinite(yaw)
+    t, x, y, yaw = t[keep], x[keep], y[keep], yaw[keep]
     return PoseTrack(
-        t[keep],
-        x[keep],
-        y[keep],
-        yaw[keep],
+        t,
+        x,
+        y,
+        yaw,
         batches[0].parent_frame,
         batches[0].child_frame,
         backwards=backwards,

@@ -334,6 +334,20 @@ def _ablation_row(mapper: Mapper, snap: MapSnapshot) -> dict[str, Any]:
     }
 
 
+MAX_DRAWN_POSES = 20_000
+
+
+def _drawn_trajectory(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """The trajectory as drawn in map.png: every pose up to MAX_DRAWN_POSES, else evenly
+    spaced poses plus the last one (a picture at most ~2400 px wide shows no more, and
+    drawing hours of 20 Hz odometry would make memory grow with the log's length)."""
+    n = x.shape[0]
+    if n <= MAX_DRAWN_POSES:
+        return np.column_stack([x, y])
+    idx = np.unique(np.r_[np.linspace(0, n - 1, MAX_DRAWN_POSES).astype(np.int64), n - 1])
+    return np.column_stack([x[idx], y[idx]])
+
+
 def _write_outputs(
     out: Any,
     config: Config,
@@ -352,7 +366,7 @@ def _write_outputs(
 
     t_outputs = time.perf_counter()
     snap = snapshots["main"]
-    traj = np.column_stack([sv.track.x, sv.track.y])
+    traj = _drawn_trajectory(sv.track.x, sv.track.y)
     write_nav2_map(out.path("map.yaml"), snap.probability, snap.grid)
     title = f"{metrics.input['name']} - {config.mapper.method}"
     write_map_png(out.path("map.png"), snap, trajectory_xy=traj, features=snap.features, title=title)
