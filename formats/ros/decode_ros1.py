@@ -14,28 +14,19 @@ message at a time with rosbags and the log's own message definitions.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from formats.ros.columns import (
-    LASER_TYPES,
-    POINTCLOUD_TYPES,
     RANGE_TYPES,
-    SONARARRAY_TYPES,
-    TF_TYPES,
     Columns,
-    LaserScanColumns,
-    PointColumns,
     PoseColumns,
     RangeColumns,
-    SonarArrayColumns,
-    TransformColumns,
 )
+from formats.ros.decode_messages import FrameCodes, decode_per_message, message_error
 from formats.ros.source import RawBatch
-from formats.ros.typestore import typestore_for
 from pipeline.errors import FormatError
 
 I64 = npt.NDArray[np.int64]
@@ -64,47 +55,20 @@ def decode_ros1(raw: RawBatch) -> Columns:
         return _decode_pose(raw, child=False, tail=_POSE)
     if msgtype == "geometry_msgs/msg/PoseWithCovarianceStamped":
         return _decode_pose(raw, child=False, tail=_POSE_COV)
-    if msgtype in TF_TYPES:
-        return _decode_tf(raw)
-    if msgtype in POINTCLOUD_TYPES:
-        return _decode_pointcloud(raw)
-    if msgtype in SONARARRAY_TYPES:
-        return _decode_sonararray(raw)
-    if msgtype in LASER_TYPES:
-        return _decode_laserscan(raw)
-    raise FormatError(f"topic {raw.connection.topic}: cannot decode type {msgtype}")
+    columns = decode_per_message(raw)
+    if columns is None:
+        raise FormatError(f"topic {raw.connection.topic}: cannot decode type {msgtype}")
+    return columns
 
 
 # --------------------------------------------------------------------------- helpers
-
-
-class _Frames:
-    """Frame names → small integer codes, in order of first appearance."""
-
-    def __init__(self) -> None:
-        self.names: list[str] = []
-        self._codes: dict[str, int] = {}
-
-    def code(self, name: str) -> int:
-        c = self._codes.get(name)
-        if c is None:
-            c = self._codes[name] = len(self.names)
-            self.names.append(name)
-        return c
-
-
-def _fail(raw: RawBatch, i: int, what: str) -> FormatError:
-    return FormatError(
-        f"message {i} of topic {raw.connection.topic} "
-        f"(log time {int(raw.log_time_ns[i])} ns): {what}"
-    )
 
 
 def _check(raw: RawBatch, bad: npt.NDArray[np.bool_], what: Callable[[int], str]) -> None:
     """Raise for the first message flagged ``bad``."""
     if bad.any():
         i = int(np.argmax(bad))
-        raise _fail(raw, i, what(i))
+        raise message_error(raw, i, what(i))
 
 
 def _gather(buf: npt.NDArray[np.uint8], pos: I64, dtype: np.dtype[Any]) -> np.ndarray:
@@ -125,7 +89,7 @@ def _u32_at(raw: RawBatch, pos: I64) -> I64:
     return _gather(raw.buffer, pos, _U32).astype(np.int64)
 
 
-def _codes(block: np.ndarray, frames: _Frames) -> npt.NDArray[np.int32]:
+def _codes(block: np.ndarray, frames: FrameCodes) -> npt.NDArray[np.int32]:
     """Codes of fixed-length strings (a ``V<L>`` array) in ``frames``.
 
     Strings are hashed to uint64 (few distinct values: one per sensor), the hash is
@@ -211,7 +175,7 @@ def _decode_range(raw: RawBatch) -> RangeColumns:
         raw.lengths != need,
         lambda i: f"{int(raw.lengths[i])} bytes, a Range with this frame_id has {int(need[i])}",
     )
-    frames = _Frames()
+    frames = FrameCodes()
     stamp = np.empty(n, np.int64)
     frame = np.empty(n, np.int32)
     rad = np.empty(n, np.uint8)
@@ -275,7 +239,7 @@ def _decode_pose(raw: RawBatch, *, child: bool, tail: int) -> PoseColumns:
             f"{raw.connection.msgtype} with these frame ids"
         ),
     )
-    frames = _Frames()
+    frames = FrameCodes()
     empty = frames.code("")
     stamp = np.empty(n, np.int64)
     frame = np.empty(n, np.int32)
@@ -311,132 +275,3 @@ def _decode_pose(raw: RawBatch, *, child: bool, tail: int) -> PoseColumns:
 
 
 # --------------------------------------------------------------------------- per message
-
-
-@dataclass
-class _Msgs:
-    """Deserialized messages of a batch (low-volume types only)."""
-
-    raw: RawBatch
-    items: list[Any]
-
-
-def _deserialize(raw: RawBatch) -> _Msgs:
-    store = typestore_for(raw.connection)
-    msgtype = raw.connection.msgtype
-    out: list[Any] = []
-    for i in range(len(raw)):
-        o = int(raw.offsets[i])
-        data = raw.buffer[o : o + int(raw.lengths[i])].tobytes()
-        try:
-            out.append(store.deserialize_ros1(data, msgtype))
-        # rosbags raises struct.error, IndexError, UnicodeDecodeError, ValueError, ... on
-        # malformed bytes: every one of them means this message is corrupt.
-        except Exception as err:
-            raise _fail(raw, i, f"does not deserialize as {msgtype} ({err})") from err
-    return _Msgs(raw, out)
-
-
-def _header_stamp(header: Any) -> int:
-    return int(header.stamp.sec) * _NS + int(header.stamp.nanosec)
-
-
-def _decode_tf(raw: RawBatch) -> TransformColumns:
-    """tf2_msgs/TFMessage and tf/tfMessage: one row per transform."""
-    msgs = _deserialize(raw)
-    frames = _Frames()
-    idx: list[int] = []
-    stamp: list[int] = []
-    parent: list[int] = []
-    childs: list[int] = []
-    vals: list[tuple[float, ...]] = []
-    for i, msg in enumerate(msgs.items):
-        for tr in msg.transforms:
-            t, q = tr.transform.translation, tr.transform.rotation
-            idx.append(i)
-            stamp.append(_header_stamp(tr.header))
-            # tf frame ids may carry a leading '/' (tf1 era); tf2 strips it.
-            parent.append(frames.code(tr.header.frame_id.lstrip("/")))
-            childs.append(frames.code(tr.child_frame_id.lstrip("/")))
-            vals.append((t.x, t.y, t.z, q.x, q.y, q.z, q.w))
-    v = np.asarray(vals, np.float64).reshape(-1, 7)
-    return TransformColumns(
-        msg_index=np.asarray(idx, np.int64),
-        stamp_ns=np.asarray(stamp, np.int64),
-        parent=np.asarray(parent, np.int32),
-        child=np.asarray(childs, np.int32),
-        frames=frames.names,
-        x=v[:, 0].copy(),
-        y=v[:, 1].copy(),
-        z=v[:, 2].copy(),
-        qx=v[:, 3].copy(),
-        qy=v[:, 4].copy(),
-        qz=v[:, 5].copy(),
-        qw=v[:, 6].copy(),
-    )
-
-
-def _decode_pointcloud(raw: RawBatch) -> PointColumns:
-    """sensor_msgs/PointCloud: one row per point (RosAria: one point per sonar)."""
-    msgs = _deserialize(raw)
-    frames = _Frames()
-    per_msg = np.array([len(m.points) for m in msgs.items], np.int64)
-    stamps = np.array([_header_stamp(m.header) for m in msgs.items], np.int64)
-    codes = np.array([frames.code(m.header.frame_id) for m in msgs.items], np.int32)
-    xyz = np.array([(p.x, p.y, p.z) for m in msgs.items for p in m.points], np.float64).reshape(
-        -1, 3
-    )
-    return PointColumns(
-        msg_index=np.repeat(np.arange(len(raw), dtype=np.int64), per_msg),
-        stamp_ns=np.repeat(stamps, per_msg),
-        frame=np.repeat(codes, per_msg),
-        frames=frames.names,
-        x=xyz[:, 0].copy(),
-        y=xyz[:, 1].copy(),
-        z=xyz[:, 2].copy(),
-        points_per_message=per_msg,
-    )
-
-
-def _decode_sonararray(raw: RawBatch) -> SonarArrayColumns:
-    """p2os_msgs/SonarArray (header, ranges_count, float64[] ranges): a row per value."""
-    msgs = _deserialize(raw)
-    frames = _Frames()
-    ranges = [np.asarray(m.ranges, np.float64).reshape(-1) for m in msgs.items]
-    per_msg = np.array([r.shape[0] for r in ranges], np.int64)
-    stamps = np.array([_header_stamp(m.header) for m in msgs.items], np.int64)
-    codes = np.array([frames.code(m.header.frame_id) for m in msgs.items], np.int32)
-    starts = np.cumsum(per_msg) - per_msg
-    total = int(per_msg.sum())
-    return SonarArrayColumns(
-        msg_index=np.repeat(np.arange(len(raw), dtype=np.int64), per_msg),
-        stamp_ns=np.repeat(stamps, per_msg),
-        frame=np.repeat(codes, per_msg),
-        frames=frames.names,
-        index=np.arange(total, dtype=np.int64) - np.repeat(starts, per_msg),
-        value=np.concatenate(ranges) if ranges else np.empty(0, np.float64),
-        values_per_message=per_msg,
-    )
-
-
-def _decode_laserscan(raw: RawBatch) -> LaserScanColumns:
-    """sensor_msgs/LaserScan: per-message scalars, ranges concatenated."""
-    msgs = _deserialize(raw)
-    frames = _Frames()
-    items = msgs.items
-    ranges = [np.asarray(m.ranges, np.float64).reshape(-1) for m in items]
-
-    def col(name: str) -> F64:
-        return np.array([float(getattr(m, name)) for m in items], np.float64)
-
-    return LaserScanColumns(
-        stamp_ns=np.array([_header_stamp(m.header) for m in items], np.int64),
-        frame=np.array([frames.code(m.header.frame_id) for m in items], np.int32),
-        frames=frames.names,
-        angle_min=col("angle_min"),
-        angle_increment=col("angle_increment"),
-        range_min=col("range_min"),
-        range_max=col("range_max"),
-        beams_per_message=np.array([r.shape[0] for r in ranges], np.int64),
-        ranges=np.concatenate(ranges) if ranges else np.empty(0, np.float64),
-    )
