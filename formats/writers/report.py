@@ -88,9 +88,10 @@ def _sigma_histogram(features: FeatureTable) -> tuple[np.ndarray, np.ndarray]:
     major = major[np.isfinite(major)]
     if major.size == 0:
         return np.zeros(0), np.zeros(0, dtype=np.int64)
-    hi = float(major.max())
-    hi = hi if hi > 0 else 1e-3
-    counts, edges = np.histogram(major, bins=HIST_BINS, range=(0.0, hi))
+    lo, hi = float(major.min()), float(major.max())
+    if hi - lo < 1e-9:  # all equal: a small window around the value keeps bins non-empty
+        lo, hi = max(lo - 5e-4, 0.0), hi + 5e-4
+    counts, edges = np.histogram(major, bins=HIST_BINS, range=(lo, hi))
     return edges, counts.astype(np.int64)
 
 

@@ -51,6 +51,7 @@ def test_size_and_cell_colours(tmp_path: Path) -> None:
     scale = 30  # ceil(600 / 20)
     assert img.size == (20 * scale + 2 * MARGIN, 10 * scale + 2 * MARGIN + 44)
     px = img.load()
+    assert px is not None
     assert px[_cell_centre_px(0, 0, scale)] == (0, 0, 0)  # occupied: black
     assert px[_cell_centre_px(5, 5, scale)] == (255, 255, 255)  # free: white
     assert px[_cell_centre_px(3, 15, scale)] == UNKNOWN_RGB  # unknown
@@ -129,6 +130,4 @@ def test_bytes_deterministic_and_no_time_chunks(tmp_path: Path, features: Featur
 
 def test_bad_trajectory_shape_refused(features: FeatureTable) -> None:
     with pytest.raises(ValueError, match=r"trajectory_xy must have shape \(N, 2\)"):
-        render_map(
-            make_snapshot(GRID, _prob(), features), trajectory_xy=np.zeros(5), features=None
-        )
+        render_map(make_snapshot(GRID, _prob(), features), trajectory_xy=np.zeros(5), features=None)
