@@ -20,7 +20,7 @@ def test_version(runner):
     assert result.exit_code == 0 and result.output.strip() == f"sonarmap {__version__}"
 
 
-@pytest.mark.parametrize("command", ["run", "info", "validate", "config", "simulate"])
+@pytest.mark.parametrize("command", ["run", "info", "validate", "config", "simulate", "emulate", "evaluate", "regress", "batch"])
 def test_every_command_has_help_with_examples(runner, command):
     result = runner.invoke(app, [command, "--help"])
     assert result.exit_code == 0
