@@ -22,7 +22,7 @@ from typing import Any, BinaryIO
 import numpy as np
 import numpy.typing as npt
 
-from formats.ros.source import Connection, Encoding, RawBatch
+from formats.ros.source import Connection, Encoding, RawBatch, SourceAccessors
 from pipeline.errors import FormatError
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -229,7 +229,7 @@ def _u16_at(buf: npt.NDArray[np.uint8], pos: npt.NDArray[np.int64]) -> npt.NDArr
     return _at(buf, pos, "<u2")
 
 
-class McapSource:
+class McapSource(SourceAccessors):
     """An MCAP file: ``ros1`` and ``cdr`` channels, read chunk by chunk.
 
     Opening reads the summary (or scans the file when it has none); nothing else.
@@ -259,22 +259,6 @@ class McapSource:
         self._connections = self._make_connections()
 
     # -- MessageSource -------------------------------------------------------------------
-
-    @property
-    def connections(self) -> list[Connection]:
-        return list(self._connections.values())
-
-    @property
-    def start_ns(self) -> int | None:
-        return self._start
-
-    @property
-    def end_ns(self) -> int | None:
-        return self._end
-
-    @property
-    def warnings(self) -> list[str]:
-        return self._warnings
 
     def close(self) -> None:
         self._file.close()

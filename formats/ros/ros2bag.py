@@ -26,7 +26,7 @@ import numpy as np
 import yaml
 
 from formats.ros.mcap_source import McapSource, normalize_msgtype
-from formats.ros.source import Connection, Encoding, RawBatch
+from formats.ros.source import Connection, Encoding, RawBatch, SourceAccessors
 from pipeline.errors import FormatError
 
 _STORAGE_SUFFIXES = {".db3": "sqlite3", ".mcap": "mcap"}
@@ -54,7 +54,7 @@ class _StorageFile(Protocol):
     def close(self) -> None: ...
 
 
-class Sqlite3File:
+class Sqlite3File(SourceAccessors):
     """One rosbag2 ``.db3`` file (old schema without definitions, or with
     ``message_definitions``); connection ids are the ``topics`` table ids."""
 
@@ -116,22 +116,6 @@ class Sqlite3File:
                 count=int(counts.get(tid, 0)),
             )
 
-    @property
-    def connections(self) -> list[Connection]:
-        return list(self._connections.values())
-
-    @property
-    def start_ns(self) -> int | None:
-        return self._start
-
-    @property
-    def end_ns(self) -> int | None:
-        return self._end
-
-    @property
-    def warnings(self) -> list[str]:
-        return self._warnings
-
     def raw_batches(self, connection_ids: Collection[int]) -> Iterator[RawBatch]:
         """Messages ordered by (timestamp, id), SQLITE_BATCH_ROWS rows at a time; each page
         becomes one batch per topic sharing one buffer."""
@@ -187,7 +171,7 @@ def _encoding(fmt: str) -> Encoding:
     return "other"
 
 
-class Ros2BagSource:
+class Ros2BagSource(SourceAccessors):
     """A rosbag2 bag directory, or a single storage file.
 
     ``format_name`` is ``'ros2-sqlite3'`` or ``'ros2-mcap'``.
@@ -313,18 +297,6 @@ class Ros2BagSource:
         self._end = max(ends) if ends else None
 
     # -- MessageSource -------------------------------------------------------------------
-
-    @property
-    def connections(self) -> list[Connection]:
-        return list(self._connections.values())
-
-    @property
-    def start_ns(self) -> int | None:
-        return self._start
-
-    @property
-    def end_ns(self) -> int | None:
-        return self._end
 
     @property
     def warnings(self) -> list[str]:

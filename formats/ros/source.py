@@ -62,6 +62,33 @@ class RawBatch:
         return self.buffer[o : o + int(self.lengths[i])].tobytes()
 
 
+class SourceAccessors:
+    """The MessageSource accessors, over the state a source fills in while opening:
+    ``_connections`` (by id, in id order), ``_start``/``_end`` (log time, ns) and
+    ``_warnings`` (losses found while reading)."""
+
+    _connections: dict[int, Connection]
+    _start: int | None
+    _end: int | None
+    _warnings: list[str]
+
+    @property
+    def connections(self) -> list[Connection]:
+        return list(self._connections.values())
+
+    @property
+    def start_ns(self) -> int | None:
+        return self._start
+
+    @property
+    def end_ns(self) -> int | None:
+        return self._end
+
+    @property
+    def warnings(self) -> list[str]:
+        return self._warnings
+
+
 class MessageSource(Protocol):
     """A ROS log container (ROS 1 bag, ROS 2 bag, MCAP)."""
 
