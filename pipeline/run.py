@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from formats import open_log
-from formats.contract import RangeBatch
+from formats.contract import LogReader, RangeBatch
 from pipeline import __version__
 from pipeline.config import Config, dump_config
 from pipeline.errors import ConfigError, InputError
@@ -39,7 +39,13 @@ from pipeline.metrics import (
     peak_rss_mb,
     sha256_of,
 )
-from pipeline.pose_sync import POSE_OK, POSE_REASONS, interpolate_poses, sonar_geometry
+from pipeline.pose_sync import (
+    POSE_OK,
+    POSE_REASONS,
+    PoseTrack,
+    interpolate_poses,
+    sonar_geometry,
+)
 from pipeline.reading_quality import REASONS
 from pipeline.scans import ScanBuilder, ScanKeys
 from pipeline.sensors import SensorTable, resolve_sensors
@@ -147,7 +153,7 @@ def grid_for(sv: Survey, sensors: SensorTable, config: Config) -> GridSpec:
 
 
 def _map_stream(
-    reader: Any,
+    reader: LogReader,
     sv: Survey,
     sensors: SensorTable,
     mappers: dict[str, Mapper],
@@ -196,7 +202,7 @@ def _integrate(mappers: dict[str, Mapper], scans: list[Scan]) -> None:
 
 def _sync(
     batch: RangeBatch,
-    track: Any,
+    track: PoseTrack,
     sensors: SensorTable,
     offset_ns: int,
     max_gap_ns: int,
