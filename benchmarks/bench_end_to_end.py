@@ -1,7 +1,7 @@
 """End to end: ``sonarmap run`` on a simulated long log of a 16-sonar ring, and its scaling.
 
 Usage: ``python benchmarks/bench_end_to_end.py [--seconds 3600] [--fractions 0.25 0.5 1]
-[--rss-factor 10] [--repeat 3] [--smoke] [--profile]``
+[--rss-factor 10] [--repeat 3] [--smoke] [--profile FILE]``
 
 Input (deterministic, no downloads): the simulator (:mod:`pipeline.simulate`) drives the
 Pioneer ring (16 sonars, 30° beams, 0.1-5 m, ring at 10 Hz → 160 readings/s) through the
@@ -159,6 +159,15 @@ def run_once(log: Path, out: Path, extra: tuple[str, ...] = ()) -> RunFigures:
     )
 
 
+def profile_run(log: Path, report: Path) -> None:
+    """One ``sonarmap run`` of ``log`` under pyinstrument; its call tree goes to ``report``."""
+    with tempfile.TemporaryDirectory(prefix="bench_profile_") as tmp:
+        cmd = [sys.executable, "-m", "pyinstrument", "--outfile", str(report), "-m", "cli",
+               "run", str(log), "-o", str(Path(tmp) / "out"), "--quiet"]
+        subprocess.run(cmd, check=True)
+    print(f"# pyinstrument call tree of `sonarmap run {log}` written to {report}")
+
+
 def median_run(log: Path, out: Path, repeat: int) -> RunFigures:
     """The run with the median wall time of ``repeat`` runs (the machine is shared)."""
     runs = sorted((run_once(log, out) for _ in range(repeat)), key=lambda r: r.wall)
@@ -181,7 +190,13 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
                     help="peak RSS is compared between 1x and this many times longer (0: skip)")
     ap.add_argument("--repeat", type=int, default=3, help="runs per log (median reported)")
     ap.add_argument("--smoke", action="store_true", help="tiny logs, one run each")
+    ap.add_argument("--profile", metavar="FILE", type=Path,
+                    help="only profile one run of the 1x log with pyinstrument (call tree "
+                         "as text into FILE; needs the bench extra)")
     args = ap.parse_args(argv)
+    if args.profile is not None:
+        profile_run(cached_log(LogSpec(seconds=args.seconds)), args.profile)
+        return {}
     if args.smoke:
         args.seconds, args.fractions, args.rss_factor, args.repeat = 20.0, [0.5, 1.0], 2.0, 1
     base = LogSpec(seconds=args.seconds)

@@ -17,7 +17,7 @@ import numpy.typing as npt
 
 from formats.contract import LogReader, MountBatch, PoseBatch, RangeBatch, SensorMount
 from pipeline.errors import InputError
-from pipeline.pose_sync import PoseTrack, build_pose_track
+from pipeline.pose_sync import PoseTrack, PoseTrackBuilder
 
 
 @dataclass
@@ -90,7 +90,7 @@ class Survey:
 
 def survey(reader: LogReader) -> Survey:
     """Pass 1: pose track, static mounts and a summary of the readings."""
-    poses: list[PoseBatch] = []
+    poses = PoseTrackBuilder()
     mounts: dict[str, SensorMount] = {}
     summary = RangeSummary()
     stamps = StampOrder()
@@ -98,13 +98,12 @@ def survey(reader: LogReader) -> Survey:
         if isinstance(batch, RangeBatch):
             summary.add(batch, stamps)
         elif isinstance(batch, PoseBatch):
-            if len(batch):
-                poses.append(batch)
+            poses.add(batch)
         elif isinstance(batch, MountBatch):
             mounts.update(batch.mounts)
     if summary.count == 0:
         raise InputError("the log has no range readings on the selected topics", reader.path)
-    track = build_pose_track(poses)
+    track = poses.finish()
     if len(track) < 2:
         raise InputError(
             f"the log has {len(track)} usable pose(s); mapping needs a pose stream", reader.path

@@ -86,3 +86,48 @@ def test_stamps_going_backwards_are_flagged_per_sensor_across_batches():
     # Sensor 1 at 25 < 30 went back; sensor 0 at 21 > 20 did not (15 never raised the max).
     b = make_range_batch([21, 25, 5], [0, 1, 2], 1.0, 0.5, 0.1, 5.0)
     assert order.backwards(b).tolist() == [False, True, False]
+
+
+def _one_by_one_track(t, x):
+    """The filtering of build_pose_track, written as the plain loop it stands for."""
+    kept_t, kept_x, running, last, back, dup = [], [], None, None, 0, 0
+    for ti, xi in zip(t, x, strict=True):
+        if running is not None and ti < running:
+            back += 1
+        elif last is not None and ti == last:
+            dup += 1
+        else:
+            last = ti
+            if math.isfinite(xi):
+                kept_t.append(ti)
+                kept_x.append(xi)
+        running = ti if running is None else max(running, ti)
+    return kept_t, kept_x, back, dup
+
+
+@pytest.mark.parametrize("cuts", [[], [1], [3, 4], [2, 5, 7], list(range(1, 12))])
+def test_pose_track_built_batch_by_batch_filters_across_batch_boundaries(cuts):
+    # Backwards stamps, duplicates and a NaN pose, some of them right at batch boundaries.
+    t = [0, 10, 10, 5, 20, 20, 15, 30, 40, 40, 35, 50]
+    x = [0.0, 1.0, 9.0, 9.0, 2.0, 9.0, 9.0, math.nan, 4.0, 9.0, 9.0, 5.0]
+    want_t, want_x, want_back, want_dup = _one_by_one_track(t, x)
+    assert (want_back, want_dup) == (3, 3)  # the fixture exercises both filters
+    edges = [0, *cuts, len(t)]
+    batches = [
+        PoseBatch(np.array(t[a:b], np.int64), np.array(x[a:b]), np.zeros(b - a), np.zeros(b - a), "odom", "base_link")
+        for a, b in zip(edges[:-1], edges[1:], strict=True)
+    ]
+    tr = build_pose_track(batches)
+    assert tr.t_ns.tolist() == want_t
+    assert tr.x.tolist() == want_x
+    assert (tr.backwards, tr.duplicates) == (want_back, want_dup)
+    assert (tr.parent_frame, tr.child_frame) == ("odom", "base_link")
+
+
+def test_path_length_in_blocks_matches_the_whole_sum():
+    n = 200_000  # more than one block of the blockwise sum
+    ang = np.linspace(0.0, 40.0 * math.pi, n)
+    tr = track(np.arange(n, dtype=np.int64), np.cos(ang), np.sin(ang), np.zeros(n))
+    whole = float(np.hypot(np.diff(tr.x), np.diff(tr.y)).sum())
+    assert tr.path_length() == pytest.approx(whole, rel=1e-12)
+    assert tr.path_length() == pytest.approx(40.0 * math.pi, rel=1e-6)  # 20 laps of a unit circle
