@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -115,7 +116,7 @@ def test_pose_track_built_batch_by_batch_filters_across_batch_boundaries(cuts):
     edges = [0, *cuts, len(t)]
     batches = [
         PoseBatch(np.array(t[a:b], np.int64), np.array(x[a:b]), np.zeros(b - a), np.zeros(b - a), "odom", "base_link")
-        for a, b in zip(edges[:-1], edges[1:], strict=True)
+        for a, b in itertools.pairwise(edges)
     ]
     tr = build_pose_track(batches)
     assert tr.t_ns.tolist() == want_t
