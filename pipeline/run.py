@@ -104,6 +104,8 @@ def run(
                 used=[sv.ranges.per_sensor.get(i, 0) > 0 for i in range(len(sv.sensor_names))],
             )
             grid = grid_for(sv, sensors, config)
+            # Thinned now, while little else is in memory (it reads the whole track).
+            drawn = _drawn_trajectory(sv.track)
             log.info(
                 "%s: %d readings from %d sensors, %d poses; grid %dx%d at %.3f m",
                 log_path, sv.ranges.count, len(sv.sensor_names), len(sv.track),
@@ -118,7 +120,7 @@ def run(
             snapshots = {k: m.snapshot() for k, m in mappers.items()}
         metrics = _metrics(log_path, info.format, info.duration_s, sv, sensors, mappers,
                            snapshots, state, config)
-        _write_outputs(out, config, sv, snapshots, metrics, timer, t_start)
+        _write_outputs(out, config, sv, drawn, snapshots, metrics, timer, t_start)
     return RunResult(Path(out_dir), metrics, snapshots["main"])
 
 
@@ -139,9 +141,9 @@ def grid_for(sv: Survey, sensors: SensorTable, config: Config) -> GridSpec:
         offsets = np.hypot(sensors.mount_x, sensors.mount_y)
         offset = float(np.nanmax(offsets)) if np.isfinite(offsets).any() else 0.0
         reach = max(finite) + offset + g.margin
-        t = sv.track
-        x0, x1 = float(t.x.min()) - reach, float(t.x.max()) + reach
-        y0, y1 = float(t.y.min()) - reach, float(t.y.max()) + reach
+        bx0, by0, bx1, by1 = sv.track.bounds()
+        x0, x1 = bx0 - reach, bx1 + reach
+        y0, y1 = by0 - reach, by1 + reach
     grid = GridSpec.covering(x0, y0, x1, y1, g.resolution)
     cells = grid.width * grid.height
     if cells > g.max_cells:
@@ -184,6 +186,8 @@ def _map_stream(
             scan_ids, readings = _sync(batch, track, sensors, offset_ns, max_gap_ns, state)
         with timer.stage("scan_building"):
             scans = list(builder.push(scan_ids, readings))
+        # Later readings are newer than this chunk: the poses before it are done with.
+        track.release_before(int(batch.t_ns[0]) + offset_ns)
         with timer.stage("mapping"):
             _integrate(mappers, scans)
         if progress is not None:
@@ -343,21 +347,25 @@ def _ablation_row(mapper: Mapper, snap: MapSnapshot) -> dict[str, Any]:
 MAX_DRAWN_POSES = 20_000
 
 
-def _drawn_trajectory(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+def _drawn_trajectory(track: PoseTrack) -> np.ndarray:
     """The trajectory as drawn in map.png: every pose up to MAX_DRAWN_POSES, else evenly
     spaced poses plus the last one (a picture at most ~2400 px wide shows no more, and
     drawing hours of 20 Hz odometry would make memory grow with the log's length)."""
-    n = x.shape[0]
+    n = len(track)
     if n <= MAX_DRAWN_POSES:
-        return np.column_stack([x, y])
-    idx = np.unique(np.r_[np.linspace(0, n - 1, MAX_DRAWN_POSES).astype(np.int64), n - 1])
-    return np.column_stack([x[idx], y[idx]])
+        xy = np.column_stack([track.x, track.y])
+    else:
+        idx = np.unique(np.r_[np.linspace(0, n - 1, MAX_DRAWN_POSES).astype(np.int64), n - 1])
+        xy = np.column_stack([track.x[idx], track.y[idx]])
+    track.release_before(None)
+    return xy
 
 
 def _write_outputs(
     out: Any,
     config: Config,
     sv: Survey,
+    traj: np.ndarray,
     snapshots: dict[str, MapSnapshot],
     metrics: RunMetrics,
     timer: StageTimer,
@@ -372,7 +380,6 @@ def _write_outputs(
 
     t_outputs = time.perf_counter()
     snap = snapshots["main"]
-    traj = _drawn_trajectory(sv.track.x, sv.track.y)
     write_nav2_map(out.path("map.yaml"), snap.probability, snap.grid)
     title = f"{metrics.input['name']} - {config.mapper.method}"
     write_map_png(out.path("map.png"), snap, trajectory_xy=traj, features=snap.features, title=title)

@@ -28,6 +28,7 @@ from pipeline.mapper.types import Scan
 from pipeline.pose_sync import PoseTrack
 
 I64 = npt.NDArray[np.int64]
+_BLOCK = 65_536  # poses per block of the motion policy's walk
 
 
 def motion_boundaries(track: PoseTrack, max_travel_m: float, max_turn_rad: float) -> I64:
@@ -36,16 +37,21 @@ def motion_boundaries(track: PoseTrack, max_travel_m: float, max_turn_rad: float
     Sequential by nature (each scan starts where the last one ended), but a loop over
     poses only — poses are few compared with readings.
     """
-    xs, ys, yaws = track.x.tolist(), track.y.tolist(), track.yaw.tolist()
     out: list[int] = []
-    if not xs:
+    n = len(track)
+    if n == 0:
         return np.empty(0, np.int64)
-    sx, sy, syaw = xs[0], ys[0], yaws[0]
-    for i in range(1, len(xs)):
-        dyaw = (yaws[i] - syaw + math.pi) % (2 * math.pi) - math.pi
-        if math.hypot(xs[i] - sx, ys[i] - sy) > max_travel_m or abs(dyaw) > max_turn_rad:
-            out.append(int(track.t_ns[i]))
-            sx, sy, syaw = xs[i], ys[i], yaws[i]
+    sx, sy, syaw = float(track.x[0]), float(track.y[0]), float(track.yaw[0])
+    for a in range(0, n, _BLOCK):  # in blocks: hours of odometry make no long lists
+        xs = track.x[a : a + _BLOCK].tolist()
+        ys = track.y[a : a + _BLOCK].tolist()
+        yaws = track.yaw[a : a + _BLOCK].tolist()
+        for j in range(1 if a == 0 else 0, len(xs)):
+            dyaw = (yaws[j] - syaw + math.pi) % (2 * math.pi) - math.pi
+            if math.hypot(xs[j] - sx, ys[j] - sy) > max_travel_m or abs(dyaw) > max_turn_rad:
+                out.append(int(track.t_ns[a + j]))
+                sx, sy, syaw = xs[j], ys[j], yaws[j]
+    track.release_before(None)
     return np.asarray(out, dtype=np.int64)
 
 

@@ -53,6 +53,8 @@ _UPPER: dict[int, npt.NDArray[np.bool_]] = {}
 # Readings merged per local solve (see FeatureSet._merge_block): a scan of a ring is one
 # block; the local distance table is (block × nearby features).
 _MERGE_BLOCK = 64
+# Slots in the bucket pool: int32 halves the index's memory (rows × twice the fullest bucket).
+_SLOT = np.int32
 
 
 def _upper(k: int) -> npt.NDArray[np.bool_]:
@@ -127,7 +129,7 @@ class FeatureSet:
         # bucket's slots in insertion order, with holes (-1) where slots left.
         self._row_of = np.zeros(self._nbx * self._nby, dtype=np.int64)
         self._cap = 8
-        self._pool = np.full((256, self._cap), -1, dtype=np.int64)
+        self._pool = np.full((256, self._cap), -1, dtype=_SLOT)
         self._fill = np.zeros(256, dtype=np.int64)
         self._rows_used = 1
         self.n = 0  # slots in use (alive or dead)
@@ -287,7 +289,7 @@ class FeatureSet:
         self._bucket[slots] = -1
 
     def _grow_pool(self, rows: int, cap: int) -> None:
-        pool = np.full((rows, cap), -1, dtype=np.int64)
+        pool = np.full((rows, cap), -1, dtype=_SLOT)
         old = self._pool
         pool[: old.shape[0], : old.shape[1]] = old
         fill = np.zeros(rows, dtype=np.int64)
@@ -315,7 +317,7 @@ class FeatureSet:
         n_rows = int(row[-1]) + 1
         # Room for growth: twice the fullest bucket.
         cap = max(self._cap, 2 * (int(pos.max()) + 1))
-        self._pool = np.full((max(n_rows + 64, self._pool.shape[0]), cap), -1, dtype=np.int64)
+        self._pool = np.full((max(n_rows + 64, self._pool.shape[0]), cap), -1, dtype=_SLOT)
         self._fill = np.zeros(self._pool.shape[0], dtype=np.int64)
         self._cap = cap
         self._pool[row, pos] = s
@@ -352,7 +354,7 @@ class FeatureSet:
         total = cand.shape[0]
         if total == 0:
             return np.full(m, -1, dtype=np.int64), np.full(m, np.inf)
-        s = np.maximum(cand, 0)  # holes (-1) read slot 0 and get distance inf below
+        s = np.maximum(cand, 0).astype(np.int64)  # holes (-1) read slot 0, distance inf below
         diff = self.mean[s] - np.repeat(points, per, axis=0)
         d = np.hypot(diff[:, 0], diff[:, 1])
         d[cand < 0] = np.inf

@@ -81,14 +81,21 @@ def _clamp_table(step: np.float32, l_min: np.float32, l_max: np.float32) -> F32:
     return np.array(vals, dtype=np.float32)
 
 
+_RASTER_BLOCK = 2048  # features rasterised at once by occupied_layer
+
+
 def occupied_layer(mean: F64, cov: F64, grid: GridSpec) -> B:
     """Cells inside any feature's 2σ ellipse, plus each in-grid feature's mean cell."""
     occ = np.zeros(grid.shape, dtype=np.bool_)
     if mean.shape[0] == 0:
         return occ
-    spans = ellipse_spans(mean[:, 0], mean[:, 1], cov[:, 0], cov[:, 1], cov[:, 2], 2.0, grid)
-    _, row, col = span_cells(spans)
-    occ[row, col] = True
+    # In blocks of features: the cells of every ellipse at once would make temporaries
+    # that grow with the feature count (tens of MB for tens of thousands of features).
+    for a in range(0, mean.shape[0], _RASTER_BLOCK):
+        m, c = mean[a : a + _RASTER_BLOCK], cov[a : a + _RASTER_BLOCK]
+        spans = ellipse_spans(m[:, 0], m[:, 1], c[:, 0], c[:, 1], c[:, 2], 2.0, grid)
+        _, row, col = span_cells(spans)
+        occ[row, col] = True
     r, c, inside = mean_cells(mean[:, 0], mean[:, 1], grid)
     occ[r[inside], c[inside]] = True
     return occ

@@ -186,3 +186,51 @@ def test_feature_variance_definition() -> None:
     cov = np.array([[4.0, 0.0, 1.0], [1.0, 0.0, 1.0]])
     assert feature_variance(cov) == pytest.approx((1.75, 2.5))
     assert all(math.isnan(v) for v in feature_variance(np.zeros((0, 3))))
+
+
+def _reference_merge(feats: list[list], pts: np.ndarray, cov: np.ndarray, t: np.ndarray, md: float) -> None:
+    """§2 one reading at a time, brute-force nearest (ties → oldest feature)."""
+    for i in range(pts.shape[0]):
+        best, best_d = -1, np.inf
+        for j, f in enumerate(feats):
+            d = float(np.hypot(f[0][0] - pts[i, 0], f[0][1] - pts[i, 1]))
+            if d < best_d:
+                best, best_d = j, d
+        if best >= 0 and best_d < md:
+            f = feats[best]
+            mu, p = kalman_merge(f[0][None], f[1][None], pts[i : i + 1], cov[i : i + 1])
+            f[0], f[1] = mu[0], p[0]
+            f[2] += 1  # measured
+            f[3] += 1  # merges
+            f[5] = int(t[i])  # last seen
+        else:
+            feats.append([pts[i].copy(), cov[i].copy(), 1, 0, int(t[i]), int(t[i])])
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_block_merge_equals_one_reading_at_a_time(seed: int) -> None:
+    """Dense readings (chains into one feature, merges into features created in the same
+    scan, scans longer than one merge block) give exactly the sequential result."""
+    rng = np.random.default_rng(seed)
+    md = 0.15
+    fs = _set(md)
+    ref: list[list] = []
+    t0 = 0
+    for size in (5, 40, 150, 64, 1):
+        pts = rng.uniform(-0.6, 0.6, (size, 2))
+        cov = np.tile([0.004, 0.001, 0.003], (size, 1)) * rng.uniform(0.5, 2.0, (size, 1))
+        t = np.arange(t0, t0 + size, dtype=np.int64)
+        t0 += size
+        created, merged = fs.merge_readings(pts, cov, t)
+        n_before = len(ref)
+        _reference_merge(ref, pts, cov, t, md)
+        assert created == len(ref) - n_before and created + merged == size
+    tab = fs.table()
+    assert tab.id.tolist() == list(range(len(ref)))
+    np.testing.assert_array_equal(np.c_[tab.x, tab.y], np.array([f[0] for f in ref]))
+    np.testing.assert_array_equal(np.c_[tab.cov_xx, tab.cov_xy, tab.cov_yy], np.array([f[1] for f in ref]))
+    assert tab.measured_times.tolist() == [f[2] for f in ref]
+    assert tab.merges.tolist() == [f[3] for f in ref]
+    assert tab.first_seen_ns.tolist() == [f[4] for f in ref]
+    assert tab.last_seen_ns.tolist() == [f[5] for f in ref]
+    assert max(tab.merges) >= 5  # the fixture does chain many readings into one feature

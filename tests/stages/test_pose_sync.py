@@ -132,3 +132,31 @@ def test_path_length_in_blocks_matches_the_whole_sum():
     whole = float(np.hypot(np.diff(tr.x), np.diff(tr.y)).sum())
     assert tr.path_length() == pytest.approx(whole, rel=1e-12)
     assert tr.path_length() == pytest.approx(40.0 * math.pi, rel=1e-6)  # 20 laps of a unit circle
+
+
+def test_built_track_is_mapped_read_only_and_survives_page_release():
+    n = 200_000  # several pages and blocks per column
+    t = np.arange(n, dtype=np.int64) * 50_000_000
+    ang = np.linspace(0.0, 6.0, n)
+    tr = track(t, np.cos(ang) * 3.0, np.sin(ang) - 1.0, ang)
+    assert tr.x.flags.writeable is False
+    with pytest.raises(ValueError):
+        tr.x[0] = 1.0
+    want = (tr.x.copy(), tr.yaw.copy())
+    tr.release_before(int(t[n // 2]))  # as pass 2 does behind its readings
+    tr.release_before(None)  # all pages
+    np.testing.assert_array_equal(tr.x, want[0])
+    np.testing.assert_array_equal(tr.yaw, want[1])
+    look = interpolate_poses(tr, np.array([t[10] + 25_000_000, t[-2]], np.int64), S)
+    assert look.reason.tolist() == [POSE_OK, POSE_OK]
+    assert look.yaw[1] == pytest.approx((ang[-2] + math.pi) % (2 * math.pi) - math.pi)
+    x0, y0, x1, y1 = tr.bounds()
+    assert (x0, x1) == (float(tr.x.min()), float(tr.x.max()))
+    assert (y0, y1) == (float(tr.y.min()), float(tr.y.max()))
+
+
+def test_empty_track_has_no_poses_and_nan_bounds():
+    tr = build_pose_track([])
+    assert len(tr) == 0 and tr.path_length() == 0.0
+    assert all(math.isnan(v) for v in tr.bounds())
+    tr.release_before(None)  # nothing mapped: a no-op
