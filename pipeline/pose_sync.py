@@ -93,14 +93,18 @@ class PoseTrack:
         pages with None). Only pages are dropped: the values stay readable (from the file)."""
         if not self._maps or not hasattr(mmap, "MADV_DONTNEED"):
             return
-        n = len(self)
-        i = n if t_ns is None else max(int(np.searchsorted(self.t_ns, t_ns)) - 2, 0)
+        if t_ns is None:
+            for m in self._maps:
+                m.madvise(mmap.MADV_DONTNEED)
+            self._released[0] = 0  # a new walk from the start may follow
+            return
+        i = max(int(np.searchsorted(self.t_ns, t_ns)) - 2, 0)
         upto = (i * 8) // mmap.PAGESIZE * mmap.PAGESIZE
         if upto <= self._released[0]:
             return
         for m in self._maps:
             m.madvise(mmap.MADV_DONTNEED, 0, min(upto, len(m)))
-        self._released[0] = 0 if t_ns is None else upto
+        self._released[0] = upto
 
 
 def build_pose_track(batches: Sequence[PoseBatch]) -> PoseTrack:

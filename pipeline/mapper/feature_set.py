@@ -388,27 +388,34 @@ class FeatureSet:
         Only features within ``match_distance`` of a reading can take it, and each of
         those is either unchanged since the block began — then it lies in the 3×3 buckets
         around the reading — or was moved or created by an earlier reading of the block.
-        So the block is solved on a local table: the features of every reading's 3×3
+        So the block is solved on a local table: the features of the readings' 3×3
         buckets (in slot order) followed by the features the block creates (in creation
-        order, i.e. the slots they will get). Nearest = dense distances to that table,
-        ties → the lowest index = the lowest slot. The rounds (the longest prefix whose
-        readings cannot see each other's changes is applied at once) run on the table, and
-        the feature set is written once at the end: one move of the merged features, one
-        add of the new ones.
+        order, i.e. the slots they will get). A reading's nearest is the minimum over its
+        own bucket candidates (at their current local positions) and over every feature
+        the block has changed so far; ties → the lowest index = the lowest slot. The rounds
+        (the longest prefix whose readings cannot see each other's changes is applied at
+        once) run on the table, and the feature set is written once at the end: one move
+        of the merged features, one add of the new ones.
         """
         k = q.shape[0]
         md = self.match_distance
         if self._live:
-            cand, _ = self._candidates(q)
-            cand = np.unique(cand[cand >= 0])  # ascending = slot order
+            cand, per = self._candidates(q)
+            valid = cand >= 0
+            local = np.unique(cand[valid])  # ascending = slot order
+            pr = np.repeat(np.arange(k), per)[valid]  # pairs (reading, local row), by reading
+            pl = np.searchsorted(local, cand[valid])
         else:
-            cand = np.zeros(0, dtype=np.int64)
-        n0 = cand.shape[0]
+            local = np.zeros(0, dtype=np.int64)
+            pr = pl = np.zeros(0, dtype=np.int64)
+        n0 = local.shape[0]
+        first_pair = np.searchsorted(pr, np.arange(k + 1))  # reading i's pairs: [fp[i], fp[i+1])
         lm = np.empty((n0 + k, 2))
         lc = np.empty((n0 + k, 3))
-        lm[:n0] = self.mean[cand]
-        lc[:n0] = self.cov[cand]
+        lm[:n0] = self.mean[local]
+        lc[:n0] = self.cov[local]
         nloc = n0
+        changed = np.zeros(n0 + k, dtype=np.bool_)
         target = np.empty(k, dtype=np.int64)  # local row each reading merged into or created
         hit_all = np.zeros(k, dtype=np.bool_)
         reach = md * (1.0 + 1e-9)  # conservative: a tie starts a new round
@@ -416,13 +423,32 @@ class FeatureSet:
         while start < k:
             qq = q[start:]
             r = qq.shape[0]
-            if nloc:
-                d = np.hypot(lm[None, :nloc, 0] - qq[:, None, 0], lm[None, :nloc, 1] - qq[:, None, 1])
-                j = d.argmin(axis=1)
-                hit = d[np.arange(r), j] < md
+            p0 = int(first_pair[start])
+            if p0 < pr.shape[0]:
+                # Per reading (pairs are grouped by reading): the minimum distance, then the
+                # lowest row at it; a reading without pairs starts at the appended sentinel.
+                ri, li = pr[p0:] - start, pl[p0:]
+                d = np.hypot(lm[li, 0] - qq[ri, 0], lm[li, 1] - qq[ri, 1])
+                seg = first_pair[start:k] - p0
+                best_d = np.minimum.reduceat(np.concatenate((d, _INF1)), seg)
+                key = np.where(d == best_d[ri], li, _BIG)
+                best_j = np.minimum.reduceat(np.concatenate((key, _BIG1)), seg)
+                empty = first_pair[start + 1 : k + 1] == first_pair[start:k]
+                best_d[empty] = np.inf
             else:
-                j = np.zeros(r, dtype=np.int64)
-                hit = np.zeros(r, dtype=np.bool_)
+                best_d = np.full(r, np.inf)
+                best_j = np.full(r, _BIG, dtype=np.int64)
+            ch = np.flatnonzero(changed[:nloc])
+            if ch.shape[0]:
+                dc = np.hypot(lm[ch, 0][None, :] - qq[:, 0:1], lm[ch, 1][None, :] - qq[:, 1:2])
+                jc = dc.argmin(axis=1)
+                dmin_c = dc[np.arange(r), jc]
+                jc = ch[jc]
+                better = (dmin_c < best_d) | ((dmin_c == best_d) & (jc < best_j))
+                best_d = np.where(better, dmin_c, best_d)
+                best_j = np.where(better, jc, best_j)
+            hit = best_d < md
+            j = np.where(hit, best_j, 0)
             fj = j[hit]
             mu_f = lm[fj]
             mu_m, p_m = kalman_merge(mu_f, lc[fj], qq[hit], pz[start:][hit])
@@ -449,6 +475,7 @@ class FeatureSet:
                 jt = j[:n_ok][take]
                 lm[jt] = mu_m[:n_hit]
                 lc[jt] = p_m[:n_hit]
+                changed[jt] = True
                 target[start : start + n_ok][take] = jt
                 hit_all[start : start + n_ok] = take
             if n_hit < n_ok:
@@ -456,9 +483,11 @@ class FeatureSet:
                 c = new.shape[0]
                 lm[nloc : nloc + c] = qq[new]
                 lc[nloc : nloc + c] = pz[start:][new]
+                changed[nloc : nloc + c] = True
                 target[start + new] = np.arange(nloc, nloc + c)
                 nloc += c
             start += n_ok
+        cand = local
         # Write back: per local row, how many readings merged into it and the last one.
         rows_hit = target[hit_all]
         times = np.bincount(rows_hit, minlength=nloc)

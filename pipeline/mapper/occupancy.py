@@ -92,8 +92,8 @@ def occupied_layer(mean: F64, cov: F64, grid: GridSpec) -> B:
     # In blocks of features: the cells of every ellipse at once would make temporaries
     # that grow with the feature count (tens of MB for tens of thousands of features).
     for a in range(0, mean.shape[0], _RASTER_BLOCK):
-        m, c = mean[a : a + _RASTER_BLOCK], cov[a : a + _RASTER_BLOCK]
-        spans = ellipse_spans(m[:, 0], m[:, 1], c[:, 0], c[:, 1], c[:, 2], 2.0, grid)
+        mb, cb = mean[a : a + _RASTER_BLOCK], cov[a : a + _RASTER_BLOCK]
+        spans = ellipse_spans(mb[:, 0], mb[:, 1], cb[:, 0], cb[:, 1], cb[:, 2], 2.0, grid)
         _, row, col = span_cells(spans)
         occ[row, col] = True
     r, c, inside = mean_cells(mean[:, 0], mean[:, 1], grid)

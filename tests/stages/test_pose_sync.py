@@ -2,6 +2,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import os
 
 import numpy as np
 import pytest
@@ -160,3 +161,28 @@ def test_empty_track_has_no_poses_and_nan_bounds():
     assert len(tr) == 0 and tr.path_length() == 0.0
     assert all(math.isnan(v) for v in tr.bounds())
     tr.release_before(None)  # nothing mapped: a no-op
+
+
+def _rss_file_kb() -> int:
+    with open("/proc/self/status", encoding="ascii") as f:
+        return next(int(line.split()[1]) for line in f if line.startswith("RssFile:"))
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/status"), reason="needs Linux /proc")
+def test_release_gives_back_the_track_pages_again_after_a_full_walk():
+    n = 400_000  # 3.2 MB per column, 12.8 MB in all
+    tr = track(np.arange(n, dtype=np.int64) * 1000, np.zeros(n) + 1.0, np.zeros(n), np.zeros(n))
+
+    def touch() -> None:
+        float(tr.t_ns.sum()) + float(tr.x.sum()) + float(tr.y.sum()) + float(tr.yaw.sum())
+
+    tr.bounds()  # a walk in blocks that releases behind itself, as before pass 2
+    for _ in range(2):  # then whole walks (the drawn trajectory) and full releases
+        touch()
+        high = _rss_file_kb()
+        tr.release_before(None)
+        assert high - _rss_file_kb() > 10_000
+    touch()
+    high = _rss_file_kb()
+    tr.release_before(int(tr.t_ns[n // 2]))  # half of every column
+    assert high - _rss_file_kb() > 5_000
