@@ -50,9 +50,6 @@ _BIG = np.iinfo(np.int64).max
 _INF1 = np.array([np.inf])
 _BIG1 = np.array([_BIG], dtype=np.int64)
 _UPPER: dict[int, npt.NDArray[np.bool_]] = {}
-# Readings merged per local solve (see FeatureSet._merge_block): a scan of a ring is one
-# block; the local distance table is (block × nearby features).
-_MERGE_BLOCK = 64
 # Slots in the bucket pool: int32 halves the index's memory (rows × twice the fullest bucket).
 _SLOT = np.int32
 
@@ -327,33 +324,29 @@ class FeatureSet:
         self._bucket[s] = b
         self._pos[s] = pos
 
-    def _candidates(self, points: F64) -> tuple[I64, I64]:
-        """Pool entries of the 3×3 buckets around each point, as one flat array (holes
-        are -1; clamping may repeat a bucket at the border), and how many per point."""
-        m = points.shape[0]
-        bx, by = self._bucket_xy(points)
-        nx = np.minimum(np.maximum(bx[:, None] + _OFFS, 0), self._nbx - 1)
-        ny = np.minimum(np.maximum(by[:, None] + _OFFS, 0), self._nby - 1)
-        ny *= self._nbx
-        rows = self._row_of[(ny[:, :, None] + nx[:, None, :]).reshape(-1)]
-        # The used part of the 9 rows of every point, as one flat index into the pool.
-        cnt = self._fill[rows]
-        ends = np.cumsum(cnt)
-        total = int(ends[-1])
-        flat = np.repeat(rows * self._cap + cnt - ends, cnt)
-        flat += np.arange(total)
-        return self._pool.reshape(-1)[flat], cnt.reshape(m, 9).sum(axis=1)
-
     def nearest(self, points: F64) -> tuple[I64, F64]:
         """Slot of the nearest live feature to each point among the 3×3 buckets around it
         (ties → lowest slot), and its distance, m; ``(-1, inf)`` where there is none."""
         m = points.shape[0]
         if m == 0 or self._live == 0:
             return np.full(m, -1, dtype=np.int64), np.full(m, np.inf)
-        cand, per = self._candidates(points)
-        total = cand.shape[0]
+        bx, by = self._bucket_xy(points)
+        nx = np.minimum(np.maximum(bx[:, None] + _OFFS, 0), self._nbx - 1)
+        ny = np.minimum(np.maximum(by[:, None] + _OFFS, 0), self._nby - 1)
+        ny *= self._nbx
+        rows = self._row_of[(ny[:, :, None] + nx[:, None, :]).reshape(-1)]
+        # Gather the used part of the 9 rows of every point as one flat index into the pool
+        # (clamping may repeat a bucket at the border; a repeated candidate changes neither
+        # the minimum nor the tie-break).
+        cnt = self._fill[rows]
+        ends = np.cumsum(cnt)
+        total = int(ends[-1])
         if total == 0:
             return np.full(m, -1, dtype=np.int64), np.full(m, np.inf)
+        flat = np.repeat(rows * self._cap + cnt - ends, cnt)
+        flat += np.arange(total)
+        cand = self._pool.reshape(-1)[flat]
+        per = cnt.reshape(m, 9).sum(axis=1)  # candidates of each point
         s = np.maximum(cand, 0).astype(np.int64)  # holes (-1) read slot 0, distance inf below
         diff = self.mean[s] - np.repeat(points, per, axis=0)
         d = np.hypot(diff[:, 0], diff[:, 1])
@@ -375,143 +368,49 @@ class FeatureSet:
         Returns ``(created, merged)`` counts.
         """
         created = merged = 0
-        for a in range(0, mean.shape[0], _MERGE_BLOCK):
-            b = a + _MERGE_BLOCK
-            c, g = self._merge_block(mean[a:b], cov[a:b], t_ns[a:b])
-            created += c
-            merged += g
-        return created, merged
-
-    def _merge_block(self, q: F64, pz: F64, tq: I64) -> tuple[int, int]:
-        """Sequential merge of up to ``_MERGE_BLOCK`` readings, solved on a local copy.
-
-        Only features within ``match_distance`` of a reading can take it, and each of
-        those is either unchanged since the block began — then it lies in the 3×3 buckets
-        around the reading — or was moved or created by an earlier reading of the block.
-        So the block is solved on a local table: the features of the readings' 3×3
-        buckets (in slot order) followed by the features the block creates (in creation
-        order, i.e. the slots they will get). A reading's nearest is the minimum over its
-        own bucket candidates (at their current local positions) and over every feature
-        the block has changed so far; ties → the lowest index = the lowest slot. The rounds
-        (the longest prefix whose readings cannot see each other's changes is applied at
-        once) run on the table, and the feature set is written once at the end: one move
-        of the merged features, one add of the new ones.
-        """
-        k = q.shape[0]
-        md = self.match_distance
-        if self._live:
-            cand, per = self._candidates(q)
-            valid = cand >= 0
-            local = np.unique(cand[valid])  # ascending = slot order
-            pr = np.repeat(np.arange(k), per)[valid]  # pairs (reading, local row), by reading
-            pl = np.searchsorted(local, cand[valid])
-        else:
-            local = np.zeros(0, dtype=np.int64)
-            pr = pl = np.zeros(0, dtype=np.int64)
-        n0 = local.shape[0]
-        first_pair = np.searchsorted(pr, np.arange(k + 1))  # reading i's pairs: [fp[i], fp[i+1])
-        lm = np.empty((n0 + k, 2))
-        lc = np.empty((n0 + k, 3))
-        lm[:n0] = self.mean[local]
-        lc[:n0] = self.cov[local]
-        nloc = n0
-        changed = np.zeros(n0 + k, dtype=np.bool_)
-        target = np.empty(k, dtype=np.int64)  # local row each reading merged into or created
-        hit_all = np.zeros(k, dtype=np.bool_)
-        reach = md * (1.0 + 1e-9)  # conservative: a tie starts a new round
-        start = 0
-        while start < k:
-            qq = q[start:]
-            r = qq.shape[0]
-            p0 = int(first_pair[start])
-            if p0 < pr.shape[0]:
-                # Per reading (pairs are grouped by reading): the minimum distance, then the
-                # lowest row at it; a reading without pairs starts at the appended sentinel.
-                ri, li = pr[p0:] - start, pl[p0:]
-                d = np.hypot(lm[li, 0] - qq[ri, 0], lm[li, 1] - qq[ri, 1])
-                seg = first_pair[start:k] - p0
-                best_d = np.minimum.reduceat(np.concatenate((d, _INF1)), seg)
-                key = np.where(d == best_d[ri], li, _BIG)
-                best_j = np.minimum.reduceat(np.concatenate((key, _BIG1)), seg)
-                empty = first_pair[start + 1 : k + 1] == first_pair[start:k]
-                best_d[empty] = np.inf
-            else:
-                best_d = np.full(r, np.inf)
-                best_j = np.full(r, _BIG, dtype=np.int64)
-            ch = np.flatnonzero(changed[:nloc])
-            if ch.shape[0]:
-                dc = np.hypot(lm[ch, 0][None, :] - qq[:, 0:1], lm[ch, 1][None, :] - qq[:, 1:2])
-                jc = dc.argmin(axis=1)
-                dmin_c = dc[np.arange(r), jc]
-                jc = ch[jc]
-                better = (dmin_c < best_d) | ((dmin_c == best_d) & (jc < best_j))
-                best_d = np.where(better, dmin_c, best_d)
-                best_j = np.where(better, jc, best_j)
-            hit = best_d < md
-            j = np.where(hit, best_j, 0)
-            fj = j[hit]
-            mu_f = lm[fj]
-            mu_m, p_m = kalman_merge(mu_f, lc[fj], qq[hit], pz[start:][hit])
-            n_ok = r
-            if r > 1:
+        start, m = 0, mean.shape[0]
+        reach = self.match_distance * (1.0 + 1e-9)  # conservative: a tie re-queries
+        while start < m:
+            stop = min(m, start + 512)  # bounds the pairwise check below
+            q, pz, tq = mean[start:stop], cov[start:stop], t_ns[start:stop]
+            k = q.shape[0]
+            slot, dist = self.nearest(q)
+            hit = dist < self.match_distance
+            fs = slot[hit]
+            mu_f = self.mean[fs]
+            mu_m, p_m = kalman_merge(mu_f, self.cov[fs], q[hit], pz[hit])
+            n_ok = k
+            if k > 1:
                 # Reading j sees the state left by readings i < j only through features
-                # within reach of its mean: the new (rows < r) and old (rows >= r)
+                # within reach of its mean: the new (rows < k) and old (rows >= k)
                 # positions of what i changed; a reading that created a feature has no old
                 # position (NaN, never within reach).
-                pos = np.full((2 * r, 2), np.nan)
-                pos[:r] = qq
-                pos[:r][hit] = mu_m
-                pos[r:][hit] = mu_f
-                near = np.hypot(pos[:, None, 0] - qq[None, :, 0], pos[:, None, 1] - qq[None, :, 1])
+                pos = np.full((2 * k, 2), np.nan)
+                pos[:k] = q
+                pos[:k][hit] = mu_m
+                pos[k:][hit] = mu_f
+                near = np.hypot(pos[:, None, 0] - q[None, :, 0], pos[:, None, 1] - q[None, :, 1])
                 near = near < reach
-                seen = near[:r] | near[r:]
-                seen &= _upper(r)  # [i, j], i < j
+                seen = near[:k] | near[k:]
+                seen &= _upper(k)  # [i, j], i < j
                 conflict = np.flatnonzero(seen.any(axis=0))
                 if conflict.shape[0]:
                     n_ok = int(conflict[0])
-            take = hit[:n_ok]
-            n_hit = int(np.count_nonzero(take))
+            take_hit = hit[:n_ok]
+            n_hit = int(np.count_nonzero(take_hit))
             if n_hit:
-                jt = j[:n_ok][take]
-                lm[jt] = mu_m[:n_hit]
-                lc[jt] = p_m[:n_hit]
-                changed[jt] = True
-                target[start : start + n_ok][take] = jt
-                hit_all[start : start + n_ok] = take
+                s = slot[:n_ok][take_hit]
+                self.move(s, mu_m[:n_hit], p_m[:n_hit])
+                self.measured[s] += 1
+                self.merges[s] += 1
+                self.last_ns[s] = tq[:n_ok][take_hit]
+                merged += n_hit
             if n_hit < n_ok:
-                new = np.flatnonzero(~take)
-                c = new.shape[0]
-                lm[nloc : nloc + c] = qq[new]
-                lc[nloc : nloc + c] = pz[start:][new]
-                changed[nloc : nloc + c] = True
-                target[start + new] = np.arange(nloc, nloc + c)
-                nloc += c
+                new = np.flatnonzero(~take_hit)
+                self.add(q[new], pz[new], tq[new])
+                created += new.shape[0]
             start += n_ok
-        cand = local
-        # Write back: per local row, how many readings merged into it and the last one.
-        rows_hit = target[hit_all]
-        times = np.bincount(rows_hit, minlength=nloc)
-        last = np.full(nloc, -1, dtype=np.int64)
-        np.maximum.at(last, rows_hit, np.flatnonzero(hit_all))
-        old = np.flatnonzero(times[:n0])
-        if old.shape[0]:
-            s = cand[old]
-            self.move(s, lm[old], lc[old])
-            self.measured[s] += times[old]
-            self.merges[s] += times[old]
-            self.last_ns[s] = tq[last[old]]
-        created = nloc - n0
-        if created:
-            first = np.flatnonzero(~hit_all)  # the readings that created them, in order
-            slots = self.add(lm[n0:nloc], lc[n0:nloc], tq[first])
-            t_new = times[n0:nloc]
-            again = np.flatnonzero(t_new)
-            if again.shape[0]:
-                s = slots[again]
-                self.measured[s] += t_new[again]
-                self.merges[s] += t_new[again]
-                self.last_ns[s] = tq[last[n0:nloc][again]]
-        return created, int(rows_hit.shape[0])
+        return created, merged
 
     # ------------------------------------------------------------------ outputs
 

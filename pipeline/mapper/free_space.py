@@ -31,11 +31,11 @@ from pipeline.mapper.types import F64, I64, B, GridSpec, Scan
 class FreeSpaceScan:
     """Union of one scan's free cones: ``mask[r − row0, c − col0]`` is True for free cells.
 
-    ``cells`` (flat grid indices, ascending) and ``sat`` (the summed-area table of the mask,
-    for box and span tests) are derived from the mask on first use.
+    ``cells`` (flat grid indices, ascending) and ``prefix`` (per-row running count of free
+    cells, for span tests) are derived from the mask on first use.
     """
 
-    __slots__ = ("_cells", "_padded", "_sat", "_width", "col0", "count", "mask", "row0")
+    __slots__ = ("_cells", "_padded", "_prefix", "_width", "col0", "count", "mask", "row0")
 
     def __init__(
         self, row0: int, col0: int, mask: B, grid_width: int = 0, count: int | None = None
@@ -46,7 +46,7 @@ class FreeSpaceScan:
         self.count = int(np.count_nonzero(mask)) if count is None else count
         self._width = grid_width
         self._cells: I64 | None = None
-        self._sat: npt.NDArray[np.int32] | None = None
+        self._prefix: npt.NDArray[np.int32] | None = None
         self._padded: B | None = None
 
     @property
@@ -69,16 +69,14 @@ class FreeSpaceScan:
         return self._padded
 
     @property
-    def sat(self) -> npt.NDArray[np.int32]:
-        """Summed-area table, ``(h + 1, w + 1)``: ``sat[r, c]`` = free cells in window rows
-        ``< r`` and columns ``< c``; any rectangle's count is four lookups."""
-        if self._sat is None:
+    def prefix(self) -> npt.NDArray[np.int32]:
+        """``prefix[r, c]`` = free cells in window row r before window column c, (h, w + 1)."""
+        if self._prefix is None:
             h, w = self.mask.shape
-            sat = np.zeros((h + 1, w + 1), dtype=np.int32)
-            np.cumsum(self.mask, axis=0, out=sat[1:, 1:])
-            np.cumsum(sat[1:, 1:], axis=1, out=sat[1:, 1:])
-            self._sat = sat
-        return self._sat
+            pre = np.zeros((h, w + 1), dtype=np.int32)
+            np.cumsum(self.mask, axis=1, out=pre[:, 1:])
+            self._prefix = pre
+        return self._prefix
 
     def contains(self, row: I64, col: I64) -> B:
         """Whether each cell (row, col) is free; cells outside the window/grid are not."""
