@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 import mmap
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -28,7 +28,7 @@ POSE_OK = 0
 BEFORE_FIRST_POSE = 1
 AFTER_LAST_POSE = 2
 IN_POSE_GAP = 3
-_BLOCK = 65_536  # poses per block wherever the whole track is walked
+_BLOCK = 65_536  # poses per block of PoseTrack.blocks
 _TRACK_DTYPES = (np.int64, np.float64, np.float64, np.float64)  # t_ns, x, y, yaw
 POSE_REASONS = {
     POSE_OK: "ok",
@@ -66,11 +66,8 @@ class PoseTrack:
         if len(self) < 2:
             return 0.0
         total = 0.0
-        for a in range(0, len(self) - 1, _BLOCK):
-            b = min(a + _BLOCK + 1, len(self))
-            total += float(np.hypot(np.diff(self.x[a:b]), np.diff(self.y[a:b])).sum())
-            self.release_before(int(self.t_ns[b - 1]))
-        self.release_before(None)
+        for blk in self.blocks(overlap=1):
+            total += float(np.hypot(np.diff(self.x[blk]), np.diff(self.y[blk])).sum())
         return total
 
     def bounds(self) -> tuple[float, float, float, float]:
@@ -79,14 +76,22 @@ class PoseTrack:
             return (math.nan,) * 4
         lo = [math.inf, math.inf]
         hi = [-math.inf, -math.inf]
-        for a in range(0, len(self), _BLOCK):
+        for blk in self.blocks():
             for k, col in enumerate((self.x, self.y)):
-                part = col[a : a + _BLOCK]
-                lo[k] = min(lo[k], float(part.min()))
-                hi[k] = max(hi[k], float(part.max()))
-            self.release_before(int(self.t_ns[min(a + _BLOCK, len(self)) - 1]))
-        self.release_before(None)
+                lo[k] = min(lo[k], float(col[blk].min()))
+                hi[k] = max(hi[k], float(col[blk].max()))
         return (lo[0], lo[1], hi[0], hi[1])
+
+    def blocks(self, overlap: int = 0) -> Iterator[slice]:
+        """The track in order as slices of ``_BLOCK`` poses, each reaching ``overlap`` poses
+        into the next; the pages behind each block are released once it has been used,
+        and all pages at the end, so a walk over hours of poses stays small."""
+        n = len(self)
+        for a in range(0, n, _BLOCK):
+            b = min(a + _BLOCK + overlap, n)
+            yield slice(a, b)
+            self._release_index(b - overlap)
+        self.release_before(None)
 
     def release_before(self, t_ns: int | None = None) -> None:
         """Give back the resident pages of poses older than the pose before ``t_ns`` (all
@@ -98,8 +103,13 @@ class PoseTrack:
                 m.madvise(mmap.MADV_DONTNEED)
             self._released[0] = 0  # a new walk from the start may follow
             return
-        i = max(int(np.searchsorted(self.t_ns, t_ns)) - 2, 0)
-        upto = (i * 8) // mmap.PAGESIZE * mmap.PAGESIZE
+        self._release_index(max(int(np.searchsorted(self.t_ns, t_ns)) - 2, 0))
+
+    def _release_index(self, i: int) -> None:
+        """Give back the whole pages of every column that lie before pose ``i``."""
+        if not self._maps or not hasattr(mmap, "MADV_DONTNEED"):
+            return
+        upto = (i * 8) // mmap.PAGESIZE * mmap.PAGESIZE  # every column is 8 bytes a pose
         if upto <= self._released[0]:
             return
         for m in self._maps:

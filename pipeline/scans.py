@@ -28,7 +28,6 @@ from pipeline.mapper.types import Scan
 from pipeline.pose_sync import PoseTrack
 
 I64 = npt.NDArray[np.int64]
-_BLOCK = 65_536  # poses per block of the motion policy's walk
 
 
 def motion_boundaries(track: PoseTrack, max_travel_m: float, max_turn_rad: float) -> I64:
@@ -38,20 +37,16 @@ def motion_boundaries(track: PoseTrack, max_travel_m: float, max_turn_rad: float
     poses only — poses are few compared with readings.
     """
     out: list[int] = []
-    n = len(track)
-    if n == 0:
+    if len(track) == 0:
         return np.empty(0, np.int64)
     sx, sy, syaw = float(track.x[0]), float(track.y[0]), float(track.yaw[0])
-    for a in range(0, n, _BLOCK):  # in blocks: hours of odometry make no long lists
-        xs = track.x[a : a + _BLOCK].tolist()
-        ys = track.y[a : a + _BLOCK].tolist()
-        yaws = track.yaw[a : a + _BLOCK].tolist()
-        for j in range(1 if a == 0 else 0, len(xs)):
+    for blk in track.blocks():  # in blocks: hours of odometry make no long lists
+        xs, ys, yaws = track.x[blk].tolist(), track.y[blk].tolist(), track.yaw[blk].tolist()
+        for j in range(1 if blk.start == 0 else 0, len(xs)):
             dyaw = (yaws[j] - syaw + math.pi) % (2 * math.pi) - math.pi
             if math.hypot(xs[j] - sx, ys[j] - sy) > max_travel_m or abs(dyaw) > max_turn_rad:
-                out.append(int(track.t_ns[a + j]))
+                out.append(int(track.t_ns[blk.start + j]))
                 sx, sy, syaw = xs[j], ys[j], yaws[j]
-    track.release_before(None)
     return np.asarray(out, dtype=np.int64)
 
 
