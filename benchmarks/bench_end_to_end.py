@@ -192,7 +192,7 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     ap.add_argument("--smoke", action="store_true", help="tiny logs, one run each")
     ap.add_argument("--profile", metavar="FILE", type=Path,
                     help="only profile one run of the 1x log with pyinstrument (call tree "
-                         "as text into FILE; needs the bench extra)")
+                         "as text into FILE; pyinstrument comes with the dev extra)")
     args = ap.parse_args(argv)
     if args.profile is not None:
         profile_run(cached_log(LogSpec(seconds=args.seconds)), args.profile)

@@ -210,13 +210,14 @@ def _reference_merge(feats: list[list], pts: np.ndarray, cov: np.ndarray, t: np.
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_block_merge_equals_one_reading_at_a_time(seed: int) -> None:
     """Dense readings (chains into one feature, merges into features created in the same
-    scan, scans longer than one merge block) give exactly the sequential result."""
+    scan, a scan longer than the 512 readings merged at once) give exactly the sequential
+    result."""
     rng = np.random.default_rng(seed)
     md = 0.15
     fs = _set(md)
     ref: list[list] = []
     t0 = 0
-    for size in (5, 40, 150, 64, 1):
+    for size in (5, 40, 150, 600, 64, 1):  # 600 > the 512 readings merge_readings takes at once
         pts = rng.uniform(-0.6, 0.6, (size, 2))
         cov = np.tile([0.004, 0.001, 0.003], (size, 1)) * rng.uniform(0.5, 2.0, (size, 1))
         t = np.arange(t0, t0 + size, dtype=np.int64)
