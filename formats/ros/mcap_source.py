@@ -22,7 +22,7 @@ from typing import Any, BinaryIO
 import numpy as np
 import numpy.typing as npt
 
-from formats.ros.source import Connection, Encoding, RawBatch, SourceAccessors
+from formats.ros.source import Connection, Encoding, RawBatch, SourceAccessors, open_log_file
 from pipeline.errors import FormatError
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -246,12 +246,9 @@ class McapSource(SourceAccessors):
         self._counts: dict[int, int] = {}
         self._start: int | None = None
         self._end: int | None = None
+        self._file: BinaryIO
+        self._file, self._size = open_log_file(self.path)
         try:
-            self._file: BinaryIO = self.path.open("rb")
-        except OSError as err:
-            raise FormatError(f"cannot open: {err.strerror or err}", self.path) from err
-        try:
-            self._size = self.path.stat().st_size
             self._open()
         except BaseException:
             self._file.close()

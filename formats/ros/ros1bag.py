@@ -28,7 +28,7 @@ import lz4.frame
 import numpy as np
 import numpy.typing as npt
 
-from formats.ros.source import Connection, RawBatch
+from formats.ros.source import Connection, RawBatch, open_log_file
 from pipeline.errors import FormatError
 
 if TYPE_CHECKING:
@@ -198,12 +198,9 @@ class Ros1BagSource:
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
         self._warnings: list[str] = []
+        self._file: BinaryIO
+        self._file, self._size = open_log_file(self.path)
         try:
-            self._file: BinaryIO = self.path.open("rb")
-        except OSError as err:
-            raise FormatError(f"cannot open: {err.strerror or err}", self.path) from err
-        try:
-            self._size = self.path.stat().st_size
             self._open()
         except BaseException:
             self._file.close()

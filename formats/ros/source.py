@@ -14,10 +14,12 @@ from __future__ import annotations
 from collections.abc import Collection, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal, Protocol
+from typing import BinaryIO, Literal, Protocol
 
 import numpy as np
 import numpy.typing as npt
+
+from pipeline.errors import FormatError
 
 # "other": an MCAP channel in another encoding (json, protobuf, ...): listed, not decodable.
 Encoding = Literal["ros1", "cdr", "other"]
@@ -117,3 +119,17 @@ class MessageSource(Protocol):
     def warnings(self) -> list[str]: ...
 
     def close(self) -> None: ...
+
+
+def open_log_file(path: Path) -> tuple[BinaryIO, int]:
+    """``path`` opened for binary reading, and its size; a file that cannot be opened is a
+    FormatError naming it. The caller closes the file (also when its own parsing fails)."""
+    try:
+        f = path.open("rb")
+    except OSError as err:
+        raise FormatError(f"cannot open: {err.strerror or err}", path) from err
+    try:
+        return f, path.stat().st_size
+    except BaseException:
+        f.close()
+        raise
