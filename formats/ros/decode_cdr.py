@@ -23,17 +23,21 @@ from formats.ros.columns import (
     PoseColumns,
     RangeColumns,
 )
-from formats.ros.decode_messages import FrameCodes, decode_per_message, message_error
+from formats.ros.decode_messages import (
+    NS_PER_S,
+    POSE_BYTES,
+    POSE_COV_BYTES,
+    TWIST_COV_BYTES,
+    FrameCodes,
+    decode_per_message,
+    message_error,
+)
 from formats.ros.source import Connection, RawBatch
 from pipeline.errors import FormatError
 
 I64 = npt.NDArray[np.int64]
 F64 = npt.NDArray[np.float64]
-_NS = 1_000_000_000
 _ENCAP = 4  # encapsulation header bytes
-_POSE = 7 * 8  # Point + Quaternion, float64
-_POSE_COV = _POSE + 36 * 8
-_TWIST_COV = 6 * 8 + 36 * 8
 
 
 def decode_cdr(raw: RawBatch) -> Columns:
@@ -51,11 +55,11 @@ def decode_cdr(raw: RawBatch) -> Columns:
     if msgtype in RANGE_TYPES:
         return _decode_range(raw)
     if msgtype == "nav_msgs/msg/Odometry":
-        return _decode_pose(raw, child=True, tail=_POSE_COV + _TWIST_COV)
+        return _decode_pose(raw, child=True, tail=POSE_COV_BYTES + TWIST_COV_BYTES)
     if msgtype == "geometry_msgs/msg/PoseStamped":
-        return _decode_pose(raw, child=False, tail=_POSE)
+        return _decode_pose(raw, child=False, tail=POSE_BYTES)
     if msgtype == "geometry_msgs/msg/PoseWithCovarianceStamped":
-        return _decode_pose(raw, child=False, tail=_POSE_COV)
+        return _decode_pose(raw, child=False, tail=POSE_COV_BYTES)
     columns = decode_per_message(raw)
     if columns is None:
         raise FormatError(f"topic {conn.topic}: cannot decode type {msgtype}")
@@ -127,7 +131,7 @@ class _Header:
             head = _rows(buf, self.start[sel], 12)
             sec = _field(head, 0, f"{order}i4").astype(np.int64)
             nsec = _field(head, 4, f"{order}u4").astype(np.int64)
-            self.stamp[sel] = sec * _NS + nsec
+            self.stamp[sel] = sec * NS_PER_S + nsec
             length = _field(head, 8, f"{order}u4").astype(np.int64)
             self.frame[sel] = _strings(
                 raw, sel, self.start[sel] + 12, length, self.end[sel], frames, "frame_id"
@@ -259,7 +263,7 @@ def _decode_pose(raw: RawBatch, *, child: bool, tail: int) -> PoseColumns:
             after = at + 4 + length
         pose_at = _align(after, 8)
         _check(raw, sel, start + pose_at + tail > end, f"too short for {raw.connection.msgtype}")
-        rows = _rows(raw.buffer, start + pose_at, _POSE)
+        rows = _rows(raw.buffer, start + pose_at, POSE_BYTES)
         for k in range(7):
             vals[sel, k] = _field(rows, 8 * k, f"{order}f8")
     names, (frame, child_codes) = frames.finish(hdr.frame, childs)

@@ -25,6 +25,13 @@ from formats.ros.columns import (
 from formats.ros.source import RawBatch
 from pipeline.errors import FormatError
 
+NS_PER_S = 1_000_000_000
+# Bytes of the fixed-size float64 parts, the same in ROS 1 and CDR: a Pose is Point +
+# Quaternion (7 f64), PoseWithCovariance adds 36 f64, a TwistWithCovariance is 6 + 36 f64.
+POSE_BYTES = 7 * 8
+POSE_COV_BYTES = POSE_BYTES + 36 * 8
+TWIST_COV_BYTES = 6 * 8 + 36 * 8
+
 F64 = npt.NDArray[np.float64]
 _NS = 1_000_000_000
 

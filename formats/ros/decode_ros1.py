@@ -25,19 +25,21 @@ from formats.ros.columns import (
     PoseColumns,
     RangeColumns,
 )
-from formats.ros.decode_messages import FrameCodes, decode_per_message, message_error
+from formats.ros.decode_messages import (
+    NS_PER_S,
+    POSE_BYTES,
+    POSE_COV_BYTES,
+    TWIST_COV_BYTES,
+    FrameCodes,
+    decode_per_message,
+    message_error,
+)
 from formats.ros.source import RawBatch
 from pipeline.errors import FormatError
 
 I64 = npt.NDArray[np.int64]
 F64 = npt.NDArray[np.float64]
 
-_NS = 1_000_000_000
-# Bytes after the strings: Pose = 7 f64; PoseWithCovariance adds 36 f64; Odometry adds a
-# TwistWithCovariance (6 + 36 f64).
-_POSE = 56
-_POSE_COV = _POSE + 36 * 8
-_TWIST_COV = 6 * 8 + 36 * 8
 
 
 def decode_ros1(raw: RawBatch) -> Columns:
@@ -50,11 +52,11 @@ def decode_ros1(raw: RawBatch) -> Columns:
     if msgtype in RANGE_TYPES:
         return _decode_range(raw)
     if msgtype == "nav_msgs/msg/Odometry":
-        return _decode_pose(raw, child=True, tail=_POSE_COV + _TWIST_COV)
+        return _decode_pose(raw, child=True, tail=POSE_COV_BYTES + TWIST_COV_BYTES)
     if msgtype == "geometry_msgs/msg/PoseStamped":
-        return _decode_pose(raw, child=False, tail=_POSE)
+        return _decode_pose(raw, child=False, tail=POSE_BYTES)
     if msgtype == "geometry_msgs/msg/PoseWithCovarianceStamped":
-        return _decode_pose(raw, child=False, tail=_POSE_COV)
+        return _decode_pose(raw, child=False, tail=POSE_COV_BYTES)
     columns = decode_per_message(raw)
     if columns is None:
         raise FormatError(f"topic {raw.connection.topic}: cannot decode type {msgtype}")
@@ -124,7 +126,7 @@ def _string_field(name: str, offset: int, length: int) -> list[tuple[str, str, i
 
 
 def _stamp(rec: np.ndarray) -> I64:
-    return rec["sec"].astype(np.int64) * _NS + rec["nsec"].astype(np.int64)
+    return rec["sec"].astype(np.int64) * NS_PER_S + rec["nsec"].astype(np.int64)
 
 
 def _struct(width: int, fields: list[tuple[str, str, int]]) -> np.dtype[Any]:
