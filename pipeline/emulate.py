@@ -39,7 +39,11 @@ import numpy as np
 import numpy.typing as npt
 
 from formats.contract import PoseBatch, SensorMount, make_range_batch
-from formats.log_writers import LogContent, format_time_s, write_log
+from formats.log_writers import (
+    LogContent,
+    reference_paths,
+    write_log_with_reference,
+)
 from pipeline.config import Config, MountConfig
 from pipeline.errors import ConfigError, FormatError, InputError, OutputError, TopicError
 from pipeline.mapper.types import GridSpec
@@ -694,9 +698,7 @@ def laser_occupancy_map(log: LaserLog, options: LaserMapOptions | None = None) -
 
 def output_paths(out_path: Path) -> tuple[Path, Path, Path]:
     """``<stem>.laser.yaml``, ``<stem>.laser.pgm`` and ``<stem>.truth.csv`` beside a log."""
-    stem = out_path.name.split(".")[0] or out_path.name
-    d = out_path.parent
-    return d / f"{stem}.laser.yaml", d / f"{stem}.laser.pgm", d / f"{stem}.truth.csv"
+    return reference_paths(out_path, "laser")
 
 
 def write_emulation(
@@ -711,25 +713,10 @@ def write_emulation(
 
     Refuses (OutputError) when any of them exists already, before writing anything.
     """
-    from formats.writers.nav2_map import write_nav2_map
-
-    out = Path(out_path)
-    yaml_path, pgm_path, csv_path = output_paths(out)
-    for q in (out, yaml_path, pgm_path, csv_path):
-        if q.exists() or q.is_symlink():
-            raise OutputError("exists already, not overwriting", q)
-    log_path = write_log(em.content, out, fmt, compression=compression)
-    p = em.content.poses
-    rows = [
-        f"{t},{x!r},{y!r},{a!r}"
-        for t, x, y, a in zip(
-            format_time_s(p.t_ns), p.x.tolist(), p.y.tolist(), p.yaw.tolist(), strict=True
-        )
-    ]
-    with csv_path.open("x", encoding="utf-8", newline="") as f:
-        f.write("t,x,y,yaw\n" + "\n".join(rows) + "\n")
-    write_nav2_map(yaml_path, laser_map.probability, laser_map.grid)
-    return [log_path, yaml_path, pgm_path, csv_path]
+    return write_log_with_reference(
+        em.content, out_path, fmt, compression=compression, kind="laser",
+        probability=laser_map.probability, grid=laser_map.grid, trajectory=em.content.poses,
+    )
 
 
 @dataclass(frozen=True)

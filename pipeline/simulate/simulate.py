@@ -20,9 +20,9 @@ import numpy as np
 import numpy.typing as npt
 
 from formats.contract import PoseBatch, SensorMount, make_range_batch
-from formats.log_writers import LogContent, format_time_s, write_log
+from formats.log_writers import LogContent, reference_paths, write_log_with_reference
 from pipeline.config import MapperConfig, MountConfig
-from pipeline.errors import ConfigError, OutputError
+from pipeline.errors import ConfigError
 from pipeline.presets import PRESETS
 from pipeline.simulate.sonar import SonarRing, add_sensor_errors, firing_schedule, true_ranges
 from pipeline.simulate.trajectory import (
@@ -237,9 +237,7 @@ def _odometry(
 
 def truth_paths(out_path: Path) -> tuple[Path, Path, Path]:
     """``<stem>.truth.yaml``, ``<stem>.truth.pgm`` and ``<stem>.truth.csv`` beside a log."""
-    stem = out_path.name.split(".")[0] or out_path.name
-    d = out_path.parent
-    return d / f"{stem}.truth.yaml", d / f"{stem}.truth.pgm", d / f"{stem}.truth.csv"
+    return reference_paths(out_path, "truth")
 
 
 def write_simulation(
@@ -249,28 +247,11 @@ def write_simulation(
 
     Refuses (OutputError) when any of them exists already, before writing anything.
     """
-    from formats.writers.nav2_map import write_nav2_map
-
-    out = Path(out_path)
-    yaml_path, pgm_path, csv_path = truth_paths(out)
-    for p in (out, yaml_path, pgm_path, csv_path):
-        if p.exists() or p.is_symlink():
-            raise OutputError("exists already, not overwriting", p)
-    log = write_log(sim.to_content(), out, fmt, compression=compression)
-    # The truth trajectory: t as exact decimal seconds, floats round-trip exact.
-    tp = sim.true_poses
-    rows = [
-        f"{t},{x!r},{y!r},{a!r}"
-        for t, x, y, a in zip(
-            format_time_s(tp.t_ns), tp.x.tolist(), tp.y.tolist(), tp.yaw.tolist(), strict=True
-        )
-    ]
-    with csv_path.open("x", encoding="utf-8", newline="") as f:
-        f.write("t,x,y,yaw\n" + "\n".join(rows) + "\n")
-
     grid = sim.world.grid(sim.options.truth_resolution, margin=sim.options.truth_resolution)
-    write_nav2_map(yaml_path, sim.world.rasterize(grid), grid)
-    return [log, yaml_path, pgm_path, csv_path]
+    return write_log_with_reference(
+        sim.to_content(), out_path, fmt, compression=compression, kind="truth",
+        probability=sim.world.rasterize(grid), grid=grid, trajectory=sim.true_poses,
+    )
 
 
 def run_simulation(
