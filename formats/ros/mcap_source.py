@@ -17,12 +17,12 @@ import zlib
 from collections.abc import Collection, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from formats.ros.source import Connection, Encoding, RawBatch, SourceAccessors, open_log_file
+from formats.ros.source import Connection, Encoding, FileSource, RawBatch, SourceAccessors
 from pipeline.errors import FormatError
 
 MAGIC = b"\x89MCAP0\r\n"
@@ -229,7 +229,7 @@ def _u16_at(buf: npt.NDArray[np.uint8], pos: npt.NDArray[np.int64]) -> npt.NDArr
     return _at(buf, pos, "<u2")
 
 
-class McapSource(SourceAccessors):
+class McapSource(FileSource, SourceAccessors):
     """An MCAP file: ``ros1`` and ``cdr`` channels, read chunk by chunk.
 
     Opening reads the summary (or scans the file when it has none); nothing else.
@@ -246,25 +246,10 @@ class McapSource(SourceAccessors):
         self._counts: dict[int, int] = {}
         self._start: int | None = None
         self._end: int | None = None
-        self._file: BinaryIO
-        self._file, self._size = open_log_file(self.path)
-        try:
-            self._open()
-        except BaseException:
-            self._file.close()
-            raise
+        self._open_file()
         self._connections = self._make_connections()
 
     # -- MessageSource -------------------------------------------------------------------
-
-    def close(self) -> None:
-        self._file.close()
-
-    def __enter__(self) -> McapSource:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     def raw_batches(self, connection_ids: Collection[int]) -> Iterator[RawBatch]:
         """Messages of the given channels, one batch per chunk and channel, chunks in

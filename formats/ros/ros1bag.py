@@ -22,13 +22,13 @@ import struct
 from collections.abc import Collection, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, BinaryIO
+from typing import TYPE_CHECKING
 
 import lz4.frame
 import numpy as np
 import numpy.typing as npt
 
-from formats.ros.source import Connection, RawBatch, open_log_file
+from formats.ros.source import Connection, FileSource, RawBatch
 from pipeline.errors import FormatError
 
 if TYPE_CHECKING:
@@ -184,7 +184,7 @@ def _conn_record(header: dict[str, bytes], data: bytes) -> _ConnRecord:
     return _ConnRecord(cid, topic, fields)
 
 
-class Ros1BagSource:
+class Ros1BagSource(FileSource):
     """A ROS 1 bag file: connections from the index, raw messages chunk by chunk.
 
     Opening reads the bag header and the index at its end (connections and chunk infos);
@@ -198,13 +198,7 @@ class Ros1BagSource:
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
         self._warnings: list[str] = []
-        self._file: BinaryIO
-        self._file, self._size = open_log_file(self.path)
-        try:
-            self._open()
-        except BaseException:
-            self._file.close()
-            raise
+        self._open_file()
 
     # ------------------------------------------------------------------ opening
 
@@ -575,16 +569,6 @@ class Ros1BagSource:
         if start.size and (start + dlen).max() > n:
             raise _Corrupt("message data overruns the chunk")
         return times, start, dlen
-
-    def close(self) -> None:
-        """Close the file."""
-        self._file.close()
-
-    def __enter__(self) -> Ros1BagSource:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
 
 def _gather_u32(buf: npt.NDArray[np.uint8], pos: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:

@@ -14,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Collection, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import BinaryIO, Literal, Protocol
+from typing import BinaryIO, Literal, Protocol, Self
 
 import numpy as np
 import numpy.typing as npt
@@ -121,15 +121,36 @@ class MessageSource(Protocol):
     def close(self) -> None: ...
 
 
-def open_log_file(path: Path) -> tuple[BinaryIO, int]:
-    """``path`` opened for binary reading, and its size; a file that cannot be opened is a
-    FormatError naming it. The caller closes the file (also when its own parsing fails)."""
-    try:
-        f = path.open("rb")
-    except OSError as err:
-        raise FormatError(f"cannot open: {err.strerror or err}", path) from err
-    try:
-        return f, path.stat().st_size
-    except BaseException:
-        f.close()
-        raise
+class FileSource:
+    """The life cycle of a source that reads one file: :meth:`_open_file` opens it (a file
+    that cannot be opened is a FormatError naming it), keeps its size and runs the
+    source's ``_open`` parse, closing the file if that fails; a context manager."""
+
+    path: Path
+    _file: BinaryIO
+    _size: int
+
+    def _open(self) -> None:
+        raise NotImplementedError
+
+    def _open_file(self) -> None:
+        try:
+            self._file = self.path.open("rb")
+        except OSError as err:
+            raise FormatError(f"cannot open: {err.strerror or err}", self.path) from err
+        try:
+            self._size = self.path.stat().st_size
+            self._open()
+        except BaseException:
+            self._file.close()
+            raise
+
+    def close(self) -> None:
+        """Close the file."""
+        self._file.close()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
