@@ -75,6 +75,7 @@ def _load(
     pose_topic: str | None = None,
     method: str | None = None,
     resolution: float | None = None,
+    refine_poses: bool = False,
 ) -> Config:
     """The configuration file plus command-line overrides, validated."""
     import dataclasses
@@ -95,7 +96,10 @@ def _load(
     grid = cfg.grid
     if resolution is not None:
         grid = dataclasses.replace(grid, resolution=resolution)
-    return cfg.replace(input=inp, mapper=mapper, grid=grid).validate()
+    refine = cfg.pose_refinement
+    if refine_poses:
+        refine = dataclasses.replace(refine, enabled=True)
+    return cfg.replace(input=inp, mapper=mapper, grid=grid, pose_refinement=refine).validate()
 
 
 @app.command()
@@ -118,11 +122,18 @@ def run(
         bool,
         typer.Option("--compare-correction", help="Also map without feature correction; report both."),
     ] = False,
+    refine_poses: Annotated[
+        bool,
+        typer.Option("--refine-poses", help="Correct the odometry from the sonar data before "
+                     "mapping ([pose_refinement] in the config)."),
+    ] = False,
     force: Annotated[bool, typer.Option("--force", help="Replace an existing output directory.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar or summary.")] = False,
 ) -> None:
     """Map a log: writes map.pgm/map.yaml (nav2), map.png, features.parquet, metrics.json,
-    config.toml and report.html/report.md into OUTPUT.
+    config.toml, trajectory.csv and report.html/report.md into OUTPUT. With --refine-poses
+    the poses are first corrected from the sonar data (trajectory.csv: the refined poses,
+    odometry.csv: the odometry they started from).
 
     Examples:
 
@@ -131,13 +142,15 @@ def run(
       sonarmap run robot.bag -o out/robot --range-topic /sonar --pose-topic /odom
 
       sonarmap run log.csv -o out/log --config sonarmap.toml --method classic --force
+
+      sonarmap run drifted.mcap -o out/drifted --refine-poses
     """
     from pipeline.run import run as run_pipeline
 
     if method is not None and method not in ("andersone", "classic"):
         raise typer.BadParameter("must be 'andersone' or 'classic'", param_hint="--method")
     cfg = _load(config, format=format, range_topics=range_topic, pose_topic=pose_topic,
-                method=method, resolution=resolution)
+                method=method, resolution=resolution, refine_poses=refine_poses)
     if quiet:
         result = run_pipeline(log, output, cfg, force=force, compare_correction=compare_correction)
     else:

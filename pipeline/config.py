@@ -137,6 +137,56 @@ class PoseSyncConfig:
 
 
 @dataclass(frozen=True)
+class PoseRefinementConfig:
+    """Correcting the odometry from the sonar data before mapping (``run --refine-poses``;
+    pipeline/refine/)."""
+
+    enabled: bool = _doc("refine the poses before mapping (also: run --refine-poses)",
+                         default=False)
+    match_submaps: bool = _doc("after the calibration, match submaps and solve the pose "
+                               "graph (off: measured worse on sonar, see RESULTS.md)",
+                               default=False)
+    submap_travel_m: float = _doc("echoes are pooled into a submap per this much travel, m",
+                                  default=1.5)
+    submap_min_echoes: int = _doc("a shorter stretch joins the next submap", default=60)
+    submap_max_points: int = _doc("points kept per submap (evenly thinned)", default=400)
+    max_echo_range_m: float = _doc("echoes farther than this are not matched, m", default=3.0)
+    arc_fraction: float = _doc("an echo is matched along ± this fraction of its half beam",
+                               default=0.8)
+    local_map_submaps: int = _doc("a submap is matched against this many previous ones",
+                                  default=3)
+    field_resolution_m: float = _doc("cell of the matching likelihood field, m", default=0.05)
+    field_sigma_m: float = _doc("σ of the likelihood field around each point, m", default=0.1)
+    search_xy_m: float = _doc("consecutive matches: search ± this around odometry, m",
+                              default=0.3)
+    search_yaw_deg: float = _doc("consecutive matches: search ± this yaw, degrees", default=6.0)
+    min_score: float = _doc("a match is kept when its mean field value reaches this",
+                            default=0.3)
+    max_ambiguity: float = _doc("loop closures: a distinct pose scoring this fraction of the "
+                                "best rejects the match", default=0.9)
+    loop_radius_m: float = _doc("loop closure candidates: anchors this close (estimate), m",
+                                default=2.5)
+    loop_min_path_m: float = _doc("... and at least this much travel apart, m", default=6.0)
+    loop_search_xy_m: float = _doc("loop closures: search ± this, m", default=1.0)
+    loop_search_yaw_deg: float = _doc("loop closures: search ± this yaw, degrees", default=12.0)
+    loop_max_per_submap: int = _doc("loop closures tried per submap (nearest first)", default=2)
+    odometry_sigma_xy: float = _doc("odometry translation σ, m per √m", default=0.02)
+    odometry_sigma_yaw_deg: float = _doc("odometry rotation σ, degrees per √m", default=0.5)
+    calibration_search: bool = _doc("search the odometry calibration that makes the echoes "
+                                    "sharpest before matching", default=True)
+    calibration_max_scale: float = _doc("... scale error searched in ± this (0: bias only)",
+                                        default=0.1)
+    calibration_max_bias_deg_per_m: float = _doc("... heading bias searched in ± this, deg/m",
+                                                 default=3.0)
+    calibrate: bool = _doc("estimate the odometry's scale error and heading bias", default=True)
+    prior_scale: float = _doc("σ of the scale error's prior (fraction)", default=0.1)
+    prior_bias_deg_per_m: float = _doc("σ of the heading bias's prior, deg/m", default=2.0)
+    robust_scale: float = _doc("Cauchy loss scale on whitened residuals", default=3.0)
+    reject_chi2: float = _doc("a match whose χ² after solving exceeds this is dropped",
+                              default=16.0)
+
+
+@dataclass(frozen=True)
 class CsvConfig:
     """How to read CSV/text logs (see formats/csv_log.py for the schema)."""
 
@@ -212,6 +262,7 @@ class Config:
     grid: GridConfig = field(default_factory=GridConfig)
     scans: ScanConfig = field(default_factory=ScanConfig)
     pose_sync: PoseSyncConfig = field(default_factory=PoseSyncConfig)
+    pose_refinement: PoseRefinementConfig = field(default_factory=PoseRefinementConfig)
     input: InputConfig = field(default_factory=InputConfig)
     sensors: SensorsConfig = field(default_factory=SensorsConfig)
 
@@ -362,6 +413,30 @@ def _check_ranges(cfg: Config) -> None:
     need(s.max_turn_deg > 0, "scans.max_turn_deg", "must be > 0", s.max_turn_deg)
     need(ps.max_pose_gap_s > 0, "pose_sync.max_pose_gap_s", "must be > 0", ps.max_pose_gap_s)
     need(math.isfinite(ps.time_offset_s), "pose_sync.time_offset_s", "must be finite", ps.time_offset_s)
+    pr = cfg.pose_refinement
+    for key in ("submap_travel_m", "max_echo_range_m", "field_resolution_m", "field_sigma_m",
+                "search_xy_m", "search_yaw_deg", "loop_radius_m", "loop_search_xy_m",
+                "loop_search_yaw_deg", "odometry_sigma_xy", "odometry_sigma_yaw_deg",
+                "prior_scale", "prior_bias_deg_per_m", "robust_scale", "reject_chi2"):
+        v = getattr(pr, key)
+        need(math.isfinite(v) and v > 0, f"pose_refinement.{key}", "must be > 0", v)
+    for key in ("submap_min_echoes", "submap_max_points", "local_map_submaps"):
+        v = getattr(pr, key)
+        need(v >= 1, f"pose_refinement.{key}", "must be >= 1", v)
+    need(0 <= pr.calibration_max_scale < 0.5, "pose_refinement.calibration_max_scale",
+         "must be in [0, 0.5)", pr.calibration_max_scale)
+    need(0 < pr.calibration_max_bias_deg_per_m <= 45,
+         "pose_refinement.calibration_max_bias_deg_per_m", "must be in (0, 45]",
+         pr.calibration_max_bias_deg_per_m)
+    need(pr.loop_min_path_m >= 0, "pose_refinement.loop_min_path_m", "must be >= 0",
+         pr.loop_min_path_m)
+    need(pr.loop_max_per_submap >= 0, "pose_refinement.loop_max_per_submap", "must be >= 0",
+         pr.loop_max_per_submap)
+    need(0 <= pr.arc_fraction <= 1, "pose_refinement.arc_fraction", "must be in [0, 1]",
+         pr.arc_fraction)
+    need(0 < pr.min_score < 1, "pose_refinement.min_score", "must be in (0, 1)", pr.min_score)
+    need(0 < pr.max_ambiguity <= 1, "pose_refinement.max_ambiguity", "must be in (0, 1]",
+         pr.max_ambiguity)
     sc = cfg.sensors
     need(0 <= sc.fov_deg < 180, "sensors.fov_deg", "must be in [0, 180)", sc.fov_deg)
     _check_limits("sensors", sc.min_range, sc.max_range)

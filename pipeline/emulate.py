@@ -29,6 +29,7 @@ pose, nav2 trinary) and the trajectory ``<stem>.truth.csv`` (``t,x,y,yaw``).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -45,6 +46,7 @@ from formats.log_writers import (
     write_log_with_reference,
 )
 from pipeline.config import Config, MountConfig
+from pipeline.drift import DriftModel, apply_drift
 from pipeline.errors import ConfigError, FormatError, InputError, OutputError, TopicError
 from pipeline.mapper.types import GridSpec
 from pipeline.presets import PRESETS
@@ -520,6 +522,27 @@ class Emulation:
     ring: VirtualRing  # the emitted sonars
     dropped: tuple[str, ...]  # sonars not emitted (outside the laser's view)
     notes: tuple[str, ...]
+    truth: PoseBatch | None = None  # the true poses when the log's odometry is drifted
+
+    def with_drift(self, model: DriftModel, seed: int) -> Emulation:
+        """The same emulation with its odometry drifted by ``model`` (:mod:`pipeline.drift`,
+        noise from ``PCG64(seed)``); the poses it started from become the truth."""
+        if model.is_zero:
+            return self
+        p = self.content.poses
+        rng = np.random.Generator(np.random.PCG64(seed))
+        x, y, yaw = apply_drift(p.x, p.y, p.yaw, model.validate(), rng)
+        drifted = PoseBatch(p.t_ns.copy(), x, y, yaw, p.parent_frame, p.child_frame)
+        note = (
+            f"odometry drifted: scale error {model.scale_error:g}, heading bias "
+            f"{model.heading_bias_deg_per_m:g} deg/m, noise {model.noise_xy:g} m/√m and "
+            f"{model.noise_yaw:g} rad/√rad (seed {seed}); the truth trajectory keeps the "
+            "poses before drift"
+        )
+        return dataclasses.replace(
+            self, content=dataclasses.replace(self.content, poses=drifted), truth=p,
+            notes=(*self.notes, note),
+        )
 
 
 def emulate(log: LaserLog, ring: VirtualRing, *, require_full_cone: bool = False) -> Emulation:
@@ -709,13 +732,15 @@ def write_emulation(
     *,
     compression: str = "none",
 ) -> list[Path]:
-    """Write the sonar log, the laser map and the trajectory; return the paths (log first).
+    """Write the sonar log, the laser map and the trajectory (the true poses: those before
+    drift when the odometry is drifted); return the paths (log first).
 
     Refuses (OutputError) when any of them exists already, before writing anything.
     """
+    truth = em.truth if em.truth is not None else em.content.poses
     return write_log_with_reference(
         em.content, out_path, fmt, compression=compression, kind="laser",
-        probability=laser_map.probability, grid=laser_map.grid, trajectory=em.content.poses,
+        probability=laser_map.probability, grid=laser_map.grid, trajectory=truth,
     )
 
 
@@ -733,6 +758,8 @@ class EmulateOptions:
     map_resolution: float | None = None  # default: [grid] resolution of the config
     max_free_range: float = 30.0
     compression: str = "none"
+    drift: DriftModel = field(default_factory=DriftModel)  # odometry drift (pipeline.drift)
+    drift_seed: int = 0
 
 
 @dataclass(frozen=True)
@@ -778,7 +805,9 @@ def run_emulation(
         laser_topic=opt.laser_topic,
         laser_max_range=opt.laser_max_range,
     )
-    em = emulate(log, ring, require_full_cone=opt.require_full_cone)
+    em = emulate(log, ring, require_full_cone=opt.require_full_cone).with_drift(
+        opt.drift, opt.drift_seed
+    )
     lmap = laser_occupancy_map(
         log,
         LaserMapOptions(

@@ -99,6 +99,7 @@ class RunMetrics:
     run: dict[str, Any]
     timing: dict[str, Any] = field(default_factory=dict)
     comparison: dict[str, Any] | None = None
+    pose_refinement: dict[str, Any] | None = None  # run --refine-poses (pipeline/refine/)
 
     def deterministic(self) -> dict[str, Any]:
         out = {
@@ -113,6 +114,8 @@ class RunMetrics:
         }
         if self.comparison is not None:
             out["comparison"] = self.comparison
+        if self.pose_refinement is not None:
+            out["pose_refinement"] = self.pose_refinement
         return out
 
     def to_dict(self) -> dict[str, Any]:

@@ -103,6 +103,12 @@ def run(
                 config,
                 used=[sv.ranges.per_sensor.get(i, 0) > 0 for i in range(len(sv.sensor_names))],
             )
+            odometry: PoseTrack | None = None
+            refinement: dict[str, Any] | None = None
+            if config.pose_refinement.enabled:
+                with timer.stage("pose_refinement"):
+                    odometry = sv.track
+                    sv, refinement = _refine_poses(reader, sv, sensors, config)
             grid = grid_for(sv, sensors, config)
             # Thinned now, while little else is in memory (it reads the whole track).
             drawn = _drawn_trajectory(sv.track)
@@ -120,8 +126,35 @@ def run(
             snapshots = {k: m.snapshot() for k, m in mappers.items()}
         metrics = _metrics(log_path, info.format, info.duration_s, sv, sensors, mappers,
                            snapshots, state, config)
-        _write_outputs(out, config, sv, drawn, snapshots, metrics, timer, t_start)
+        metrics.pose_refinement = refinement
+        _write_outputs(out, config, sv, drawn, snapshots, metrics, timer, t_start,
+                       odometry=odometry)
     return RunResult(Path(out_dir), metrics, snapshots["main"])
+
+
+def _refine_poses(
+    reader: LogReader, sv: Survey, sensors: SensorTable, config: Config
+) -> tuple[Survey, dict[str, Any]]:
+    """Pose refinement (pipeline/refine/): one more pass over the readings for the echoes,
+    then the refined track replaces the odometry for the grid and the mapping pass."""
+    from pipeline.refine import collect_echoes, refine_track
+
+    echoes = collect_echoes(
+        reader, sv.track, sensors,
+        eps_max=config.mapper.eps_max,
+        max_echo_range_m=config.pose_refinement.max_echo_range_m,
+        arc_fraction=config.pose_refinement.arc_fraction,
+        time_offset_ns=round(config.pose_sync.time_offset_s * 1e9),
+        max_gap_ns=round(config.pose_sync.max_pose_gap_s * 1e9),
+    )
+    refined = refine_track(sv.track, echoes, config.pose_refinement)
+    old = sv.track
+    track = PoseTrack(refined.t_ns, refined.x, refined.y, refined.yaw, old.parent_frame,
+                      old.child_frame, backwards=old.backwards, duplicates=old.duplicates)
+    log.info("pose refinement: %d submaps, %d matches, %d loop closures; poses moved %.3f m "
+             "on average", refined.metrics["submaps"], refined.metrics.get("matches_accepted", 0),
+             refined.metrics.get("loop_closures_accepted", 0), refined.metrics["moved_mean_m"])
+    return dataclasses.replace(sv, track=track), refined.metrics
 
 
 def grid_for(sv: Survey, sensors: SensorTable, config: Config) -> GridSpec:
@@ -344,6 +377,17 @@ def _ablation_row(mapper: Mapper, snap: MapSnapshot) -> dict[str, Any]:
     }
 
 
+def _write_trajectories(out: Any, track: PoseTrack, odometry: PoseTrack | None) -> None:
+    from formats.writers.trajectory_csv import trajectory_csv_text
+
+    for name, tr in (("trajectory.csv", track), ("odometry.csv", odometry)):
+        if tr is None:
+            continue
+        text = trajectory_csv_text(tr.t_ns, tr.x, tr.y, tr.yaw)
+        tr.release_before(None)
+        out.path(name).write_text(text, encoding="utf-8")
+
+
 MAX_DRAWN_POSES = 20_000
 
 
@@ -370,9 +414,14 @@ def _write_outputs(
     metrics: RunMetrics,
     timer: StageTimer,
     t_start: float,
+    *,
+    odometry: PoseTrack | None = None,
 ) -> None:
     """Write every output; metrics.json and the reports last, so that they can carry the
-    timing of everything before them (total = up to the reports)."""
+    timing of everything before them (total = up to the reports).
+
+    ``trajectory.csv`` holds the poses the map was built on; with pose refinement those are
+    the refined ones and ``odometry.csv`` the odometry they started from."""
     from formats.writers.features_parquet import write_features
     from formats.writers.map_png import write_map_png
     from formats.writers.nav2_map import write_nav2_map
@@ -396,6 +445,7 @@ def _write_outputs(
         },
     )
     (out.path("config.toml")).write_text(dump_config(config), encoding="utf-8")
+    _write_trajectories(out, sv.track, odometry)
     labels = {"with_correction": "with feature correction",
               "without_correction": "without feature correction"}
     images = {labels["with_correction"]: "map.png"}
