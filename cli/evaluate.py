@@ -70,8 +70,8 @@ def evaluate(
 
       sonarmap evaluate out/drifted --truth office.truth.yaml --truth-trajectory office.truth.csv
     """
+    from formats.errors import OutputError
     from formats.writers.atomic import atomic_write_text
-    from pipeline.errors import OutputError
     from pipeline.evaluate import evaluate_run
 
     if output is not None:

@@ -60,8 +60,8 @@ def register(app: typer.Typer) -> None:
 
           sonarmap simulate sample_logs/worlds/office.toml -o drifted.mcap --drift-scale 0.03 --drift-heading-bias 0.8
         """
+        from formats.presets import PRESETS
         from pipeline.config import load_config
-        from pipeline.presets import PRESETS
         from pipeline.simulate.simulate import SimOptions, run_simulation
 
         cfg = load_config(config)

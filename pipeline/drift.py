@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from pipeline.errors import ConfigError
+from formats.errors import ConfigError
 
 F64 = npt.NDArray[np.float64]
 

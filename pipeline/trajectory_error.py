@@ -32,7 +32,7 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
-from pipeline.errors import ConfigError, InputError
+from formats.errors import ConfigError, InputError
 from pipeline.pose_sync import POSE_OK, PoseTrack, interpolate_poses, wrap_angle
 
 F64 = npt.NDArray[np.float64]

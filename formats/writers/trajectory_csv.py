@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from formats.errors import FormatError, InputError
 from formats.writers.atomic import atomic_write_text
-from pipeline.errors import FormatError, InputError
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]

@@ -61,11 +61,11 @@ class LikelihoodField:
         fx, fy = (x - x0) / res - 0.5, (y - y0) / res - 0.5
         ix, iy = np.floor(fx).astype(np.int64), np.floor(fy).astype(np.int64)
         ax, ay = fx - ix, fy - iy
-        counts = np.zeros(h * w)
+        flat = np.zeros(h * w)
         for dx, dy, wt in ((0, 0, (1 - ax) * (1 - ay)), (1, 0, ax * (1 - ay)),
                            (0, 1, (1 - ax) * ay), (1, 1, ax * ay)):
-            counts += np.bincount((iy + dy) * w + ix + dx, weights=wt, minlength=h * w)
-        counts = counts.reshape(h, w)
+            flat += np.bincount((iy + dy) * w + ix + dx, weights=wt, minlength=h * w)
+        counts = flat.reshape(h, w)
         dens = gaussian_filter(counts, sigma / res, mode="constant", truncate=3.0)
         level = float(np.median(dens[dens > 0.01 * dens.max()])) if dens.max() > 0 else 1.0
         vals = (1.0 - np.exp(-dens / level)).astype(np.float32)

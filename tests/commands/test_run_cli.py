@@ -19,7 +19,7 @@ ROOT = Path(__file__).resolve().parents[2]
 SAMPLES = ROOT / "sample_logs"
 
 OUTPUTS = {"map.pgm", "map.yaml", "map.png", "features.parquet", "metrics.json", "config.toml",
-           "report.html", "report.md"}
+           "report.html", "report.md", "trajectory.csv"}
 
 SAMPLE_RUNS = [
     ("office.mcap", [str(SAMPLES / "office" / "office.mcap")], "mcap"),

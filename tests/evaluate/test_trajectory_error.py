@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from formats.errors import ConfigError, FormatError, InputError
 from formats.writers.trajectory_csv import read_trajectory_csv, write_trajectory_csv
-from pipeline.errors import ConfigError, FormatError, InputError
 from pipeline.trajectory_error import Poses2D, align_se2, rpe_pairs, trajectory_error
 
 NS = 1_000_000_000

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from formats.errors import ConfigError
 from pipeline.drift import DriftModel, apply_drift
-from pipeline.errors import ConfigError
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "emulate"))
 
@@ -91,8 +91,8 @@ def test_simulate_drifts_the_log_and_keeps_the_truth() -> None:
 def test_emulation_with_drift_keeps_the_poses_as_truth() -> None:
     from emulate_helpers import laser_log
 
+    from formats.presets import PRESETS
     from pipeline.emulate import emulate, ring_from_mounts
-    from pipeline.presets import PRESETS
 
     poses = [(0.1 * k, 0.0, 0.0) for k in range(21)]
     log = laser_log(np.full((21, 181), 3.0), np.linspace(-90, 90, 181), poses=poses)
