@@ -457,6 +457,13 @@ def _write_outputs(
             title=f"{metrics.input['name']} - without feature correction",
         )
         images[labels["without_correction"]] = "map_no_correction.png"
+    figures: list[tuple[str, Path]] = []
+    if odometry is not None:
+        from formats.writers.trajectory_png import write_trajectory_png
+
+        write_trajectory_png(out.path("trajectory.png"), _drawn_trajectory(odometry), traj,
+                             title=f"{metrics.input['name']} - pose refinement")
+        figures.append(("Pose refinement: odometry and refined trajectory", out.path("trajectory.png")))
     readings_per_sensor = {row["name"]: row["readings"] for row in metrics.sensors}
     comparison = None
     if metrics.comparison is not None:
@@ -480,4 +487,5 @@ def _write_outputs(
         readings_per_sensor=readings_per_sensor,
         dropped_by_reason=metrics.dropped,
         comparison=comparison,
+        figures=figures,
     )

@@ -223,8 +223,12 @@ def write_reports(
     readings_per_sensor: dict[str, int],
     dropped_by_reason: dict[str, int],
     comparison: dict[str, Any] | None = None,
+    figures: Sequence[tuple[str, Path]] = (),
 ) -> None:
     """Write ``out_dir/report.html`` and ``out_dir/report.md``.
+
+    ``figures``: extra ``(caption, image)`` pairs shown after the map (e.g. the pose
+    refinement's odometry against the refined trajectory).
 
     ``metrics``: nested dict, shown flattened (dotted keys, sorted). ``map_png``: the map
     image (embedded in the HTML, linked from the Markdown). Charts: histogram of feature
@@ -256,6 +260,9 @@ def write_reports(
         "<h2>Map</h2>",
         f'<img alt="map" src="{_data_uri(map_png)}">',
     ]
+    for caption, img in figures:
+        h += [f"<h2>{html.escape(caption)}</h2>",
+              f'<img alt="{html.escape(caption)}" src="{_data_uri(Path(img))}">']
     if comp is not None:
         columns, rows, images = comp
         h.append("<h2>Comparison</h2>")
@@ -290,6 +297,8 @@ def write_reports(
         "",
         f"![map]({_image_ref(map_png, out_dir)})",
     ]
+    for caption, img in figures:
+        m += ["", f"## {caption}", "", f"![{caption}]({_image_ref(Path(img), out_dir)})"]
     if comp is not None:
         columns, rows, images = comp
         m += ["", "## Comparison", ""]

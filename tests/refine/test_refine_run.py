@@ -48,7 +48,7 @@ def test_refined_run_corrects_the_drift_and_is_deterministic(drifted_log: Path,
     truth = drifted_log.with_name("room.truth.csv")
     a = run(drifted_log, tmp_path / "a", cfg)
     run(drifted_log, tmp_path / "b", cfg)
-    for name in ("trajectory.csv", "odometry.csv", "map.pgm"):
+    for name in ("trajectory.csv", "odometry.csv", "map.pgm", "trajectory.png"):
         assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
     odo_ate = ate(tmp_path / "a" / "odometry.csv", truth)
     ref_ate = ate(tmp_path / "a" / "trajectory.csv", truth)
@@ -58,6 +58,7 @@ def test_refined_run_corrects_the_drift_and_is_deterministic(drifted_log: Path,
     assert pr is not None
     assert pr["submaps"] >= 5 and pr["moved_max_m"] > 0.05
     assert pr["search_heading_bias_deg_per_m"] == pytest.approx(0.8, abs=0.3)
+    assert "Pose refinement" in (tmp_path / "a" / "report.md").read_text()
     doc = json.loads((tmp_path / "a" / "metrics.json").read_text())
     for key in ("matches_accepted", "matches_rejected", "loop_closures_accepted",
                 "loop_closures_rejected", "cost_initial", "cost_final", "moved_mean_m"):
