@@ -16,7 +16,7 @@ fail with a one-line reason. A log whose input sha256 and config hash match its 
 skipped unless ``rerun``. At start, the staging directories of interrupted batches whose
 processes are dead are removed (a concurrent batch's are left alone).
 
-Failure isolation: a log that raises :class:`~pipeline.errors.SonarmapError` is recorded
+Failure isolation: a log that raises :class:`~formats.errors.SonarmapError` is recorded
 with its one-line message; any other exception with its type, message and traceback (the
 traceback is logged); the other logs complete. The summary (``summary.parquet``,
 ``summary.md``, one row per log sorted by path) is written atomically at the end.
@@ -38,8 +38,8 @@ from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any
 
+from formats.errors import ConfigError, FormatError, InputError, OutputError, SonarmapError
 from pipeline.config import Config, config_from_dict, load_config
-from pipeline.errors import ConfigError, FormatError, InputError, OutputError, SonarmapError
 
 log = logging.getLogger("sonarmap.batch")
 

@@ -15,8 +15,8 @@ import shutil
 from pathlib import Path, PurePath
 from types import TracebackType
 
+from formats.errors import OutputError
 from formats.writers.output_marker import not_replaceable_reason, write_output_marker
-from pipeline.errors import OutputError
 
 __all__ = [
     "OutputDir",
