@@ -213,6 +213,11 @@ class OutputDir:
                 continue
             except OSError as err:
                 raise OutputError(f"cannot create temporary directory: {err}", tmp) from err
+            except BaseException:
+                # SIGTERM/Ctrl-C right after mkdir: __exit__ will not run for a failed
+                # __enter__, so the directory is removed here.
+                _remove(tmp)
+                raise
             self._tmp = tmp
             return self
         raise OutputError("cannot find a free temporary directory name", self.final.parent)

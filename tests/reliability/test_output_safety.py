@@ -104,6 +104,7 @@ def test_sigterm_on_run_leaves_no_temporary_directory(tmp_path: Path) -> None:
     while not any(p.name.startswith(".OUT.tmp-") for p in tmp_path.iterdir()):
         assert proc.poll() is None and time.monotonic() < deadline, "run never started"
         time.sleep(0.02)
+    time.sleep(0.5)  # well inside the run (reading, mapping)
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 143
