@@ -26,12 +26,13 @@ import numpy as np
 
 from formats import open_log
 from formats.contract import LogReader, RangeBatch
+from formats.errors import ConfigError, InputError
+from formats.map_types import GridSpec
 from pipeline import __version__
 from pipeline.config import Config, dump_config
-from pipeline.errors import ConfigError, InputError
 from pipeline.ingest import Survey, ordered_ranges, survey
 from pipeline.mapper import Mapper, make_mapper
-from pipeline.mapper.types import GridSpec, MapSnapshot, Scan
+from pipeline.mapper.types import MapSnapshot, Scan
 from pipeline.metrics import (
     RunMetrics,
     StageTimer,

@@ -15,7 +15,7 @@ import shutil
 from pathlib import Path, PurePath
 from types import TracebackType
 
-from pipeline.errors import OutputError
+from formats.errors import OutputError
 
 __all__ = ["OutputDir", "atomic_write_bytes", "atomic_write_text", "clean_stale_siblings"]
 

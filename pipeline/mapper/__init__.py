@@ -11,8 +11,8 @@ compared with the numpy modules above, which stay as the readable reference), an
 
 from __future__ import annotations
 
+from formats.errors import ConfigError
 from pipeline.config import MapperConfig
-from pipeline.errors import ConfigError
 from pipeline.mapper.andersone import AndersoneMapper
 from pipeline.mapper.classic import ClassicMapper
 from pipeline.mapper.protocol import Mapper
