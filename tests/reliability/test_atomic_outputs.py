@@ -20,7 +20,7 @@ from fuzz.harness import ROOT
 
 LOG = ROOT / "sample_logs" / "office" / "office.mcap"
 FILES = {"map.pgm", "map.yaml", "map.png", "features.parquet", "metrics.json", "config.toml",
-         "report.html", "report.md", "trajectory.csv"}
+         "report.html", "report.md", ".sonarmap-output", "trajectory.csv"}
 
 
 def _start(out: Path) -> subprocess.Popen[bytes]:
