@@ -67,6 +67,7 @@ compare: $(STAMP)
 	  sample_logs/corridor/corridor.mcap sample_logs/corridor/corridor.truth.yaml \
 	  sample_logs/orchard/orchard.mcap sample_logs/orchard/orchard.truth.yaml \
 	  sample_logs/intel-lab/intel.mcap sample_logs/intel-lab/intel.laser.yaml
+	$(BIN)/python benchmarks/compare_methods.py --drifted
 
 clean:
 	rm -rf $(VENV) demo_out build *.egg-info .pytest_cache .mypy_cache .ruff_cache
