@@ -26,6 +26,7 @@ import numpy as np
 
 from formats import open_log
 from formats.contract import LogReader, RangeBatch
+from formats.writers.trajectory_tum import Trajectory
 from pipeline import __version__
 from pipeline.config import Config, dump_config
 from pipeline.errors import ConfigError, InputError
@@ -347,25 +348,27 @@ def _ablation_row(mapper: Mapper, snap: MapSnapshot) -> dict[str, Any]:
 MAX_DRAWN_POSES = 20_000
 
 
-def _drawn_trajectory(track: PoseTrack) -> np.ndarray:
-    """The trajectory as drawn in map.png: every pose up to MAX_DRAWN_POSES, else evenly
-    spaced poses plus the last one (a picture at most ~2400 px wide shows no more, and
-    drawing hours of 20 Hz odometry would make memory grow with the log's length)."""
+def _drawn_trajectory(track: PoseTrack) -> Trajectory:
+    """The trajectory as drawn in map.png and published in map.mcap: every pose up to
+    MAX_DRAWN_POSES, else evenly spaced poses plus the last one (a picture at most ~2400 px
+    wide shows no more, and hours of 20 Hz odometry would make memory grow with the log)."""
     n = len(track)
-    if n <= MAX_DRAWN_POSES:
-        xy = np.column_stack([track.x, track.y])
-    else:
-        idx = np.unique(np.r_[np.linspace(0, n - 1, MAX_DRAWN_POSES).astype(np.int64), n - 1])
-        xy = np.column_stack([track.x[idx], track.y[idx]])
+    idx = np.arange(n) if n <= MAX_DRAWN_POSES else np.unique(
+        np.r_[np.linspace(0, n - 1, MAX_DRAWN_POSES).astype(np.int64), n - 1]
+    )
+    drawn = Trajectory(
+        np.asarray(track.t_ns[idx], dtype=np.int64), np.asarray(track.x[idx], dtype=np.float64),
+        np.asarray(track.y[idx], dtype=np.float64), np.asarray(track.yaw[idx], dtype=np.float64),
+    )
     track.release_before(None)
-    return xy
+    return drawn
 
 
 def _write_outputs(
     out: Any,
     config: Config,
     sv: Survey,
-    traj: np.ndarray,
+    traj: Trajectory,
     snapshots: dict[str, MapSnapshot],
     metrics: RunMetrics,
     timer: StageTimer,
@@ -374,15 +377,28 @@ def _write_outputs(
     """Write every output; metrics.json and the reports last, so that they can carry the
     timing of everything before them (total = up to the reports)."""
     from formats.writers.features_parquet import write_features
+    from formats.writers.map_mcap import write_map_mcap
     from formats.writers.map_png import write_map_png
     from formats.writers.nav2_map import write_nav2_map
     from formats.writers.report import write_reports
+    from formats.writers.trajectory_tum import write_trajectory_tum
 
     t_outputs = time.perf_counter()
     snap = snapshots["main"]
     write_nav2_map(out.path("map.yaml"), snap.probability, snap.grid)
     title = f"{metrics.input['name']} - {config.mapper.method}"
-    write_map_png(out.path("map.png"), snap, trajectory_xy=traj, features=snap.features, title=title)
+    traj_xy = np.column_stack([traj.x, traj.y])
+    write_map_png(out.path("map.png"), snap, trajectory_xy=traj_xy, features=snap.features,
+                  title=title)
+    track = sv.track
+    write_trajectory_tum(out.path("trajectory.csv"), track.t_ns, track.x, track.y, track.yaw,
+                         frame=track.parent_frame)
+    track.release_before(None)
+    write_map_mcap(
+        out.path("map.mcap"), probability=snap.probability, grid=snap.grid,
+        features=snap.features, trajectory=traj, frame_id=track.parent_frame,
+        stamp_ns=int(metrics.trajectory["end_ns"]),
+    )
     write_features(
         out.path("features.parquet"),
         snap.features,
@@ -402,7 +418,7 @@ def _write_outputs(
     if "no_correction" in snapshots:
         other = snapshots["no_correction"]
         write_map_png(
-            out.path("map_no_correction.png"), other, trajectory_xy=traj, features=other.features,
+            out.path("map_no_correction.png"), other, trajectory_xy=traj_xy, features=other.features,
             title=f"{metrics.input['name']} - without feature correction",
         )
         images[labels["without_correction"]] = "map_no_correction.png"
@@ -423,7 +439,7 @@ def _write_outputs(
     (out.path("metrics.json")).write_text(metrics.to_json(), encoding="utf-8")
     write_reports(
         out.tmp_dir,
-        metrics=metrics.to_dict(),
+        metrics=metrics.deterministic(),  # no timing: reports are the same bytes on a rerun
         map_png=out.path("map.png"),
         features=snap.features,
         readings_per_sensor=readings_per_sensor,

@@ -18,8 +18,8 @@ from formats.writers.nav2_map import load_nav2_map
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLES = ROOT / "sample_logs"
 
-OUTPUTS = {"map.pgm", "map.yaml", "map.png", "features.parquet", "metrics.json", "config.toml",
-           "report.html", "report.md"}
+OUTPUTS = {"map.pgm", "map.yaml", "map.png", "map.mcap", "trajectory.csv", "features.parquet",
+           "metrics.json", "config.toml", "report.html", "report.md"}
 
 SAMPLE_RUNS = [
     ("office.mcap", [str(SAMPLES / "office" / "office.mcap")], "mcap"),
@@ -78,6 +78,42 @@ def test_nav2_map_reloads_to_the_same_occupancy_classes(runner, tmp_path):
     pgm = (out / "map.pgm").read_bytes()
     assert pgm.startswith(b"P5\n")
     assert set(np.frombuffer(pgm[-m.classes.size:], np.uint8).tolist()) <= {0, 205, 254}
+
+
+def test_map_mcap_holds_map_pgm_features_and_trajectory(runner, tmp_path):
+    """Read back with the mcap library and rosbags (not sonarmap's readers)."""
+    from mcap.reader import make_reader
+    from rosbags.typesys import Stores, get_typestore
+
+    out = tmp_path / "o"
+    assert _run(runner, ["run", str(SAMPLES / "office" / "office.mcap"), "-o", str(out), "-q"]).exit_code == 0
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    with (out / "map.mcap").open("rb") as f:
+        msgs = {c.topic: ts.deserialize_cdr(m.data, s.name) for s, c, m in make_reader(f).iter_messages()}
+    metrics = json.loads((out / "metrics.json").read_text())
+    grid = msgs["/map"]
+    frame = metrics["trajectory"]["pose_frames"][0]
+    assert frame == "odom" and grid.header.frame_id == frame
+    yaml_doc = (out / "map.yaml").read_text()
+    assert f"resolution: {grid.info.resolution:.2f}" in yaml_doc
+    assert f"origin: [{grid.info.origin.position.x!r}, {grid.info.origin.position.y!r}, 0.0]" in yaml_doc
+    pgm = (out / "map.pgm").read_bytes()
+    w, h = grid.info.width, grid.info.height
+    assert pgm.startswith(f"P5\n{w} {h}\n255\n".encode())
+    pixels = np.frombuffer(pgm[-w * h:], np.uint8).reshape(h, w)[::-1]  # PGM row 0 = top
+    data = np.asarray(grid.data, np.int8).reshape(h, w)
+    assert np.array_equal(data, np.select([pixels == 0, pixels == 254], [100, 0], -1))
+    assert int((data == 100).sum()) == metrics["map"]["cells_occupied"] > 0
+    table = pq.read_table(out / "features.parquet")
+    markers = msgs["/sonar_features"].markers
+    assert [m.id for m in markers] == table.column("id").to_pylist()
+    sigma = table.column("sigma_major").to_numpy()
+    assert np.allclose([m.scale.x for m in markers], np.maximum(4 * sigma, 1e-3))
+    poses = msgs["/trajectory"].poses
+    assert len(poses) == metrics["counts"]["poses"]
+    rows = [ln.split(" ") for ln in (out / "trajectory.csv").read_text().splitlines()[1:]]
+    assert len(rows) == metrics["counts"]["poses"]
+    assert float(rows[-1][1]) == pytest.approx(poses[-1].pose.position.x, abs=1e-9)
 
 
 def test_features_parquet_schema(runner, tmp_path):
