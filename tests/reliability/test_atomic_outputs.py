@@ -19,8 +19,8 @@ from fuzz.harness import ROOT
 from pipeline.errors import OutputError
 
 LOG = ROOT / "sample_logs" / "office" / "office.mcap"
-FILES = {"map.pgm", "map.yaml", "map.png", "features.parquet", "metrics.json", "config.toml",
-         "report.html", "report.md"}
+FILES = {"map.pgm", "map.yaml", "map.png", "map.mcap", "trajectory.csv", "features.parquet",
+         "metrics.json", "config.toml", "report.html", "report.md"}
 
 
 def _start(out: Path) -> subprocess.Popen[bytes]:
