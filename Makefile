@@ -8,7 +8,7 @@ STAMP  := $(VENV)/.installed-stamp
 DEMO_LOG := sample_logs/office/office.mcap
 DEMO_OUT := demo_out/office
 
-.PHONY: setup demo test lint typecheck unit bench fuzz goldens samples compare clean
+.PHONY: setup demo test lint layers typecheck unit bench fuzz goldens samples compare clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -c 'import sys; sys.exit("sonarmap needs Python 3.11+") if sys.version_info < (3, 11) else None'
@@ -29,13 +29,18 @@ demo: $(STAMP)
 lint: $(STAMP)
 	$(BIN)/ruff check pipeline formats cli tests benchmarks fuzz sample_logs
 
+# The import contract in pyproject.toml: formats/ imports neither pipeline/ nor cli/, and
+# pipeline/ does not import cli/.
+layers: $(STAMP)
+	$(BIN)/lint-imports
+
 typecheck: $(STAMP)
 	$(BIN)/mypy
 
 unit: $(STAMP)
 	$(BIN)/python -m pytest -q -n 2
 
-test: lint typecheck unit
+test: lint layers typecheck unit
 
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks

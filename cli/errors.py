@@ -14,7 +14,7 @@ from typing import ParamSpec, TypeVar
 
 import typer
 
-from pipeline.errors import SonarmapError
+from formats.errors import SonarmapError
 
 P = ParamSpec("P")
 R = TypeVar("R")

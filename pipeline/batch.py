@@ -12,7 +12,7 @@ swapped into place, so a directory under the final name with a marker is always 
 one without a marker (a plain ``sonarmap run`` output) is re-mapped and replaced. A log
 whose input sha256 and config hash match its marker is skipped unless ``rerun``.
 
-Failure isolation: a log that raises :class:`~pipeline.errors.SonarmapError` is recorded
+Failure isolation: a log that raises :class:`~formats.errors.SonarmapError` is recorded
 with its one-line message; any other exception with its type, message and traceback (the
 traceback is logged); the other logs complete. The summary (``summary.parquet``,
 ``summary.md``, one row per log sorted by path) is written atomically at the end.
@@ -35,8 +35,8 @@ from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any
 
+from formats.errors import ConfigError, FormatError, InputError, OutputError, SonarmapError
 from pipeline.config import Config, config_from_dict, load_config
-from pipeline.errors import ConfigError, FormatError, InputError, OutputError, SonarmapError
 
 log = logging.getLogger("sonarmap.batch")
 

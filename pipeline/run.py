@@ -26,13 +26,14 @@ import numpy as np
 
 from formats import open_log
 from formats.contract import LogReader, RangeBatch
+from formats.errors import ConfigError, InputError
+from formats.map_types import GridSpec
 from formats.writers.trajectory_tum import Trajectory
 from pipeline import __version__
 from pipeline.config import Config, dump_config
-from pipeline.errors import ConfigError, InputError
 from pipeline.ingest import Survey, ordered_ranges, survey
 from pipeline.mapper import Mapper, make_mapper
-from pipeline.mapper.types import GridSpec, MapSnapshot, Scan
+from pipeline.mapper.types import MapSnapshot, Scan
 from pipeline.metrics import (
     RunMetrics,
     StageTimer,
@@ -397,7 +398,7 @@ def _write_outputs(
     write_map_mcap(
         out.path("map.mcap"), probability=snap.probability, grid=snap.grid,
         features=snap.features, trajectory=traj, frame_id=track.parent_frame,
-        stamp_ns=int(metrics.trajectory["end_ns"]),
+        stamp_ns=int(metrics.trajectory["end_ns"]), library=f"sonarmap {__version__}",
     )
     write_features(
         out.path("features.parquet"),

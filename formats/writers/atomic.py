@@ -17,7 +17,7 @@ from pathlib import Path, PurePath
 from types import TracebackType
 from typing import BinaryIO
 
-from pipeline.errors import OutputError
+from formats.errors import OutputError
 
 __all__ = ["OutputDir", "atomic_open", "atomic_write_bytes", "atomic_write_text", "clean_stale_siblings"]
 

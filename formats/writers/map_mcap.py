@@ -29,12 +29,11 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from formats.map_types import FeatureTable, GridSpec
 from formats.writers.atomic import atomic_open
 from formats.writers.ellipse import covariance_axes
 from formats.writers.nav2_map import FREE, OCCUPIED, trinary_classes
 from formats.writers.trajectory_tum import Trajectory
-from pipeline import __version__
-from pipeline.mapper.types import FeatureTable, GridSpec
 
 __all__ = [
     "FEATURES_TOPIC",
@@ -219,13 +218,14 @@ def write_map_mcap(
     trajectory: Trajectory,
     frame_id: str,
     stamp_ns: int,
+    library: str = "sonarmap",
 ) -> None:
     """Write ``map.mcap`` (see the module docstring) at ``path``, atomically.
 
     ``probability``: float32 H×W, row 0 at min y, NaN unknown (as for map.pgm);
     ``trajectory``: the poses for ``/trajectory``; ``frame_id``: the map frame (the frame
     the poses are in; ``"map"`` when the log names none); ``stamp_ns``: the stamp of every
-    message and header (the end of the log).
+    message and header (the end of the log); ``library``: the MCAP header's writer name.
     """
     from mcap.writer import CompressionType, Writer
 
@@ -242,7 +242,7 @@ def write_map_mcap(
     )
     with atomic_open(Path(path)) as f:
         writer = Writer(f, compression=CompressionType.ZSTD)
-        writer.start(profile="ros2", library=f"sonarmap {__version__}")
+        writer.start(profile="ros2", library=library)
         for topic, msgtype, qos, msg in messages:
             msgdef, _ = ts.generate_msgdef(msgtype, ros_version=2)
             schema = writer.register_schema(msgtype, "ros2msg", msgdef.encode("utf-8"))

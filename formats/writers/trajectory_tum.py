@@ -25,7 +25,7 @@ import numpy as np
 import numpy.typing as npt
 
 from formats.writers.atomic import atomic_open
-from pipeline.errors import FormatError, InputError
+from formats.errors import FormatError, InputError
 
 __all__ = ["Trajectory", "read_trajectory_tum", "write_trajectory_tum"]
 

@@ -9,8 +9,8 @@ cells), ``andersone`` / ``classic`` (the mappers).
 
 from __future__ import annotations
 
+from formats.errors import ConfigError
 from pipeline.config import MapperConfig
-from pipeline.errors import ConfigError
 from pipeline.mapper.andersone import AndersoneMapper
 from pipeline.mapper.classic import ClassicMapper
 from pipeline.mapper.protocol import Mapper

@@ -14,9 +14,9 @@ from pathlib import Path
 
 import pytest
 
+from formats.errors import OutputError
 from formats.writers.atomic import OutputDir, clean_stale_siblings
 from fuzz.harness import ROOT
-from pipeline.errors import OutputError
 
 LOG = ROOT / "sample_logs" / "office" / "office.mcap"
 FILES = {"map.pgm", "map.yaml", "map.png", "map.mcap", "trajectory.csv", "features.parquet",

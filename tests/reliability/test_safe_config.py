@@ -11,11 +11,11 @@ from typer.testing import CliRunner
 
 from cli.app import app
 from formats import open_log
+from formats.errors import ConfigError, FormatError, OutputError
 from formats.writers.atomic import OutputDir
 from formats.writers.nav2_map import load_nav2_map
 from fuzz.harness import ROOT, Target
 from pipeline.config import load_config
-from pipeline.errors import ConfigError, FormatError, OutputError
 
 
 def _payload(marker: Path) -> str:

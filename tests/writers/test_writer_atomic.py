@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
+from formats.errors import OutputError
 from formats.writers.atomic import OutputDir, atomic_write_bytes, atomic_write_text
-from pipeline.errors import OutputError
 
 
 def _siblings(parent: Path) -> list[str]:

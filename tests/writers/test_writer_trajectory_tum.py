@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from formats.writers.trajectory_tum import read_trajectory_tum, write_trajectory_tum
-from pipeline.errors import FormatError
+from formats.errors import FormatError
 
 T = np.array([1_700_000_000_000_000_000, 1_700_000_000_050_000_001, 1_700_000_001_000_000_000])
 X = np.array([1.5, 1.525, -2.0])
