@@ -24,8 +24,8 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from formats.writers.atomic import atomic_open
 from formats.errors import FormatError, InputError
+from formats.writers.atomic import atomic_open
 
 __all__ = ["Trajectory", "read_trajectory_tum", "write_trajectory_tum"]
 

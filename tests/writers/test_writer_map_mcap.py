@@ -13,10 +13,10 @@ from mcap.reader import make_reader
 from rosbags.typesys import Stores, get_typestore
 from writers_helpers import make_features
 
+from formats.map_types import GridSpec
 from formats.writers.map_mcap import measured_colours, write_map_mcap
 from formats.writers.nav2_map import write_nav2_map
 from formats.writers.trajectory_tum import Trajectory
-from formats.map_types import GridSpec
 
 GRID = GridSpec(origin_x=-1.5, origin_y=2.25, resolution=0.05, width=4, height=3)
 # Row 0 = min y. Distinct classes in every row so a flipped grid cannot pass.

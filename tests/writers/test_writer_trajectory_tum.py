@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from formats.writers.trajectory_tum import read_trajectory_tum, write_trajectory_tum
 from formats.errors import FormatError
+from formats.writers.trajectory_tum import read_trajectory_tum, write_trajectory_tum
 
 T = np.array([1_700_000_000_000_000_000, 1_700_000_000_050_000_001, 1_700_000_001_000_000_000])
 X = np.array([1.5, 1.525, -2.0])
