@@ -49,12 +49,15 @@ from pipeline.pose_sync import (
     sonar_geometry,
 )
 from pipeline.reading_quality import REASONS
+from pipeline.run_warnings import run_warnings
 from pipeline.scans import ScanBuilder, ScanKeys
 from pipeline.sensors import SensorTable, resolve_sensors
 
 log = logging.getLogger("sonarmap")
 
-Progress = Callable[[int, int], None]  # (readings done, readings total)
+#: ``(stage, readings done, readings total)``: stage "reading" (pass 1, the total is not
+#: known yet: None) then "mapping" (pass 2, the total counted by pass 1).
+Progress = Callable[[str, int, int | None], None]
 
 
 @dataclass
@@ -97,7 +100,8 @@ def run(
             reader = open_log(log_path, format, config)
         with reader:
             with timer.stage("ingest"):
-                sv = survey(reader)
+                found = None if progress is None else (lambda n: progress("reading", n, None))
+                sv = survey(reader, found)
                 info = reader.info()
             sensors = resolve_sensors(
                 sv.sensor_names,
@@ -193,7 +197,7 @@ def _map_stream(
         with timer.stage("mapping"):
             _integrate(mappers, scans)
         if progress is not None:
-            progress(state.readings_seen, total)
+            progress("mapping", state.readings_seen, total)
     with timer.stage("mapping"):
         _integrate(mappers, list(builder.flush()))
     state.scans = builder.count
@@ -280,7 +284,7 @@ def _metrics(
             label: _ablation_row(mappers[key], snapshots[key])
             for label, key in (("with_correction", "main"), ("without_correction", "no_correction"))
         }
-    return RunMetrics(
+    metrics = RunMetrics(
         input={
             "path": str(log_path),
             "name": log_path.name,
@@ -326,6 +330,8 @@ def _metrics(
         sensors=sensor_rows,
         comparison=comparison,
     )
+    metrics.warnings = run_warnings(metrics.deterministic())
+    return metrics
 
 
 def _ablation_row(mapper: Mapper, snap: MapSnapshot) -> dict[str, Any]:
@@ -381,8 +387,8 @@ def _write_outputs(
     from formats.writers.map_mcap import write_map_mcap
     from formats.writers.map_png import write_map_png
     from formats.writers.nav2_map import write_nav2_map
-    from formats.writers.report import write_reports
     from formats.writers.trajectory_tum import write_trajectory_tum
+    from pipeline.run_report import COMPARISON_IMAGES, write_run_reports
 
     t_outputs = time.perf_counter()
     snap = snapshots["main"]
@@ -413,21 +419,13 @@ def _write_outputs(
         },
     )
     (out.path("config.toml")).write_text(dump_config(config), encoding="utf-8")
-    labels = {"with_correction": "with feature correction",
-              "without_correction": "without feature correction"}
-    images = {labels["with_correction"]: "map.png"}
     if "no_correction" in snapshots:
         other = snapshots["no_correction"]
         write_map_png(
-            out.path("map_no_correction.png"), other, trajectory_xy=traj_xy, features=other.features,
+            out.path(COMPARISON_IMAGES["without_correction"]), other, trajectory_xy=traj_xy,
+            features=other.features,
             title=f"{metrics.input['name']} - without feature correction",
         )
-        images[labels["without_correction"]] = "map_no_correction.png"
-    readings_per_sensor = {row["name"]: row["readings"] for row in metrics.sensors}
-    comparison = None
-    if metrics.comparison is not None:
-        comparison = {labels[k]: v for k, v in metrics.comparison.items()}
-        comparison["images"] = images
     now = time.perf_counter()
     timer.seconds["outputs"] = now - t_outputs
     timer.seconds["total"] = now - t_start
@@ -438,12 +436,4 @@ def _write_outputs(
         "peak_rss_mb": round(peak_rss_mb(), 1),
     }
     (out.path("metrics.json")).write_text(metrics.to_json(), encoding="utf-8")
-    write_reports(
-        out.tmp_dir,
-        metrics=metrics.deterministic(),  # no timing: reports are the same bytes on a rerun
-        map_png=out.path("map.png"),
-        features=snap.features,
-        readings_per_sensor=readings_per_sensor,
-        dropped_by_reason=metrics.dropped,
-        comparison=comparison,
-    )
+    write_run_reports(out.tmp_dir)  # from the files just written, as evaluate does
