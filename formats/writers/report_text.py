@@ -56,6 +56,8 @@ def label(key: str) -> str:
     ``readings pose synced``, ``tolerance_m`` → ``tolerance (m)``."""
     if key in REASON_LABELS:
         return REASON_LABELS[key]
+    if key.endswith("duration_s"):  # shown as a duration ("1 min 45.9 s"): no unit needed
+        return key[: -len("_s")].replace("_", " ")
     for suffix, unit in _UNITS:
         if key.endswith(suffix) and len(key) > len(suffix):
             return key[: -len(suffix)].replace("_", " ") + unit

@@ -60,6 +60,7 @@ def test_readable_values() -> None:
     assert format_duration(7384) == "2 h 03 min 04 s"
     assert format_value("x", None) == "n/a" and format_value("x", True) == "yes"
     assert label("tolerance_m") == "tolerance (m)" and label("in_pose_gap") == "in a pose gap"
+    assert label("duration_s") == "duration"
     assert label("mean_feature_variance_m2") == "mean feature variance (m²)"
 
 
