@@ -209,7 +209,7 @@ def test_prose_and_markup_are_not_taken_for_csv(tmp_path: Path) -> None:
     readme = tmp_path / "README.md"
     readme.write_text("# title\n\n**Bold prose** with words, and a comma.\n")
     assert not looks_like_csv(readme)
-    with pytest.raises(FormatError, match="not a recognised log format.*tried ROS 1 bag"):
+    with pytest.raises(FormatError, match=r"not a recognised log format.*tried ROS 1 bag"):
         detect_format(readme)
     for text in ("t,x,y,yaw,sensor,range\n1,2,3,4,s,5\n", "t_ms z1 z2\n0 100 200\n",
                  '"t","sonar_1"\n1.5,2\n', "# comment\n1700000000.5,1.0\n"):

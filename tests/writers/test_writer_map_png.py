@@ -105,7 +105,7 @@ def test_cropped_to_the_observed_area_plus_a_margin() -> None:
 
 def test_metre_ticks_and_legend() -> None:
     feats = make_features(x=[1.5], y=[0.5], cov=[(0.01, 0.0, 0.0025)])
-    img, frame, (map_w, map_h) = render_map_with_frame(
+    img, frame, (_map_w, map_h) = render_map_with_frame(
         make_snapshot(GRID, _prob(), feats), trajectory_xy=np.array([[0.1, 0.1], [1.0, 0.9]]),
         features=feats, crop=False)
     arr = np.asarray(img)
