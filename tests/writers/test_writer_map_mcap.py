@@ -148,3 +148,15 @@ def test_measured_colours_log_scale() -> None:
     assert c[1] == pytest.approx([0.128, 0.567, 0.551])  # log-midway = the middle stop
     assert measured_colours([1, 1]).tolist() == [[0.267, 0.005, 0.329]] * 2
     assert measured_colours([4, 4]).tolist() == [[0.993, 0.906, 0.144]] * 2
+
+
+def test_rosbags_anyreader_reads_it_from_the_embedded_schemas(written) -> None:
+    """rosbags' AnyReader without a typestore: the types come from the file's schemas."""
+    from rosbags.highlevel import AnyReader
+
+    path, _h, _t = written
+    with AnyReader([path]) as reader:
+        msgs = {c.topic: reader.deserialize(raw, c.msgtype) for c, _t, raw in reader.messages()}
+    assert np.asarray(msgs["/map"].data).reshape(3, 4).tolist()[0] == [100, 0, -1, -1]
+    assert len(msgs["/sonar_features"].markers) == 3
+    assert len(msgs["/trajectory"].poses) == 2
