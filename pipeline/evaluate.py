@@ -559,14 +559,14 @@ def _trajectory_error(
     run_dir: Path, truth_path: Path, rpe_delta: float, rpe_unit: str
 ) -> dict[str, Any]:
     """ATE/RPE of the run's trajectory.csv against the true trajectory CSV."""
-    from formats.writers.trajectory_csv import read_trajectory_csv
+    from formats.writers.trajectory_csv import read_trajectory
     from pipeline.trajectory_error import Poses2D, trajectory_error
 
     run_traj = run_dir / "trajectory.csv"
     if not run_traj.is_file():
         raise InputError("run directory has no trajectory.csv (written by sonarmap run)", run_dir)
-    est = read_trajectory_csv(run_traj)
-    truth = read_trajectory_csv(truth_path)
+    est = read_trajectory(run_traj)
+    truth = read_trajectory(truth_path)
     if rpe_unit not in ("m", "frames"):
         raise ConfigError(f"RPE unit must be 'm' or 'frames', got {rpe_unit!r}")
     try:

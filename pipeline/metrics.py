@@ -100,6 +100,7 @@ class RunMetrics:
     timing: dict[str, Any] = field(default_factory=dict)
     comparison: dict[str, Any] | None = None
     pose_refinement: dict[str, Any] | None = None  # run --refine-poses (pipeline/refine/)
+    warnings: list[str] = field(default_factory=list)
 
     def deterministic(self) -> dict[str, Any]:
         out = {
@@ -116,6 +117,7 @@ class RunMetrics:
             out["comparison"] = self.comparison
         if self.pose_refinement is not None:
             out["pose_refinement"] = self.pose_refinement
+        out["warnings"] = self.warnings
         return out
 
     def to_dict(self) -> dict[str, Any]:
@@ -123,6 +125,11 @@ class RunMetrics:
 
     def to_json(self) -> str:
         return json.dumps(_clean(self.to_dict()), indent=2, sort_keys=False) + "\n"
+
+
+def json_ready(v: Any) -> Any:
+    """``v`` with NaN/Inf as null, numpy scalars as Python numbers (what metrics.json holds)."""
+    return _clean(v)
 
 
 def _clean(v: Any) -> Any:

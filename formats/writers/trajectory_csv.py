@@ -131,3 +131,22 @@ def _is_number(s: str) -> bool:
     except ValueError:
         return False
     return True
+
+
+def read_trajectory(path: Path) -> TrajectoryTable:
+    """A trajectory file of either layout sonarmap writes: the CSV ``t,x,y,yaw`` (truth
+    files) or TUM (a run's ``trajectory.csv``, :mod:`formats.writers.trajectory_tum`),
+    told apart by the first line that is not a comment (commas or not)."""
+    from formats.writers.trajectory_tum import read_trajectory_tum
+
+    try:
+        with Path(path).open(encoding="utf-8") as f:
+            first = next((ln for ln in f if ln.strip() and not ln.lstrip().startswith("#")), "")
+    except FileNotFoundError as err:
+        raise InputError("trajectory file not found", path) from err
+    except (OSError, UnicodeDecodeError) as err:
+        raise FormatError(f"cannot read trajectory: {err}", path) from err
+    if "," in first or not first:
+        return read_trajectory_csv(path)
+    tum = read_trajectory_tum(path)
+    return TrajectoryTable(tum.t_ns, tum.x, tum.y, tum.yaw)

@@ -109,11 +109,12 @@ def test_regress_tolerances_option(tmp_path: Path) -> None:
 
 def test_evaluate_truth_trajectory_reports_ate_and_rpe(tmp_path: Path) -> None:
     from formats.writers.trajectory_csv import write_trajectory_csv
+    from formats.writers.trajectory_tum import write_trajectory_tum
 
     truth = write_truth(tmp_path)
     run = write_run(tmp_path / "run")
     t = (np.arange(5) * 1_000_000_000).astype(np.int64)
-    write_trajectory_csv(run / "trajectory.csv", t, np.array([0, 1, 2, 3, 4.4]), np.zeros(5),
+    write_trajectory_tum(run / "trajectory.csv", t, np.array([0, 1, 2, 3, 4.4]), np.zeros(5),
                          np.zeros(5))
     true_csv = tmp_path / "world.truth.csv"
     write_trajectory_csv(true_csv, t, np.arange(5.0), np.zeros(5), np.zeros(5))
