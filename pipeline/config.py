@@ -172,8 +172,9 @@ class PoseRefinementConfig:
     odometry_sigma_yaw_deg: float = doc_field("odometry rotation σ, degrees per √m", default=0.5)
     calibration_search: bool = doc_field("search the odometry calibration that makes the echoes "
                                     "sharpest before matching", default=True)
-    calibration_max_scale: float = doc_field("... scale error searched in ± this (0: bias only)",
-                                        default=0.1)
+    calibration_max_scale: float = doc_field(
+        "... scale error searched in ± this; 0 (default): the heading bias only — the "
+        "sharpness leans to a too-short scale on sonar (RESULTS.md)", default=0.0)
     calibration_max_bias_deg_per_m: float = doc_field("... heading bias searched in ± this, deg/m",
                                                  default=3.0)
     calibrate: bool = doc_field("estimate the odometry's scale error and heading bias", default=True)
