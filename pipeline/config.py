@@ -33,9 +33,10 @@ def _doc(text: str, **kw: Any) -> Any:
 class MapperConfig:
     """Parameters of the mapping method (ALGORITHM.md), with its documented defaults."""
 
-    method: Literal["andersone", "classic"] = _doc(
-        "mapping method: 'andersone' (the paper's) or 'classic' (log-odds baseline, §8)",
-        default="andersone",
+    method: Literal["attribution", "andersone", "classic"] = _doc(
+        "mapping method: 'attribution' (echo attribution, §9; the default), 'andersone' "
+        "(the paper's, §1-5) or 'classic' (log-odds baseline, §8)",
+        default="attribution",
     )
     sigma_d0: float = _doc("σ_d0, distance uncertainty at zero range, m (eq. 2)", default=0.01)
     k_d: float = _doc("k_d, growth of distance uncertainty with range (eq. 2)", default=0.01)
@@ -90,6 +91,30 @@ class MapperConfig:
     )
     classic_thickness_cells: float = _doc(
         "classic baseline: obstacle thickness w, in cells (§8)", default=2.0
+    )
+    attr_band_sigmas: float = _doc(
+        "attribution (§9): an echo's arc is d ± this many σ_d(d) (at least half a cell)",
+        default=4.0,
+    )
+    attr_candidate_ratio: float = _doc(
+        "attribution (§9): an arc cell cannot have produced an echo when the log saw it "
+        "free more than this many times as often as echo arcs cover it",
+        default=2.0,
+    )
+    attr_dilution: float = _doc(
+        "attribution (§9): each of an echo's n candidate cells gets 1/n**attr_dilution "
+        "(0 = a full hit each, 1 = an even split)",
+        default=0.5,
+    )
+    attr_free_weight: float = _doc(
+        "attribution (§9): occupied when attributed weight > attr_free_weight·free count "
+        "+ attr_threshold·median attributed weight",
+        default=0.25,
+    )
+    attr_threshold: float = _doc(
+        "attribution (§9): the evidence floor, as a fraction of the log's median "
+        "attributed weight per cell",
+        default=0.35,
     )
     seed: int = _doc("seed of the particle generator (runs are reproducible)", default=0)
 

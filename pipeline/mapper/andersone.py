@@ -47,6 +47,11 @@ def concat_scans(scans: Sequence[Scan]) -> tuple[Scan, I64]:
 class AndersoneMapper:
     """The paper's method on one grid; feed it scans with :meth:`integrate`."""
 
+    passes = 1
+
+    def begin_pass(self, index: int) -> None:
+        """One pass only: nothing to prepare."""
+
     def __init__(self, config: MapperConfig, grid: GridSpec) -> None:
         self.config = config
         self.grid = grid

@@ -32,6 +32,11 @@ from pipeline.mapper.types import F32, B, FeatureTable, GridSpec, MapperCounters
 class ClassicMapper:
     """Occupancy grid with an inverse sonar model; no features."""
 
+    passes = 1
+
+    def begin_pass(self, index: int) -> None:
+        """One pass only: nothing to prepare."""
+
     def __init__(self, config: MapperConfig, grid: GridSpec) -> None:
         self.config = config
         self.grid = grid
