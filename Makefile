@@ -8,7 +8,7 @@ STAMP  := $(VENV)/.installed-stamp
 DEMO_LOG := sample_logs/office/office.mcap
 DEMO_OUT := demo_out/office
 
-.PHONY: setup demo test lint typecheck unit bench fuzz goldens samples compare clean
+.PHONY: setup demo test lint layers typecheck unit bench fuzz goldens samples compare clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -c 'import sys; sys.exit("sonarmap needs Python 3.11+") if sys.version_info < (3, 11) else None'
@@ -18,6 +18,9 @@ $(STAMP): pyproject.toml
 	# OctoMap is only the mapper benchmark's baseline; without a wheel for this Python the
 	# benchmark skips its row instead of failing the set-up.
 	$(BIN)/python -m pip install --quiet -e ".[bench]" || echo "octomap-python not installed: the OctoMap benchmark row will be skipped"
+	# Compile the mapper's numba kernels into their on-disk cache once, here, rather than
+	# in the first run (or in both test workers at once).
+	$(BIN)/python -m pipeline.mapper.kernels.warm
 	touch $(STAMP)
 
 setup: $(STAMP)
@@ -29,13 +32,18 @@ demo: $(STAMP)
 lint: $(STAMP)
 	$(BIN)/ruff check pipeline formats cli tests benchmarks fuzz sample_logs
 
+# The import contract in pyproject.toml: formats/ imports neither pipeline/ nor cli/, and
+# pipeline/ does not import cli/.
+layers: $(STAMP)
+	$(BIN)/lint-imports
+
 typecheck: $(STAMP)
 	$(BIN)/mypy
 
 unit: $(STAMP)
 	$(BIN)/python -m pytest -q -n 2
 
-test: lint typecheck unit
+test: lint layers typecheck unit
 
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks

@@ -31,10 +31,11 @@ import time
 
 import numpy as np
 
+from formats.map_types import GridSpec
 from pipeline.config import MapperConfig
 from pipeline.mapper import Mapper, make_mapper
 from pipeline.mapper.synthetic import ring_scans, room_grid
-from pipeline.mapper.types import GridSpec, Scan
+from pipeline.mapper.types import Scan
 
 
 def run_mapper(cfg: MapperConfig, grid: GridSpec, scans: list[Scan]) -> tuple[float, Mapper]:

@@ -100,8 +100,8 @@ def load_config_for(log: Path, explicit: Path | None) -> Config:
 def log_reach(log: Path, cfg: Config) -> float | None:
     """Largest sensor max range, m, in the log's readings or the configuration."""
     from formats import open_log
+    from formats.presets import PRESETS
     from pipeline.ingest import survey
-    from pipeline.presets import PRESETS
 
     with open_log(log, None, cfg) as reader:
         sv = survey(reader)
@@ -211,7 +211,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--keep", type=Path, help="keep the run directories under this directory")
     args = ap.parse_args(argv)
 
-    from pipeline.errors import SonarmapError
+    from formats.errors import SonarmapError
 
     pairs = parse_pairs(args.logs) if args.logs else default_pairs(REPO / "sample_logs")
     if not pairs:

@@ -275,9 +275,9 @@ def config_cmd(
 
       sonarmap config --config mine.toml
     """
+    from formats.errors import OutputError
     from formats.writers.atomic import atomic_write_text
     from pipeline.config import dump_config, load_config
-    from pipeline.errors import OutputError
 
     text = dump_config(load_config(config))
     if output is None:

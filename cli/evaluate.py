@@ -55,8 +55,8 @@ def evaluate(
 
       sonarmap evaluate out/office --truth office.truth.yaml --json -o golden/evaluation.json
     """
+    from formats.errors import OutputError
     from formats.writers.atomic import atomic_write_text
-    from pipeline.errors import OutputError
     from pipeline.evaluate import evaluate_run
 
     if output is not None:

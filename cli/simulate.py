@@ -50,8 +50,8 @@ def register(app: typer.Typer) -> None:
 
           sonarmap simulate sample_logs/worlds/orchard.toml -o orchard.bag -f ros1 --drift-xy 0.02
         """
+        from formats.presets import PRESETS
         from pipeline.config import load_config
-        from pipeline.presets import PRESETS
         from pipeline.simulate.simulate import SimOptions, run_simulation
 
         cfg = load_config(config)

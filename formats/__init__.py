@@ -13,8 +13,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 from formats.contract import LogReader
-from pipeline.config import Config
-from pipeline.errors import FormatError
+from formats.errors import FormatError
+from formats.options import ReaderOptions, ReaderSettings
 
 ROS1_MAGIC = b"#ROSBAG V2.0\n"
 MCAP_MAGIC = b"\x89MCAP0\r\n"
@@ -22,34 +22,34 @@ SQLITE_MAGIC = b"SQLite format 3\x00"
 ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
 
 
-def _open_ros1(path: Path, config: Config) -> LogReader:
+def _open_ros1(path: Path, config: ReaderSettings) -> LogReader:
     from formats.ros.reader import RosLogReader
     from formats.ros.ros1bag import Ros1BagSource
 
     return RosLogReader(Ros1BagSource(path), config)
 
 
-def _open_ros2(path: Path, config: Config) -> LogReader:
+def _open_ros2(path: Path, config: ReaderSettings) -> LogReader:
     from formats.ros.reader import RosLogReader
     from formats.ros.ros2bag import Ros2BagSource
 
     return RosLogReader(Ros2BagSource(path), config)
 
 
-def _open_mcap(path: Path, config: Config) -> LogReader:
+def _open_mcap(path: Path, config: ReaderSettings) -> LogReader:
     from formats.ros.mcap_source import McapSource
     from formats.ros.reader import RosLogReader
 
     return RosLogReader(McapSource(path), config)
 
 
-def _open_csv(path: Path, config: Config) -> LogReader:
+def _open_csv(path: Path, config: ReaderSettings) -> LogReader:
     from formats.csv_log import CsvLogReader
 
     return CsvLogReader(path, config)
 
 
-FORMATS: dict[str, Callable[[Path, Config], LogReader]] = {
+FORMATS: dict[str, Callable[[Path, ReaderSettings], LogReader]] = {
     "ros1": _open_ros1,
     "ros2": _open_ros2,
     "mcap": _open_mcap,
@@ -100,10 +100,10 @@ def detect_format(path: str | Path) -> str:
     )
 
 
-def open_log(path: str | Path, format: str | None = None, config: Config | None = None) -> LogReader:
+def open_log(path: str | Path, format: str | None = None, config: ReaderSettings | None = None) -> LogReader:
     """Open a log for reading; ``format`` (a key of FORMATS) overrides detection."""
     p = Path(path)
-    cfg = config if config is not None else Config()
+    cfg = config if config is not None else ReaderOptions()
     name = format or cfg.input.format or detect_format(p)
     if name not in FORMATS:
         raise FormatError(f"unknown format '{name}' (known: {', '.join(sorted(FORMATS))})", p)

@@ -19,7 +19,7 @@ frame. Ranges at or above the laser's maximum (PARAM ``robot_front_laser_max``, 
 
 Logs may be gzip-compressed. Comment lines (``#``) and blank lines are skipped, and so are
 the other message types (counted in :attr:`CarmenLog.skipped`). Malformed lines raise
-:class:`~pipeline.errors.FormatError` naming the file and the line number.
+:class:`~formats.errors.FormatError` naming the file and the line number.
 """
 
 from __future__ import annotations
@@ -31,13 +31,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import numpy.typing as npt
 
+from formats.arrays import F64, I64
 from formats.contract import SensorMount
-from pipeline.errors import FormatError
-
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
+from formats.errors import FormatError
 
 GZIP_MAGIC = b"\x1f\x8b"
 DEFAULT_FOV_DEG = 180.0

@@ -31,9 +31,7 @@ from typing import Literal, Protocol, runtime_checkable
 import numpy as np
 import numpy.typing as npt
 
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
-I32 = npt.NDArray[np.int32]
+from formats.arrays import F64, I32, I64
 
 Kind = Literal["ranges", "poses", "mounts"]
 ALL_KINDS: tuple[Kind, ...] = ("ranges", "poses", "mounts")

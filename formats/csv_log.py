@@ -1,6 +1,6 @@
 """CSV / plain-text sonar logs: the reader and format sniffing.
 
-Schema (``[input.csv]`` in the configuration, :class:`pipeline.config.CsvConfig`)
+Schema (``[input.csv]`` in the configuration, :class:`formats.options.CsvConfig`)
 -------------------------------------------------------------------------------
 Two shapes, chosen by ``layout``:
 
@@ -51,6 +51,7 @@ from typing import BinaryIO
 import numpy as np
 import numpy.typing as npt
 
+from formats.arrays import F64, I64, Strs
 from formats.contract import (
     ALL_KINDS,
     Batch,
@@ -63,13 +64,9 @@ from formats.contract import (
     TopicInfo,
     make_range_batch,
 )
-from pipeline.config import Config, CsvConfig, MountConfig
-from pipeline.errors import FormatError
-from pipeline.presets import PRESETS
-
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
-Strs = npt.NDArray[np.str_]
+from formats.errors import FormatError
+from formats.options import CsvConfig, MountConfig, ReaderSettings
+from formats.presets import PRESETS
 
 CHUNK_BYTES = 4 << 20  # bytes of text per chunk (about 60 000 rows of a typical log)
 POSE_PARENT_FRAME = "odom"
@@ -90,7 +87,7 @@ _SENSORS = (("sensor", "x", "y", "yaw"), ("fov", "min_range", "max_range"))
 
 
 def configured_limits(
-    config: Config,
+    config: ReaderSettings,
 ) -> tuple[dict[str, tuple[float, float, float]], tuple[float, float, float]]:
     """Beam limits from the configuration: ``({name: (fov rad, r_min m, r_max m)}, defaults)``.
 
@@ -117,7 +114,7 @@ def configured_limits(
 # --------------------------------------------------------------------------- sniffing
 
 
-def looks_like_csv(path: str | Path, config: Config | None = None) -> bool:
+def looks_like_csv(path: str | Path, config: ReaderSettings | None = None) -> bool:
     """Whether ``path`` looks like a CSV log (content sniffing, for format detection).
 
     A file: UTF-8 text without NUL bytes whose first non-comment line splits into at
@@ -538,7 +535,7 @@ class CsvLogReader:
 
     format_name = "csv"
 
-    def __init__(self, path: str | Path, config: Config) -> None:
+    def __init__(self, path: str | Path, config: ReaderSettings) -> None:
         self.path = Path(path)
         self.config = config
         self.csv = config.input.csv

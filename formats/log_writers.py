@@ -31,14 +31,13 @@ from typing import TYPE_CHECKING, Any, Protocol, cast
 import numpy as np
 import numpy.typing as npt
 
+from formats.arrays import F64, I64
 from formats.contract import PoseBatch, RangeBatch, SensorMount
-from pipeline.errors import ConfigError, OutputError
+from formats.errors import ConfigError, OutputError
 
 if TYPE_CHECKING:
-    from pipeline.mapper.types import GridSpec
+    from formats.map_types import GridSpec
 
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
 
 FORMATS: tuple[str, ...] = ("ros1", "ros2", "ros2-mcap", "mcap", "mcap-ros1", "csv", "csv-set")
 _COMPRESSION: dict[str, tuple[str, ...]] = {

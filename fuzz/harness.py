@@ -2,7 +2,7 @@
 
 Property: opening a log with :func:`formats.open_log` and draining ``info()`` and
 ``batches()`` either succeeds (possibly with fewer records and the loss in the notes) or
-raises :class:`~pipeline.errors.FormatError` / :class:`~pipeline.errors.TopicError` with a
+raises :class:`~formats.errors.FormatError` / :class:`~formats.errors.TopicError` with a
 one-line message naming the file — never another exception, never longer than a time
 limit, never memory proportional to a declared size rather than the file size.
 
@@ -113,7 +113,7 @@ def read_everything(path: Path) -> int:
     exercised on every fixture.
     """
     from formats import open_log
-    from pipeline.errors import TopicError
+    from formats.errors import TopicError
 
     records = 0
     with open_log(path) as reader:
@@ -133,7 +133,7 @@ def read_everything(path: Path) -> int:
 
 def check(target: Target, data: bytes, work: Path, time_limit_s: float = TIME_LIMIT_S) -> Outcome:
     """Write ``data`` as the target's member under ``work`` and check the property."""
-    from pipeline.errors import FormatError, TopicError
+    from formats.errors import FormatError, TopicError
 
     path = target.materialize(work, data)
     names = {path.name, target.file.name}

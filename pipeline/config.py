@@ -4,7 +4,7 @@ One TOML file holds every parameter: the method's (``[mapper]``, ALGORITHM.md §
 §8), the grid, scan building (§6), pose sync, input selection (topics, CSV schema) and
 sensor mounts. Each section is a frozen dataclass; each field's ``doc`` metadata is the
 comment ``sonarmap config`` prints. Loading validates names, types and ranges and raises
-:class:`~pipeline.errors.ConfigError` with one line naming the file and the key.
+:class:`~formats.errors.ConfigError` with one line naming the file and the key.
 
 TOML is parsed with the standard library's ``tomllib``: no code is executed.
 """
@@ -22,101 +22,99 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from pipeline.errors import ConfigError
-
-
-def _doc(text: str, **kw: Any) -> Any:
-    return field(metadata={"doc": text}, **kw)
+from formats.errors import ConfigError
+from formats.options import InputConfig, SensorsConfig, doc_field
+from formats.presets import PRESETS
 
 
 @dataclass(frozen=True)
 class MapperConfig:
     """Parameters of the mapping method (ALGORITHM.md), with its documented defaults."""
 
-    method: Literal["attribution", "andersone", "classic"] = _doc(
+    method: Literal["attribution", "andersone", "classic"] = doc_field(
         "mapping method: 'attribution' (echo attribution, §9; the default), 'andersone' "
         "(the paper's, §1-5) or 'classic' (log-odds baseline, §8)",
         default="attribution",
     )
-    sigma_d0: float = _doc("σ_d0, distance uncertainty at zero range, m (eq. 2)", default=0.01)
-    k_d: float = _doc("k_d, growth of distance uncertainty with range (eq. 2)", default=0.01)
-    c_a: float = _doc(
+    sigma_d0: float = doc_field("σ_d0, distance uncertainty at zero range, m (eq. 2)", default=0.01)
+    k_d: float = doc_field("k_d, growth of distance uncertainty with range (eq. 2)", default=0.01)
+    c_a: float = doc_field(
         "c_a in σ_a = d·tan(β/2)/c_a (eq. 3); 2 puts the 2σ bound on the cone edge",
         default=2.0,
     )
-    eps_max: float = _doc(
+    eps_max: float = doc_field(
         "ε_max, m: readings with d ≥ r_max − ε_max count as 'no echo' (§1)", default=0.01
     )
-    match_distance: float = _doc(
+    match_distance: float = doc_field(
         "a reading merges into the nearest feature closer than this, m (§2)", default=0.15
     )
-    kappa_free: float = _doc(
+    kappa_free: float = doc_field(
         "κ_free: a cone is free up to d − κ_free·σ_d(d) (§3)", default=2.0
     )
-    clear_on_max_range: bool = _doc(
+    clear_on_max_range: bool = doc_field(
         "let max-range readings clear their cone up to r_max (§3; paper: off)", default=False
     )
-    feature_correction: bool = _doc(
+    feature_correction: bool = doc_field(
         "correct features with free-space scans (§4); off = the paper's ablation",
         default=True,
     )
-    n_particles: int = _doc("N, particles drawn per corrected feature (§4)", default=200)
-    keep_fraction: float = _doc(
+    n_particles: int = doc_field("N, particles drawn per corrected feature (§4)", default=200)
+    keep_fraction: float = doc_field(
         "a feature is refit when at least this fraction of particles survive (§4)",
         default=0.05,
     )
-    protect_times: int = _doc(
+    protect_times: int = doc_field(
         "features measured at least this often are protected from deletion (§4)", default=3
     )
-    split_guard: bool = _doc(
+    split_guard: bool = doc_field(
         "a refit whose survivors' mean falls in a free cell of the scan counts as cleared "
         "(deleted unless protected) instead of refitting across the free cone; the paper "
         "does not cover this case (§4; false = eqs. 9-10 literally)",
         default=True,
     )
-    refit_positions: Literal["particle", "cell"] = _doc(
+    refit_positions: Literal["particle", "cell"] = doc_field(
         "eqs. 9-10 refit from the survivors' own positions ('particle') or their cell "
         "centres ('cell', adds ~res²/12 of rounding variance at every refit) (§4)",
         default="particle",
     )
-    sigma_min: float = _doc(
+    sigma_min: float = doc_field(
         "σ_min, covariance floor, m; 0 = half a grid cell (§4)", default=0.0
     )
-    p_free: float = _doc("inverse sensor model value of a free observation (eq. 11)", default=0.35)
-    p_clamp_min: float = _doc("free layer clamp l_min = logit(p_clamp_min) (eq. 11)", default=0.12)
-    p_clamp_max: float = _doc("free layer clamp l_max = logit(p_clamp_max) (eq. 11)", default=0.97)
-    p_occ: float = _doc("probability of cells inside a feature's 2σ ellipse (eq. 12)", default=0.9)
-    classic_p_occ: float = _doc(
+    p_free: float = doc_field("inverse sensor model value of a free observation (eq. 11)", default=0.35)
+    p_clamp_min: float = doc_field("free layer clamp l_min = logit(p_clamp_min) (eq. 11)", default=0.12)
+    p_clamp_max: float = doc_field("free layer clamp l_max = logit(p_clamp_max) (eq. 11)", default=0.97)
+    p_occ: float = doc_field("probability of cells inside a feature's 2σ ellipse (eq. 12)", default=0.9)
+    classic_p_occ: float = doc_field(
         "classic baseline: inverse sensor model value at the echo (§8)", default=0.7
     )
-    classic_thickness_cells: float = _doc(
+    classic_thickness_cells: float = doc_field(
         "classic baseline: obstacle thickness w, in cells (§8)", default=2.0
     )
-    attr_band_sigmas: float = _doc(
+    attr_band_sigmas: float = doc_field(
         "attribution (§9): an echo's arc is d ± this many σ_d(d) (at least half a cell)",
         default=4.0,
     )
-    attr_candidate_ratio: float = _doc(
+    attr_candidate_ratio: float = doc_field(
         "attribution (§9): an arc cell cannot have produced an echo when the log saw it "
         "free more than this many times as often as echo arcs cover it",
         default=2.0,
     )
-    attr_dilution: float = _doc(
+    attr_dilution: float = doc_field(
         "attribution (§9): each of an echo's n candidate cells gets 1/n**attr_dilution "
         "(0 = a full hit each, 1 = an even split)",
         default=0.5,
     )
-    attr_free_weight: float = _doc(
+    attr_free_weight: float = doc_field(
         "attribution (§9): occupied when attributed weight > attr_free_weight·free count "
         "+ attr_threshold·median attributed weight",
         default=0.25,
     )
-    attr_threshold: float = _doc(
+    attr_threshold: float = doc_field(
         "attribution (§9): the evidence floor, as a fraction of the log's median "
         "attributed weight per cell",
         default=0.35,
     )
-    seed: int = _doc("seed of the particle generator (runs are reproducible)", default=0)
+    seed: int = doc_field("seed of the particle generator (runs are reproducible)", default=0)
 
     def sigma_floor(self, resolution: float) -> float:
         """σ_min in metres: the configured value, or half a cell when it is 0."""
@@ -127,106 +125,38 @@ class MapperConfig:
 class GridConfig:
     """The map grid."""
 
-    resolution: float = _doc("cell size, m", default=0.05)
-    extent: tuple[float, ...] = _doc(
+    resolution: float = doc_field("cell size, m", default=0.05)
+    extent: tuple[float, ...] = doc_field(
         "[xmin, ymin, xmax, ymax] in m; empty = from the poses plus max range",
         default=(),
     )
-    margin: float = _doc("extra border around an automatic extent, m", default=0.5)
-    max_cells: int = _doc("refuse grids larger than this many cells", default=200_000_000)
+    margin: float = doc_field("extra border around an automatic extent, m", default=0.5)
+    max_cells: int = doc_field("refuse grids larger than this many cells", default=200_000_000)
 
 
 @dataclass(frozen=True)
 class ScanConfig:
     """How readings are grouped into scans (ALGORITHM.md §6)."""
 
-    policy: Literal["time", "motion", "explicit"] = _doc(
+    policy: Literal["time", "motion", "explicit"] = doc_field(
         "'time' (window), 'motion' (travel/turn) or 'explicit' (scan id in the log)",
         default="time",
     )
-    window_s: float = _doc("time policy: scan length, s", default=0.2)
-    max_travel_m: float = _doc("motion policy: new scan after this travel, m", default=0.10)
-    max_turn_deg: float = _doc("motion policy: new scan after this turn, degrees", default=10.0)
+    window_s: float = doc_field("time policy: scan length, s", default=0.2)
+    max_travel_m: float = doc_field("motion policy: new scan after this travel, m", default=0.10)
+    max_turn_deg: float = doc_field("motion policy: new scan after this turn, degrees", default=10.0)
 
 
 @dataclass(frozen=True)
 class PoseSyncConfig:
     """Interpolating the robot pose at each reading's stamp."""
 
-    max_pose_gap_s: float = _doc(
+    max_pose_gap_s: float = doc_field(
         "readings inside a pose gap longer than this are dropped, s", default=0.5
     )
-    time_offset_s: float = _doc(
+    time_offset_s: float = doc_field(
         "added to range stamps before lookup (sensor clock offset), s", default=0.0
     )
-
-
-@dataclass(frozen=True)
-class CsvConfig:
-    """How to read CSV/text logs (see formats/csv_log.py for the schema)."""
-
-    layout: Literal["single", "set"] = _doc(
-        "'single': one file, a row per reading (t, x, y, yaw, sensor, range); "
-        "'set': separate ranges/poses/sensors files",
-        default="single",
-    )
-    ranges_file: str = _doc("set layout: ranges file, relative to the log directory", default="ranges.csv")
-    poses_file: str = _doc("set layout: poses file, relative to the log directory", default="poses.csv")
-    sensors_file: str = _doc(
-        "set layout: sensors file (optional; missing = mounts from [sensors])", default="sensors.csv"
-    )
-    wide_ranges: bool = _doc(
-        "ranges file has one column per sensor (t, r_0, r_1, ...) instead of a row per reading",
-        default=False,
-    )
-    delimiter: str = _doc("field delimiter; 'whitespace' for runs of spaces/tabs", default=",")
-    header: bool = _doc("first line names the columns", default=True)
-    time_unit: Literal["s", "ms", "us", "ns"] = _doc("unit of time columns", default="s")
-    length_unit: Literal["m", "cm", "mm"] = _doc("unit of x, y and ranges", default="m")
-    angle_unit: Literal["rad", "deg", "tenths"] = _doc(
-        "unit of yaw ('tenths' = tenths of a degree)", default="rad"
-    )
-    no_echo_value: float = _doc(
-        "a range equal to this (in length_unit) means no echo (+inf); negative = none",
-        default=-1.0,
-    )
-
-
-@dataclass(frozen=True)
-class InputConfig:
-    """Which format and topics to read."""
-
-    format: str = _doc("log format; '' = detect from content", default="")
-    range_topics: tuple[str, ...] = _doc("range topics; empty = discover by type", default=())
-    pose_topic: str = _doc("pose topic ('/tf' for tf); '' = discover by type", default="")
-    base_frame: str = _doc("robot base frame (REP 105)", default="base_link")
-    csv: CsvConfig = field(default_factory=CsvConfig)
-
-
-@dataclass(frozen=True)
-class MountConfig:
-    """One sonar: mount in the base frame and beam limits."""
-
-    name: str = _doc("sensor name (frame id of its Range messages)", default="")
-    x: float = _doc("mount x in base frame, m", default=0.0)
-    y: float = _doc("mount y in base frame, m", default=0.0)
-    yaw_deg: float = _doc("beam axis in base frame, degrees", default=0.0)
-    fov_deg: float = _doc("full beam width β, degrees; 0 = from the log", default=0.0)
-    min_range: float = _doc("r_min, m; 0 = from the log", default=0.0)
-    max_range: float = _doc("r_max, m; 0 = from the log", default=0.0)
-
-
-@dataclass(frozen=True)
-class SensorsConfig:
-    """Sensor mounts: explicit entries, a preset, or /tf_static from the log."""
-
-    preset: str = _doc(
-        "mount preset ('pioneer-p3dx', 'udacity-8sonar'); '' = none", default=""
-    )
-    fov_deg: float = _doc("default beam width β where the log has none, degrees", default=0.0)
-    min_range: float = _doc("default r_min where the log has none, m", default=0.0)
-    max_range: float = _doc("default r_max where the log has none, m", default=0.0)
-    mounts: tuple[MountConfig, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -399,8 +329,6 @@ def _check_ranges(cfg: Config) -> None:
     dup = sorted({n for n in names if names.count(n) > 1})
     need(not dup, "sensors.mounts", "has duplicate names", dup)
     if sc.preset:
-        from pipeline.presets import PRESETS
-
         need(sc.preset in PRESETS, "sensors.preset", f"must be one of {sorted(PRESETS)}", sc.preset)
     csv = cfg.input.csv
     need(bool(csv.delimiter), "input.csv.delimiter", "must not be empty", csv.delimiter)

@@ -38,24 +38,22 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
+from formats.arrays import F32, F64, I32, I64
 from formats.contract import PoseBatch, SensorMount, make_range_batch
+from formats.errors import ConfigError, FormatError, InputError, OutputError, TopicError
 from formats.log_writers import (
     LogContent,
     reference_paths,
     write_log_with_reference,
 )
-from pipeline.config import Config, MountConfig
-from pipeline.errors import ConfigError, FormatError, InputError, OutputError, TopicError
-from pipeline.mapper.types import GridSpec
-from pipeline.presets import PRESETS
+from formats.map_types import GridSpec
+from formats.options import MountConfig
+from formats.presets import PRESETS
+from pipeline.config import Config
 
 if TYPE_CHECKING:
     from formats.ros.source import MessageSource
 
-F64 = npt.NDArray[np.float64]
-F32 = npt.NDArray[np.float32]
-I64 = npt.NDArray[np.int64]
-I32 = npt.NDArray[np.int32]
 
 DEFAULT_FOV_DEG = 30.0  # Polaroid 600-series beam, full width
 DEFAULT_MAX_RANGE_M = 5.0

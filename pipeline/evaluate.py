@@ -43,8 +43,9 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from pipeline.errors import ConfigError, FormatError, InputError
-from pipeline.mapper.types import GridSpec
+from formats.arrays import F64, I8, B
+from formats.errors import ConfigError, FormatError, InputError
+from formats.map_types import GridSpec
 
 __all__ = [
     "RUN_FILES",
@@ -57,9 +58,6 @@ __all__ = [
     "run_sensor_reach",
 ]
 
-F64 = npt.NDArray[np.float64]
-I8 = npt.NDArray[np.int8]
-B = npt.NDArray[np.bool_]
 
 #: Files evaluate needs in a run directory (config.toml is optional: only the reach).
 RUN_FILES = ("map.yaml", "metrics.json", "features.parquet")
@@ -239,8 +237,8 @@ def run_sensor_reach(run_dir: Path, metrics: dict[str, Any]) -> tuple[float | No
     cfg_path = run_dir / "config.toml"
     if not cfg_path.is_file():
         return None, "unknown"
+    from formats.presets import PRESETS
     from pipeline.config import load_config
-    from pipeline.presets import PRESETS
 
     try:
         cfg = load_config(cfg_path)

@@ -16,7 +16,7 @@ import numpy as np
 import numpy.typing as npt
 
 from formats.contract import LogReader, MountBatch, PoseBatch, RangeBatch, SensorMount
-from pipeline.errors import InputError
+from formats.errors import InputError
 from pipeline.pose_sync import PoseTrack, PoseTrackBuilder
 
 

@@ -18,10 +18,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from formats.arrays import F64, I64
 from formats.contract import PoseBatch, SensorMount
-
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
 
 # Reasons a reading has no pose (codes in PoseLookup.reason).
 POSE_OK = 0

@@ -29,13 +29,14 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from pipeline.errors import ConfigError, FormatError, InputError
+from formats.errors import ConfigError, FormatError, InputError
+from formats.options import doc_field
 
 __all__ = [
     "GOLDEN_EVALUATION",
@@ -53,23 +54,19 @@ GOLDEN_EVALUATION = "evaluation.json"
 _REQUIRED = ("metrics.json", "map.yaml")
 
 
-def _doc(text: str, default: Any) -> Any:
-    return field(default=default, metadata={"doc": text})
-
-
 @dataclass(frozen=True)
 class Tolerances:
     """How far a run may differ from its golden before it counts as a regression."""
 
-    f1_drop: float = _doc("F1 may drop by at most this much below the golden's (absolute)", 0.01)
-    features_rel: float = _doc("feature count within this fraction of the golden's", 0.02)
-    mean_feature_variance_rel: float = _doc(
-        "mean feature variance (m²) within this fraction of the golden's", 0.05
+    f1_drop: float = doc_field("F1 may drop by at most this much below the golden's (absolute)", default=0.01)
+    features_rel: float = doc_field("feature count within this fraction of the golden's", default=0.02)
+    mean_feature_variance_rel: float = doc_field(
+        "mean feature variance (m²) within this fraction of the golden's", default=0.05
     )
-    map_cells_differ: float = _doc(
-        "at most this fraction of map cells may change class (occupied/free/unknown)", 0.005
+    map_cells_differ: float = doc_field(
+        "at most this fraction of map cells may change class (occupied/free/unknown)", default=0.005
     )
-    readings_used_abs: int = _doc("readings used may differ by at most this many", 0)
+    readings_used_abs: int = doc_field("readings used may differ by at most this many", default=0)
 
 
 def tolerances_toml(tol: Tolerances | None = None) -> str:

@@ -26,12 +26,13 @@ import numpy as np
 
 from formats import open_log
 from formats.contract import LogReader, RangeBatch
+from formats.errors import ConfigError, InputError
+from formats.map_types import GridSpec
 from pipeline import __version__
 from pipeline.config import Config, dump_config
-from pipeline.errors import ConfigError, InputError
 from pipeline.ingest import Survey, ordered_ranges, survey
 from pipeline.mapper import Mapper, make_mapper
-from pipeline.mapper.types import GridSpec, MapSnapshot, Scan
+from pipeline.mapper.types import MapSnapshot, Scan
 from pipeline.metrics import (
     RunMetrics,
     StageTimer,
@@ -83,8 +84,14 @@ def run(
     force: bool = False,
     compare_correction: bool = False,
     progress: Progress | None = None,
+    on_complete: Callable[[Path, RunMetrics], None] | None = None,
 ) -> RunResult:
-    """Map one log into ``out_dir``. Raises SonarmapError subclasses on bad input."""
+    """Map one log into ``out_dir``. Raises SonarmapError subclasses on bad input.
+
+    ``force`` replaces a previous sonarmap output only (never the input's directory, the
+    working directory or the user's files: :class:`~formats.writers.atomic.OutputDir`).
+    ``on_complete(tmp_dir, metrics)`` may add files after the outputs are written and
+    before the directory is committed (a batch's resume marker)."""
     from formats.writers.atomic import OutputDir
 
     log_path = Path(log_path)
@@ -94,7 +101,7 @@ def run(
         )
     timer = StageTimer()
     t_start = time.perf_counter()
-    with OutputDir(Path(out_dir), force=force) as out:
+    with OutputDir(Path(out_dir), force=force, protect=(log_path,)) as out:
         with timer.stage("ingest"):
             reader = open_log(log_path, format, config)
         with reader:
@@ -128,6 +135,8 @@ def run(
         metrics = _metrics(log_path, info.format, info.duration_s, sv, sensors, mappers,
                            snapshots, state, config)
         _write_outputs(out, config, sv, drawn, snapshots, metrics, timer, t_start)
+        if on_complete is not None:
+            on_complete(out.tmp_dir, metrics)
     return RunResult(Path(out_dir), metrics, snapshots["main"])
 
 

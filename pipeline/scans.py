@@ -20,14 +20,12 @@ from collections.abc import Iterator
 from dataclasses import dataclass, fields
 
 import numpy as np
-import numpy.typing as npt
 
+from formats.arrays import I64
+from formats.errors import InputError
 from pipeline.config import ScanConfig
-from pipeline.errors import InputError
 from pipeline.mapper.types import Scan
 from pipeline.pose_sync import PoseTrack
-
-I64 = npt.NDArray[np.int64]
 
 
 def motion_boundaries(track: PoseTrack, max_travel_m: float, max_turn_rad: float) -> I64:

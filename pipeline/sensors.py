@@ -12,7 +12,7 @@ Beam limits (fov, r_min, r_max): a non-zero value in the sensor's config/preset 
 overrides the log (for sensors whose messages carry wrong metadata); otherwise the value
 each reading carries; where the reading has none (NaN, e.g. CSV without those columns) the
 ``[sensors]`` defaults. A sensor with no mount, or no beam width anywhere, is an
-:class:`~pipeline.errors.InputError`: a map built with a guessed geometry would be wrong.
+:class:`~formats.errors.InputError`: a map built with a guessed geometry would be wrong.
 """
 
 from __future__ import annotations
@@ -22,14 +22,13 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 
+from formats.arrays import F64
 from formats.contract import RangeBatch, SensorMount
-from pipeline.config import Config, MountConfig
-from pipeline.errors import InputError
-from pipeline.presets import PRESETS
-
-F64 = npt.NDArray[np.float64]
+from formats.errors import InputError
+from formats.options import MountConfig
+from formats.presets import PRESETS
+from pipeline.config import Config
 
 
 @dataclass(frozen=True)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from formats.errors import FormatError
 from formats.ros.columns import (
     LASER_TYPES,
     POINTCLOUD_TYPES,
@@ -10,7 +11,6 @@ from formats.ros.columns import (
     Columns,
 )
 from formats.ros.source import RawBatch
-from pipeline.errors import FormatError
 
 # Types decoded through a typestore built from the log's own message definition: a
 # corrupt or foreign definition can deserialize into objects without the fields we read.

@@ -17,6 +17,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from formats.arrays import I64
+from formats.errors import FormatError
 from formats.ros.columns import (
     RANGE_TYPES,
     Columns,
@@ -33,10 +35,7 @@ from formats.ros.decode_messages import (
     message_error,
 )
 from formats.ros.source import Connection, RawBatch
-from pipeline.errors import FormatError
 
-I64 = npt.NDArray[np.int64]
-F64 = npt.NDArray[np.float64]
 _ENCAP = 4  # encapsulation header bytes
 
 

@@ -11,6 +11,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from formats.arrays import F64
+from formats.errors import FormatError
 from formats.ros.columns import (
     LASER_TYPES,
     POINTCLOUD_TYPES,
@@ -23,7 +25,6 @@ from formats.ros.columns import (
     TransformColumns,
 )
 from formats.ros.source import RawBatch
-from pipeline.errors import FormatError
 
 NS_PER_S = 1_000_000_000
 # Bytes of the fixed-size float64 parts, the same in ROS 1 and CDR: a Pose is Point +
@@ -32,7 +33,6 @@ POSE_BYTES = 7 * 8
 POSE_COV_BYTES = POSE_BYTES + 36 * 8
 TWIST_COV_BYTES = 6 * 8 + 36 * 8
 
-F64 = npt.NDArray[np.float64]
 _NS = 1_000_000_000
 
 

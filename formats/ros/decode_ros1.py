@@ -19,6 +19,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from formats.arrays import I64
+from formats.errors import FormatError
 from formats.ros.columns import (
     RANGE_TYPES,
     Columns,
@@ -35,11 +37,6 @@ from formats.ros.decode_messages import (
     message_error,
 )
 from formats.ros.source import RawBatch
-from pipeline.errors import FormatError
-
-I64 = npt.NDArray[np.int64]
-F64 = npt.NDArray[np.float64]
-
 
 
 def decode_ros1(raw: RawBatch) -> Columns:

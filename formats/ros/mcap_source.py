@@ -22,8 +22,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from formats.errors import FormatError
 from formats.ros.source import Connection, Encoding, FileSource, RawBatch, SourceAccessors
-from pipeline.errors import FormatError
 
 MAGIC = b"\x89MCAP0\r\n"
 

@@ -32,6 +32,8 @@ from formats.contract import (
     TopicInfo,
     make_range_batch,
 )
+from formats.errors import ConfigError, FormatError, TopicError
+from formats.options import MountConfig, ReaderOptions, ReaderSettings
 from formats.ros import tf as tflib
 from formats.ros.columns import (
     LASER_TYPES,
@@ -49,8 +51,6 @@ from formats.ros.columns import (
 )
 from formats.ros.decode import decode
 from formats.ros.source import Connection, MessageSource, RawBatch
-from pipeline.config import Config, MountConfig
-from pipeline.errors import ConfigError, FormatError, TopicError
 
 RING_TYPES = POINTCLOUD_TYPES | SONARARRAY_TYPES
 RANGE_SOURCE_TYPES = RANGE_TYPES | RING_TYPES
@@ -104,9 +104,9 @@ class _PassState:
 class RosLogReader:
     """The :class:`~formats.contract.LogReader` of ROS logs (any MessageSource)."""
 
-    def __init__(self, source: MessageSource, config: Config | None = None) -> None:
+    def __init__(self, source: MessageSource, config: ReaderSettings | None = None) -> None:
         self.source = source
-        self.config = config if config is not None else Config()
+        self.config = config if config is not None else ReaderOptions()
         self.path = source.path
         self.format_name = source.format_name
         self.sensor_names: list[str] = []
@@ -334,7 +334,7 @@ class RosLogReader:
         mounts: tuple[MountConfig, ...] = sc.mounts
         origin = "sensors.mounts"
         if not mounts and sc.preset:
-            from pipeline.presets import PRESETS
+            from formats.presets import PRESETS
 
             mounts, origin = PRESETS[sc.preset], f"preset '{sc.preset}'"
         if not mounts:

@@ -28,12 +28,12 @@ import lz4.frame
 import numpy as np
 import numpy.typing as npt
 
+from formats.errors import FormatError
+from formats.options import ReaderOptions, ReaderSettings
 from formats.ros.source import Connection, FileSource, RawBatch
-from pipeline.errors import FormatError
 
 if TYPE_CHECKING:
     from formats.ros.reader import RosLogReader
-    from pipeline.config import Config
 
 MAGIC = b"#ROSBAG V2.0\n"
 
@@ -581,14 +581,13 @@ def _gather_u32(buf: npt.NDArray[np.uint8], pos: npt.NDArray[np.int64]) -> npt.N
     return items[pos].astype(np.int64)
 
 
-def open_ros1_bag(path: str | Path, config: Config | None = None) -> RosLogReader:
+def open_ros1_bag(path: str | Path, config: ReaderSettings | None = None) -> RosLogReader:
     """A :class:`~formats.ros.reader.RosLogReader` over a ROS 1 bag file."""
     from formats.ros.reader import RosLogReader
-    from pipeline.config import Config
 
     source = Ros1BagSource(path)
     try:
-        return RosLogReader(source, config if config is not None else Config())
+        return RosLogReader(source, config if config is not None else ReaderOptions())
     except BaseException:
         source.close()
         raise

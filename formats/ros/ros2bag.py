@@ -25,9 +25,9 @@ from urllib.parse import quote
 import numpy as np
 import yaml
 
+from formats.errors import FormatError
 from formats.ros.mcap_source import McapSource, normalize_msgtype
 from formats.ros.source import Connection, Encoding, RawBatch, SourceAccessors
-from pipeline.errors import FormatError
 
 _STORAGE_SUFFIXES = {".db3": "sqlite3", ".mcap": "mcap"}
 # Rows fetched from sqlite per batch: bounded memory whatever the bag size.

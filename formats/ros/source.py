@@ -19,7 +19,7 @@ from typing import BinaryIO, Literal, Protocol, Self
 import numpy as np
 import numpy.typing as npt
 
-from pipeline.errors import FormatError
+from formats.errors import FormatError
 
 # "other": an MCAP channel in another encoding (json, protobuf, ...): listed, not decodable.
 Encoding = Literal["ros1", "cdr", "other"]
@@ -111,7 +111,7 @@ class MessageSource(Protocol):
 
         Truncated or corrupt tails: yield what is intact, then record the loss in
         ``self.warnings`` (one line each) instead of raising; a log whose header or index
-        is unusable raises :class:`~pipeline.errors.FormatError`.
+        is unusable raises :class:`~formats.errors.FormatError`.
         """
         ...
 

@@ -12,13 +12,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 
+from formats.arrays import F64, I64
 from formats.contract import PoseBatch, SensorMount
 from formats.ros.columns import TransformColumns
 
-I64 = npt.NDArray[np.int64]
-F64 = npt.NDArray[np.float64]
 Pose2 = tuple[F64, F64, F64]  # x (m), y (m), yaw (rad)
 
 

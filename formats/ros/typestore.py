@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 from rosbags.typesys import Stores, TypesysError, get_types_from_idl, get_types_from_msg
 from rosbags.typesys import get_typestore as _rosbags_typestore
 
-from pipeline.errors import FormatError
+from formats.errors import FormatError
 
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore

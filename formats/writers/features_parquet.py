@@ -10,10 +10,10 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from formats.errors import FormatError
+from formats.map_types import FeatureTable
 from formats.writers.atomic import atomic_write_bytes
 from formats.writers.ellipse import covariance_axes
-from pipeline.errors import FormatError
-from pipeline.mapper.types import FeatureTable
 
 __all__ = ["FEATURE_SCHEMA", "UNITS", "read_feature_metadata", "read_features", "write_features"]
 

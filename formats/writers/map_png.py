@@ -18,9 +18,10 @@ import numpy as np
 import numpy.typing as npt
 from PIL import Image, ImageDraw, ImageFont
 
+from formats.arrays import F64
+from formats.map_types import FeatureTable, GridSpec, ProbabilityMap
 from formats.writers.atomic import atomic_write_bytes
 from formats.writers.ellipse import ellipse_polygons
-from pipeline.mapper.types import FeatureTable, GridSpec, MapSnapshot
 
 __all__ = ["MAX_ELLIPSES", "MAX_SIDE_PX", "MIN_SIDE_PX", "render_map", "write_map_png"]
 
@@ -39,7 +40,6 @@ BACKGROUND_RGB = (255, 255, 255)
 _MARGIN = 8  # px around the map
 _STRIP = 44  # px below the map for the scale bar and north arrow
 
-F64 = npt.NDArray[np.float64]
 
 
 def _scale(long_side: int) -> tuple[int, int]:
@@ -183,7 +183,7 @@ def _draw_north(draw: ImageDraw.ImageDraw, cx: int, top: int, bottom: int) -> No
 
 
 def render_map(
-    snapshot: MapSnapshot,
+    snapshot: ProbabilityMap,
     *,
     trajectory_xy: np.ndarray | None,
     features: FeatureTable | None,
@@ -225,7 +225,7 @@ def render_map(
 
 def write_map_png(
     path: Path,
-    snapshot: MapSnapshot,
+    snapshot: ProbabilityMap,
     *,
     trajectory_xy: np.ndarray | None,
     features: FeatureTable | None,

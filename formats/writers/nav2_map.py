@@ -26,9 +26,10 @@ import numpy as np
 import numpy.typing as npt
 import yaml
 
+from formats.arrays import F64
+from formats.errors import FormatError
+from formats.map_types import GridSpec
 from formats.writers.atomic import atomic_write_bytes, atomic_write_text
-from pipeline.errors import FormatError
-from pipeline.mapper.types import GridSpec
 
 __all__ = [
     "FREE_PIXEL",
@@ -45,7 +46,6 @@ UNKNOWN_PIXEL = 205
 YAML_OCCUPIED_THRESH = 0.65
 YAML_FREE_THRESH = 0.196
 
-F64 = npt.NDArray[np.float64]
 
 
 @dataclass(frozen=True)

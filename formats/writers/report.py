@@ -19,10 +19,10 @@ from typing import Any
 
 import numpy as np
 
+from formats.errors import OutputError
+from formats.map_types import FeatureTable
 from formats.writers.atomic import atomic_write_text
 from formats.writers.ellipse import covariance_axes
-from pipeline.errors import OutputError
-from pipeline.mapper.types import FeatureTable
 
 __all__ = ["flatten_metrics", "format_value", "write_reports"]
 

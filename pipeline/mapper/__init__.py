@@ -6,13 +6,15 @@ or :class:`ClassicMapper` by ``config.method``; all follow the :class:`Mapper` p
 Module map: ``attribution`` (§9) with ``cone_kernels`` (its compiled cone loops),
 ``reading_features`` (eqs. 1-4), ``feature_set`` (eqs. 5-8 + spatial index),
 ``free_space`` (§3), ``correction`` (§4), ``occupancy`` (§5), ``grid_raster`` (shapes →
-cells), ``andersone`` / ``classic`` (the mappers).
+cells), ``andersone`` / ``classic`` (the mappers); ``kernels`` (the compiled per-scan loops, numba,
+compared with the numpy modules above, which stay as the readable reference), and
+``feature_store`` (the feature set the kernels work on).
 """
 
 from __future__ import annotations
 
+from formats.errors import ConfigError
 from pipeline.config import MapperConfig
-from pipeline.errors import ConfigError
 from pipeline.mapper.andersone import AndersoneMapper
 from pipeline.mapper.attribution import AttributionMapper
 from pipeline.mapper.classic import ClassicMapper

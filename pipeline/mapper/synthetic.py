@@ -13,8 +13,8 @@ import math
 
 import numpy as np
 
+from formats.presets import PRESETS
 from pipeline.mapper.types import F64, GridSpec, Scan
-from pipeline.presets import PRESETS
 
 
 def room_segments() -> F64:

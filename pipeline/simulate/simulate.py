@@ -19,11 +19,13 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from formats.arrays import F64, I32, I64
 from formats.contract import PoseBatch, SensorMount, make_range_batch
+from formats.errors import ConfigError
 from formats.log_writers import LogContent, reference_paths, write_log_with_reference
-from pipeline.config import MapperConfig, MountConfig
-from pipeline.errors import ConfigError
-from pipeline.presets import PRESETS
+from formats.options import MountConfig
+from formats.presets import PRESETS
+from pipeline.config import MapperConfig
 from pipeline.simulate.sonar import SonarRing, add_sensor_errors, firing_schedule, true_ranges
 from pipeline.simulate.trajectory import (
     Trajectory,
@@ -33,10 +35,6 @@ from pipeline.simulate.trajectory import (
     wrap_angle,
 )
 from pipeline.simulate.world import World, load_world
-
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
-I32 = npt.NDArray[np.int32]
 
 _MAPPER = MapperConfig()
 

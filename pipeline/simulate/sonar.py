@@ -15,15 +15,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 
-from pipeline.config import MountConfig
-from pipeline.errors import ConfigError
+from formats.arrays import F64, I32, I64
+from formats.errors import ConfigError
+from formats.options import MountConfig
 from pipeline.simulate.world import World
-
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
-I32 = npt.NDArray[np.int32]
 
 # Upper bound on ray×obstacle pairs evaluated at once (memory ≈ 8 B × a few arrays each).
 _MAX_PAIRS = 1 << 21

@@ -15,10 +15,8 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from pipeline.errors import ConfigError
-
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
+from formats.arrays import F64, I64
+from formats.errors import ConfigError
 
 
 @dataclass(frozen=True)

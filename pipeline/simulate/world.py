@@ -17,11 +17,9 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from pipeline.errors import ConfigError
-from pipeline.mapper.types import GridSpec
-
-F64 = npt.NDArray[np.float64]
-F32 = npt.NDArray[np.float32]
+from formats.arrays import F32, F64
+from formats.errors import ConfigError
+from formats.map_types import GridSpec
 
 # Rasterising samples each segment this many times per cell: a segment that clips a cell
 # corner by less than resolution/8 may leave that cell free (documented approximation).

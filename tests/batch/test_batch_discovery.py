@@ -12,10 +12,10 @@ import pyarrow.parquet as pq
 import pytest
 from batch_helpers import write_config, write_corrupt_log, write_wall_log
 
+from formats.errors import ConfigError, InputError, OutputError
 from pipeline import batch
 from pipeline.batch import LogOutcome, find_logs, output_names, read_manifest
 from pipeline.config import Config, load_config
-from pipeline.errors import ConfigError, InputError, OutputError
 
 ROS1_HEAD = b"#ROSBAG V2.0\n" + b"\0" * 64
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from formats.carmen import beam_angles, looks_like_carmen, read_carmen
-from pipeline.errors import FormatError
+from formats.errors import FormatError
 
 
 def flaser(ranges: list[float], pose: tuple[float, float, float], t: str) -> str:

@@ -9,7 +9,9 @@ import pytest
 from emulate_helpers import laser_log, wall_ranges
 
 from formats.contract import SensorMount
-from pipeline.config import MountConfig
+from formats.errors import ConfigError, InputError
+from formats.options import MountConfig
+from formats.presets import PRESETS
 from pipeline.emulate import (
     VirtualRing,
     cone_coverage,
@@ -18,8 +20,6 @@ from pipeline.emulate import (
     laser_view,
     ring_from_mounts,
 )
-from pipeline.errors import ConfigError, InputError
-from pipeline.presets import PRESETS
 
 ANGLES = -90.0 + np.arange(180.0)  # a CARMEN front laser: −90° + i·1°
 PIONEER = ring_from_mounts(PRESETS["pioneer-p3dx"])

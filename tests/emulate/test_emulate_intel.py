@@ -12,9 +12,9 @@ from emulate_helpers import INTEL, REPO
 from formats import open_log
 from formats.carmen import read_carmen
 from formats.contract import MountBatch, PoseBatch, RangeBatch
+from formats.errors import FormatError, OutputError
 from formats.writers.nav2_map import load_nav2_map
 from pipeline.emulate import EmulateOptions, load_laser_log, run_emulation
-from pipeline.errors import FormatError, OutputError
 
 SAMPLE = REPO / "sample_logs" / "intel-lab"
 

@@ -10,10 +10,11 @@ import numpy as np
 import pytest
 from emulate_helpers import NS, Msgs, wall_ranges, write_bag
 
-from pipeline.config import Config, InputConfig
+from formats.errors import TopicError
+from formats.options import InputConfig
+from formats.presets import PRESETS
+from pipeline.config import Config
 from pipeline.emulate import emulate, load_laser_log, ring_from_mounts
-from pipeline.errors import TopicError
-from pipeline.presets import PRESETS
 
 ODOM = "nav_msgs/msg/Odometry"
 SCAN = "sensor_msgs/msg/LaserScan"

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from emulate_helpers import laser_log
 
+from formats.errors import ConfigError
 from formats.writers.nav2_map import load_nav2_map, write_nav2_map
 from pipeline.emulate import LaserLog, LaserMap, LaserMapOptions, laser_occupancy_map
-from pipeline.errors import ConfigError
 
 N_SCANS = 5
 

@@ -13,9 +13,9 @@ from typing import Any
 
 import numpy as np
 
+from formats.map_types import FeatureTable, GridSpec
 from formats.writers.features_parquet import write_features
 from formats.writers.nav2_map import write_nav2_map
-from pipeline.mapper.types import FeatureTable, GridSpec
 
 TRUTH_GRID = GridSpec(0.0, 0.0, 0.05, 80, 60)
 WALL_ROW = 30

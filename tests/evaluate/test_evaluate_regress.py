@@ -17,9 +17,9 @@ from evaluate_helpers import (
     write_truth,
 )
 
-from pipeline.errors import ConfigError, InputError
+from formats.errors import ConfigError, InputError
+from formats.map_types import GridSpec
 from pipeline.evaluate import evaluate_run
-from pipeline.mapper.types import GridSpec
 from pipeline.regress import (
     Regression,
     Tolerances,

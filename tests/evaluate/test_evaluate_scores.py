@@ -18,7 +18,8 @@ from evaluate_helpers import (
     write_truth,
 )
 
-from pipeline.errors import ConfigError, FormatError, InputError
+from formats.errors import ConfigError, FormatError, InputError
+from formats.map_types import GridSpec
 from pipeline.evaluate import (
     Evaluation,
     evaluate_run,
@@ -26,7 +27,6 @@ from pipeline.evaluate import (
     resample_classes,
     run_sensor_reach,
 )
-from pipeline.mapper.types import GridSpec
 
 FREE_CELLS = 80 * 60 - WALL_CELLS
 

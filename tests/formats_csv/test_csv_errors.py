@@ -10,7 +10,7 @@ from csvlog_helpers import make_config, read_all, write
 
 import formats.csv_log as csv_log
 from formats.csv_log import CsvLogReader
-from pipeline.errors import FormatError
+from formats.errors import FormatError
 
 HEAD = "t,x,y,yaw,sensor,range\n"
 ROW = "1,0,0,0,s,1\n"

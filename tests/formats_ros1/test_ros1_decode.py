@@ -24,11 +24,11 @@ from ros1_bags import (
 )
 from rosbags.highlevel import AnyReader
 
+from formats.errors import FormatError
 from formats.ros.columns import PoseColumns, RangeColumns, TransformColumns
 from formats.ros.decode_ros1 import decode_ros1
 from formats.ros.ros1bag import Ros1BagSource
 from formats.ros.source import RawBatch
-from pipeline.errors import FormatError
 
 
 def _decode_topic(path: Path, topic: str) -> list[object]:

@@ -23,11 +23,12 @@ from ros1_bags import (
 from rosbags.highlevel import AnyReader
 
 from formats.contract import LogReader, MountBatch, PoseBatch, RangeBatch
+from formats.errors import ConfigError, FormatError, TopicError
+from formats.options import InputConfig, MountConfig, SensorsConfig
+from formats.presets import PRESETS
 from formats.ros.reader import RosLogReader
 from formats.ros.ros1bag import Ros1BagSource, open_ros1_bag
-from pipeline.config import Config, InputConfig, MountConfig, SensorsConfig
-from pipeline.errors import ConfigError, FormatError, TopicError
-from pipeline.presets import PRESETS
+from pipeline.config import Config
 
 MS = 1_000_000
 SONARS = ["sonar_front", "sonar_left", "sonar_right", "sonar_back"]

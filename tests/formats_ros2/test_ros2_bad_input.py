@@ -11,12 +11,12 @@ import pytest
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2.enums import CompressionMode
 
+from formats.errors import FormatError
 from formats.ros.columns import RangeColumns
 from formats.ros.decode_cdr import decode_cdr
 from formats.ros.mcap_source import McapSource
 from formats.ros.ros2bag import Ros2BagSource
 from formats.ros.source import RawBatch
-from pipeline.errors import FormatError
 
 from .test_ros2_written_bags import JAZZY, N, write_bag
 

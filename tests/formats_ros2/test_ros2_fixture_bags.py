@@ -8,10 +8,10 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
+from formats.errors import FormatError
 from formats.ros.mcap_source import McapSource
 from formats.ros.ros2bag import Ros2BagSource
 from formats.ros.source import RawBatch
-from pipeline.errors import FormatError
 
 PY = "rosbag2_py/test/resources"
 TESTS = "rosbag2_tests/resources"

@@ -7,7 +7,8 @@ from collections.abc import Callable
 import pytest
 from mapper_helpers import build_scan
 
-from pipeline.mapper.types import GridSpec, Scan
+from formats.map_types import GridSpec
+from pipeline.mapper.types import Scan
 
 
 @pytest.fixture

@@ -6,7 +6,8 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.mapper.types import GridSpec, Scan
+from formats.map_types import GridSpec
+from pipeline.mapper.types import Scan
 
 
 def build_scan(

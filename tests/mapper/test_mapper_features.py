@@ -9,6 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from formats.map_types import GridSpec
 from pipeline.config import MapperConfig
 from pipeline.mapper import AndersoneMapper
 from pipeline.mapper.feature_set import FeatureSet, feature_variance, kalman_merge
@@ -19,7 +20,6 @@ from pipeline.mapper.reading_features import (
     lateral_sigma,
     reading_features,
 )
-from pipeline.mapper.types import GridSpec
 
 CFG = MapperConfig(method="andersone")
 BETA = math.radians(30.0)

@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 from mapper_helpers import build_scan, cell_centres
 
+from formats.errors import ConfigError
+from formats.map_types import GridSpec
 from pipeline.config import MapperConfig
-from pipeline.errors import ConfigError
 from pipeline.mapper import AndersoneMapper, AttributionMapper, ClassicMapper, make_mapper
 from pipeline.mapper.occupancy import FreeLayer, logit
 from pipeline.mapper.synthetic import ring_scans, room_grid
-from pipeline.mapper.types import GridSpec
 
 CFG = MapperConfig(method="andersone")
 ROOT = Path(__file__).resolve().parents[2]

@@ -14,13 +14,13 @@ from pathlib import Path
 
 import pytest
 
+from formats.errors import OutputError
 from formats.writers.atomic import OutputDir, clean_stale_siblings
 from fuzz.harness import ROOT
-from pipeline.errors import OutputError
 
 LOG = ROOT / "sample_logs" / "office" / "office.mcap"
 FILES = {"map.pgm", "map.yaml", "map.png", "features.parquet", "metrics.json", "config.toml",
-         "report.html", "report.md"}
+         "report.html", "report.md", ".sonarmap-output"}
 
 
 def _start(out: Path) -> subprocess.Popen[bytes]:

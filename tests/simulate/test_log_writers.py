@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from formats.contract import PoseBatch, SensorMount, make_range_batch
+from formats.errors import ConfigError, OutputError
 from formats.log_writers import (
     FORMATS,
     LogContent,
@@ -19,7 +20,6 @@ from formats.log_writers import (
     typestore,
     write_log,
 )
-from pipeline.errors import ConfigError, OutputError
 from pipeline.simulate import SimOptions, simulate
 from pipeline.simulate.world import World
 

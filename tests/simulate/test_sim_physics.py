@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from pipeline.config import MountConfig
-from pipeline.errors import ConfigError
+from formats.errors import ConfigError
+from formats.options import MountConfig
 from pipeline.simulate.sonar import (
     SonarRing,
     add_sensor_errors,

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline.config import MountConfig
-from pipeline.errors import ConfigError, OutputError
+from formats.errors import ConfigError, OutputError
+from formats.options import MountConfig
 from pipeline.simulate import (
     SimOptions,
     load_waypoints,

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline.errors import ConfigError
-from pipeline.mapper.types import GridSpec
+from formats.errors import ConfigError
+from formats.map_types import GridSpec
 from pipeline.simulate import load_waypoints, load_world, world_from_occupancy
 from pipeline.simulate.world import World
 

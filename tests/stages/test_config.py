@@ -4,8 +4,8 @@ import tomllib
 
 import pytest
 
+from formats.errors import ConfigError
 from pipeline.config import Config, config_from_dict, dump_config, load_config
-from pipeline.errors import ConfigError
 
 
 def test_defaults_are_the_documented_ones():

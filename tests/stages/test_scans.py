@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from formats.contract import PoseBatch
+from formats.errors import InputError
 from pipeline.config import ScanConfig
-from pipeline.errors import InputError
 from pipeline.mapper.types import Scan
 from pipeline.pose_sync import build_pose_track
 from pipeline.scans import ScanBuilder, ScanKeys, motion_boundaries

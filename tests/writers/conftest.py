@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 from writers_helpers import make_features
 
-from pipeline.mapper.types import FeatureTable
+from formats.map_types import FeatureTable
 
 
 @pytest.fixture

@@ -12,10 +12,10 @@ import pyarrow.parquet as pq
 import pytest
 from writers_helpers import make_features
 
+from formats.errors import FormatError
+from formats.map_types import FeatureTable
 from formats.writers.ellipse import covariance_axes
 from formats.writers.features_parquet import read_feature_metadata, read_features, write_features
-from pipeline.errors import FormatError
-from pipeline.mapper.types import FeatureTable
 
 META = {"resolution": "0.05", "config_hash": "abc123", "tool_version": "0.1.0"}
 

@@ -9,6 +9,7 @@ import pytest
 from PIL import Image
 from writers_helpers import make_features, make_snapshot
 
+from formats.map_types import FeatureTable, GridSpec
 from formats.writers.map_png import (
     ELLIPSE_RGB,
     MAX_SIDE_PX,
@@ -18,7 +19,6 @@ from formats.writers.map_png import (
     render_map,
     write_map_png,
 )
-from pipeline.mapper.types import FeatureTable, GridSpec
 
 # 20 × 10 cells of 0.1 m: the map spans x ∈ [0, 2), y ∈ [0, 1)
 GRID = GridSpec(origin_x=0.0, origin_y=0.0, resolution=0.1, width=20, height=10)

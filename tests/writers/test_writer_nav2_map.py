@@ -9,9 +9,9 @@ import pytest
 import yaml
 from PIL import Image
 
+from formats.errors import FormatError
+from formats.map_types import GridSpec
 from formats.writers.nav2_map import load_nav2_map, write_nav2_map
-from pipeline.errors import FormatError
-from pipeline.mapper.types import GridSpec
 
 GRID = GridSpec(origin_x=-1.5, origin_y=2.25, resolution=0.05, width=4, height=3)
 

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from writers_helpers import make_features, make_snapshot
 
+from formats.errors import OutputError
+from formats.map_types import FeatureTable, GridSpec
 from formats.writers.map_png import write_map_png
 from formats.writers.report import flatten_metrics, format_value, write_reports
-from pipeline.errors import OutputError
-from pipeline.mapper.types import FeatureTable, GridSpec
 
 METRICS = {
     "counters": {"readings": 1200, "skipped_nan": 3},

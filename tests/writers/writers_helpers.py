@@ -7,7 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.mapper.types import FeatureTable, GridSpec, MapSnapshot
+from formats.map_types import FeatureTable, GridSpec
+from pipeline.mapper.types import MapSnapshot
 
 
 def make_features(

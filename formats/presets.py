@@ -9,7 +9,7 @@ transducers have a beam of about 30° full width (our default β) and read 0.1-5
 
 from __future__ import annotations
 
-from pipeline.config import MountConfig
+from formats.options import MountConfig
 
 _P3DX = [
     (0.069, 0.136, 90),
