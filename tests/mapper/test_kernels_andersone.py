@@ -145,8 +145,9 @@ def test_kernel_equals_reference_on_a_real_log(monkeypatch: pytest.MonkeyPatch,
         original(mappers, scans)
 
     monkeypatch.setattr(run_mod, "_integrate", capture)
+    paper = MapperConfig(method="andersone")
     result = run_mod.run(ROOT / "sample_logs" / "intel-lab" / "intel.mcap", tmp_path / "out",
-                         Config())
+                         Config().replace(mapper=paper))
     assert len(captured) > 500
-    ker = _assert_same_maps(MapperConfig(), result.snapshot.grid, captured)
+    ker = _assert_same_maps(paper, result.snapshot.grid, captured)
     np.testing.assert_array_equal(ker.feature_table().x, result.snapshot.features.x)
