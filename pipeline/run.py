@@ -56,7 +56,8 @@ from pipeline.sensors import SensorTable, resolve_sensors
 log = logging.getLogger("sonarmap")
 
 #: ``(stage, readings done, readings total)``: stage "reading" (pass 1, the total is not
-#: known yet: None) then "mapping" (pass 2, the total counted by pass 1).
+#: known yet: None), "mapping" (pass 2, the total counted by pass 1), then "writing" (the
+#: outputs; once, with 0 and None).
 Progress = Callable[[str, int, int | None], None]
 
 
@@ -137,6 +138,8 @@ def run(
                 )
         with timer.stage("mapping"):
             snapshots = {k: m.snapshot() for k, m in mappers.items()}
+        if progress is not None:
+            progress("writing", 0, None)  # the outputs: no reading count to show
         metrics = _metrics(log_path, info.format, info.duration_s, sv, sensors, mappers,
                            snapshots, state, config)
         _write_outputs(out, config, sv, drawn, snapshots, metrics, timer, t_start)
