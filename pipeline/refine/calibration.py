@@ -11,7 +11,8 @@ the **sharpness** of their density is measured: ``Σ ρ² / (Σ ρ)²`` of the G
 histogram (Rényi's quadratic entropy, up to a sign and a log; Sheehan et al. used it to
 calibrate lidars). Walls seen from places far apart along the path coincide only under the
 right calibration, so sharpness peaks there. The search evaluates a grid over
-``±max_scale`` × ``±max_bias`` and refines around the best twice (steps divided by 4).
+``±max_scale`` × ``±max_bias`` (bias steps that turn the heading by at most 4° over the
+whole path) and refines around the best twice (steps divided by 4).
 """
 
 from __future__ import annotations
@@ -104,7 +105,11 @@ def calibrate(
     f = _Sharpness(t_ns, x, y, yaw, echoes, res=res, sigma=sigma)
     base = f(0.0, 0.0)
     ks = np.linspace(-max_scale, max_scale, 11 if max_scale > 0 else 1)
-    bs = np.linspace(-max_bias, max_bias, 13)
+    # The heading error a bias step makes grows with the path: steps of at most 4° over
+    # the whole run (13 to 401 values), so a long run's sharp optimum is not stepped over.
+    path = float(np.hypot(np.diff(x), np.diff(y)).sum())
+    n_bias = int(np.clip(math.ceil(2 * math.degrees(max_bias) * path / 4.0) + 1, 13, 401))
+    bs = np.linspace(-max_bias, max_bias, n_bias | 1)
     best = (base, 0.0, 0.0)
     for k in ks.tolist():
         for b in bs.tolist():
