@@ -150,7 +150,8 @@ def run(
         m = result.metrics
         pm = m.paper_metric
         typer.echo(
-            f"mapped {m.counts['readings']} readings into {m.counts['features']} features; "
+            f"used {m.counts['readings_mapped']} of {m.counts['readings']} readings; "
+            f"{m.counts['features']} features; "
             f"mean feature variance {_fmt(pm['mean_feature_variance_m2'])} m²; "
             f"{m.map['cells_occupied']} occupied / {m.map['cells_free']} free cells"
         )

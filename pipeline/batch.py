@@ -48,7 +48,9 @@ SUMMARY_PARQUET = "summary.parquet"
 SUMMARY_MD = "summary.md"
 MARKER_VERSION = 1
 MAX_NAME_BYTES = 200  # an output name, so that OutputDir's temporary sibling fits 255
-SCHEDULER_TIMEOUT_S = 10.0  # connecting to an existing scheduler (--scheduler)
+SCHEDULER_TIMEOUT_S = 10.0
+# Memory per local worker process: Dask's "auto" is the machine's memory / the workers.
+MEMORY_LIMIT = "auto"  # connecting to an existing scheduler (--scheduler)
 
 BatchProgress = Callable[[int, int], None]  # (logs finished, logs total)
 
@@ -365,10 +367,12 @@ def read_marker(run_dir: Path) -> dict[str, Any] | None:
 
 
 @contextlib.contextmanager
-def _client(workers: int | None, scheduler: str | None) -> Iterator[Any]:
+def _client(
+    workers: int | None, scheduler: str | None, memory_limit: str | int = MEMORY_LIMIT
+) -> Iterator[Any]:
     """A Dask client: to ``scheduler`` if given, else to a new local process cluster."""
     with _quiet_dask():
-        yield from _client_inner(workers, scheduler)
+        yield from _client_inner(workers, scheduler, memory_limit)
 
 
 @contextlib.contextmanager
@@ -385,7 +389,9 @@ def _quiet_dask() -> Iterator[None]:
         dlog.setLevel(old)
 
 
-def _client_inner(workers: int | None, scheduler: str | None) -> Iterator[Any]:
+def _client_inner(
+    workers: int | None, scheduler: str | None, memory_limit: str | int = MEMORY_LIMIT
+) -> Iterator[Any]:
     from distributed import Client, LocalCluster
 
     if scheduler:
@@ -401,6 +407,15 @@ def _client_inner(workers: int | None, scheduler: str | None) -> Iterator[Any]:
     n = workers if workers is not None else (os.cpu_count() or 1)
     if n < 1:
         raise ConfigError(f"--workers must be >= 1, got {n}")
+    if memory_limit != "auto":
+        from dask.utils import parse_bytes
+
+        try:
+            memory_limit = parse_bytes(memory_limit)
+        except (ValueError, TypeError) as err:
+            raise ConfigError(
+                f"--memory-limit must be 'auto' or a size like 4GB, got {memory_limit!r}"
+            ) from err
     with (
         LocalCluster(
             n_workers=n,
@@ -409,9 +424,10 @@ def _client_inner(workers: int | None, scheduler: str | None) -> Iterator[Any]:
             host="127.0.0.1",
             dashboard_address=None,
             silence_logs=logging.ERROR,
-            # No per-worker memory cap: the nanny would kill a worker mapping a big log at
-            # 95 % of total/N; the operating system is the judge instead.
-            memory_limit=0,
+            # Each worker's share of the machine: a log whose map outgrows it (an odometry
+            # glitch, an absurd grid) has its worker restarted and fails as a row, instead
+            # of the operating system killing whatever process it picks.
+            memory_limit=memory_limit,
         ) as cluster,
         Client(cluster, set_as_default=False) as client,
     ):
@@ -425,6 +441,7 @@ def run_batch(
     *,
     workers: int | None = None,
     scheduler: str | None = None,
+    memory_limit: str | int = MEMORY_LIMIT,
     rerun: bool = False,
     progress: BatchProgress | None = None,
     manifests: Sequence[Path] = (),
@@ -460,7 +477,7 @@ def run_batch(
     rows: list[LogOutcome] = []
     if progress is not None:
         progress(0, total)
-    with _client(workers, scheduler) as client:
+    with _client(workers, scheduler, memory_limit) as client:
         futures = {
             client.submit(_map_one, str(p), str(out_dir), names[p], cfg_dict, rerun,
                           pure=False, key=f"sonarmap-{names[p]}-{secrets.token_hex(4)}"): p

@@ -216,3 +216,12 @@ def test_whole_batch_problems_raise_before_any_mapping(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match=r"nope\.toml: configuration file not found"):
         batch.run_batch([log], tmp_path / "out2", tmp_path / "nope.toml")
     assert not (tmp_path / "out2").exists()
+
+
+def test_local_workers_get_a_memory_limit() -> None:
+    with batch._client(1, None, "1GiB") as client:
+        limits = [w["memory_limit"] for w in client.scheduler_info()["workers"].values()]
+    assert limits == [2**30]
+    with pytest.raises(ConfigError, match=r"--memory-limit must be 'auto' or a size like 4GB"), \
+            batch._client(1, None, "lots"):
+        pass

@@ -1,0 +1,37 @@
+"""Progress on a non-terminal stderr (CI logs, batch jobs): plain lines every few seconds."""
+
+from __future__ import annotations
+
+import io
+
+from cli.progress import plain_progress
+
+
+class _Clock:
+    def __init__(self) -> None:
+        self.t = 0.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def test_plain_lines_at_most_every_interval_then_the_final_state() -> None:
+    out, clock = io.StringIO(), _Clock()
+    with plain_progress("mapping", "readings", out, every_s=5.0, clock=clock) as update:
+        for done in range(0, 12_001, 1000):  # one update per second of the clock
+            clock.t = done / 1000
+            update(done, 12_000)
+    assert out.getvalue().splitlines() == [
+        "sonarmap: mapping: 5,000 of 12,000 readings (42 %), 1,000 readings/s, 5 s",
+        "sonarmap: mapping: 10,000 of 12,000 readings (83 %), 1,000 readings/s, 10 s",
+        "sonarmap: mapping: 12,000 of 12,000 readings (100 %), 1,000 readings/s, 12 s",
+    ]
+
+
+def test_a_short_job_prints_nothing() -> None:
+    out, clock = io.StringIO(), _Clock()
+    with plain_progress("mapping", "readings", out, every_s=5.0, clock=clock) as update:
+        update(10, 100)
+        clock.t = 1.0
+        update(100, 100)
+    assert out.getvalue() == ""
