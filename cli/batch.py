@@ -23,8 +23,8 @@ def _log_progress() -> Iterator[Callable[[int, int], None]]:
     from cli.progress import plain_progress
 
     if not Console(stderr=True).is_terminal:
-        with plain_progress("batch", "logs", sys.stderr, every_s=0.0) as update:
-            yield update
+        with plain_progress("logs", sys.stderr, every_s=0.0) as plain:
+            yield lambda done, total: plain("batch", done, total)
         return
     from rich.progress import (
         BarColumn,

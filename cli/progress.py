@@ -1,10 +1,11 @@
-"""Progress over readings on stderr: a rich bar on a terminal, plain lines elsewhere.
+"""Progress of a run's two passes on stderr: "reading" counts the readings pass 1 finds (no
+total yet: a log's reading count is only known once it has been read), then "mapping" runs
+against that real total, with the rate (readings/s) and time left.
 
-CI logs and batch jobs have no terminal: there a line ``sonarmap: mapping: N of M readings
-(P %), R readings/s, E s`` is printed at most every PLAIN_EVERY_S seconds (and the final
-state at the end, once any line was printed), so a long job shows it is alive without
-flooding the log, and a short one prints nothing.
-"""
+On a terminal: a rich bar. CI logs and batch jobs have no terminal: there a line
+``sonarmap: mapping: N of M readings (P %), R readings/s, E s`` is printed at most every
+PLAIN_EVERY_S seconds (and the final state at the end, once any line was printed), so a
+long job shows it is alive without flooding the log, and a short one prints nothing."""
 
 from __future__ import annotations
 
@@ -27,19 +28,19 @@ from rich.progress import (
 
 PLAIN_EVERY_S = 5.0
 
-Update = Callable[[int, int], None]  # (done, total)
+Update = Callable[[str, int, int | None], None]  # (stage, done, total or None)
 
 
 @contextmanager
 def reading_progress() -> Iterator[Update]:
-    """Yield a ``(done, total)`` callback that reports mapping progress on stderr."""
+    """Yield a ``(stage, done, total)`` callback that reports progress on stderr."""
     console = Console(stderr=True)
     if not console.is_terminal:
-        with plain_progress("mapping", "readings", sys.stderr) as update:
+        with plain_progress("readings", sys.stderr) as update:
             yield update
         return
     with Progress(
-        TextColumn("mapping"),
+        TextColumn("{task.description:<8}"),
         BarColumn(),
         MofNCompleteColumn(),
         TextColumn("readings"),
@@ -50,9 +51,13 @@ def reading_progress() -> Iterator[Update]:
         console=console,
         transient=True,
     ) as bar:
-        task = bar.add_task("mapping", total=None, rate="")
+        task = bar.add_task("reading", total=None, rate="")
+        stage_of_task = ["reading"]
 
-        def update(done: int, total: int) -> None:
+        def update(stage: str, done: int, total: int | None) -> None:
+            if stage != stage_of_task[0]:  # pass 2 starts: a fresh bar with the real total
+                stage_of_task[0] = stage
+                bar.reset(task, total=total, description=stage, rate="")
             elapsed = bar.tasks[0].elapsed or 0.0
             rate = f"{done / elapsed:,.0f}/s" if elapsed > 0 else ""
             bar.update(task, completed=done, total=total, rate=rate)
@@ -62,36 +67,36 @@ def reading_progress() -> Iterator[Update]:
 
 @contextmanager
 def plain_progress(
-    what: str,
     unit: str,
     stream: TextIO,
     every_s: float = PLAIN_EVERY_S,
     clock: Callable[[], float] = time.monotonic,
 ) -> Iterator[Update]:
-    """A ``(done, total)`` callback printing one line per ``every_s`` seconds, plus the
-    last state when the block ends (when a line was printed before and the state moved)."""
+    """A ``(stage, done, total)`` callback printing one line per ``every_s`` seconds, plus
+    the last state when the block ends (when a line was printed before and it moved)."""
     t0 = clock()
     last_line = t0
     printed = False
-    state: list[int] = []  # [done, total] of the latest update not printed yet
+    pending: list[tuple[str, int, int | None]] = []  # the latest update not printed yet
 
-    def line(done: int, total: int) -> None:
+    def line(stage: str, done: int, total: int | None) -> None:
         elapsed = clock() - t0
+        of = f" of {total:,}" if total is not None else ""
         share = f" ({100.0 * done / total:.0f} %)" if total else ""
         rate = f", {done / elapsed:,.0f} {unit}/s" if elapsed > 0 else ""
-        print(f"sonarmap: {what}: {done:,} of {total:,} {unit}{share}{rate}, "
-              f"{elapsed:.0f} s", file=stream, flush=True)
+        print(f"sonarmap: {stage}: {done:,}{of} {unit}{share}{rate}, {elapsed:.0f} s",
+              file=stream, flush=True)
 
-    def update(done: int, total: int) -> None:
+    def update(stage: str, done: int, total: int | None) -> None:
         nonlocal last_line, printed
         now = clock()
         if now - last_line >= every_s:
-            line(done, total)
+            line(stage, done, total)
             last_line, printed = now, True
-            state.clear()
+            pending.clear()
         else:
-            state[:] = [done, total]
+            pending[:] = [(stage, done, total)]
 
     yield update
-    if state and printed:
-        line(*state)
+    if pending and printed:
+        line(*pending[0])
