@@ -60,6 +60,7 @@ _NOT_LOG_SUFFIXES = frozenset(
     {".md", ".rst", ".toml", ".yaml", ".yml", ".json", ".html", ".htm", ".py", ".cfg",
      ".ini", ".xml", ".pgm", ".sh", ".in"}
 )
+_LOG_SUFFIXES = frozenset({".bag", ".mcap", ".db3"})
 _HEADERLESS_SUFFIXES = frozenset({".csv", ".tsv", ".txt", ".dat", ".log"})
 _SINGLE_COLUMNS = frozenset({"t", "x", "y", "yaw", "sensor", "range"})
 _RESERVED_NAMES = frozenset({SUMMARY_PARQUET, SUMMARY_MD})
@@ -86,6 +87,7 @@ class LogOutcome:
     mean_feature_variance_m2: float | None = None
     mapped_area_m2: float | None = None
     seconds: float = 0.0
+    warnings: str | None = None  # the run's warnings (data lost, readings dropped), "; "
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> LogOutcome:
@@ -122,7 +124,7 @@ def read_manifest(path: Path) -> list[Path]:
     """The paths a manifest lists: one per line, ``#`` comments and blank lines ignored,
     relative paths taken relative to the manifest's directory."""
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        text = Path(path).read_text(encoding="utf-8-sig")  # a byte-order mark is not a path
     except FileNotFoundError as err:
         raise InputError("manifest not found", path) from err
     except (OSError, UnicodeDecodeError) as err:
@@ -165,7 +167,8 @@ def _is_log_file(f: Path, config: Config) -> bool:
     try:
         fmt = detect_format(f)
     except FormatError:
-        return False
+        # A file named like a log (an empty or cut .bag) is a log that fails, not noise.
+        return f.suffix.lower() in _LOG_SUFFIXES
     if fmt != "csv":
         return True
     csv = config.input.csv
@@ -328,6 +331,7 @@ def _map_one_checked(
             features=int(m.counts["features"]),
             mean_feature_variance_m2=_num(m.paper_metric.get("mean_feature_variance_m2")),
             mapped_area_m2=_num(m.map.get("mapped_area_m2")),
+            warnings="; ".join(m.warnings) or None,
         )
         marker_data = {
             "marker_version": MARKER_VERSION,
@@ -529,6 +533,7 @@ def summary_table(rows: Sequence[LogOutcome]) -> Any:
         pa.field("mean_feature_variance_m2", pa.float64(), metadata={"unit": "m^2"}),
         pa.field("mapped_area_m2", pa.float64(), metadata={"unit": "m^2"}),
         pa.field("seconds", pa.float64(), nullable=False, metadata={"unit": "s"}),
+        pa.field("warnings", pa.string()),
     ])
     cols = {f.name: [getattr(r, f.name) for r in rows] for f in schema}
     return pa.table(cols, schema=schema)
@@ -558,14 +563,15 @@ def summary_markdown(rows: Sequence[LogOutcome]) -> str:
         f"{counts['failed']} failed.",
         "",
         "| log | status | duration (s) | readings | features | mean feature variance (m²) "
-        "| mapped area (m²) | wall (s) | path | error |",
-        "|---|---|--:|--:|--:|--:|--:|--:|---|---|",
+        "| mapped area (m²) | wall (s) | path | error | warnings |",
+        "|---|---|--:|--:|--:|--:|--:|--:|---|---|---|",
     ]
     for r in rows:
         cells = [
             r.name, r.status, _fmt(r.duration_s, ".1f"), _fmt(r.readings, "d"),
             _fmt(r.features, "d"), _fmt(r.mean_feature_variance_m2, ".4g"),
             _fmt(r.mapped_area_m2, ".2f"), _fmt(r.seconds, ".2f"), r.path, r.error or "",
+            r.warnings or "",
         ]
         lines.append("| " + " | ".join(_md_cell(c) for c in cells) + " |")
     return "\n".join(lines) + "\n"

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from formats import open_log
-from formats.contract import LogReader, RangeBatch
+from formats.contract import LogInfo, LogReader, RangeBatch
 from formats.errors import ConfigError, InputError
 from formats.map_types import GridSpec
 from formats.writers.trajectory_tum import Trajectory
@@ -139,8 +139,7 @@ def run(
                 raise InputError(err.reason, log_path) from err
         with timer.stage("mapping"):
             snapshots = {k: m.snapshot() for k, m in mappers.items()}
-        metrics = _metrics(log_path, info.format, info.duration_s, sv, sensors, mappers,
-                           snapshots, state, config)
+        metrics = _metrics(log_path, info, sv, sensors, mappers, snapshots, state, config)
         # A map of (almost) nothing is an error, not an empty result with exit 0.
         check_mapped_share(log_path, metrics.counts, metrics.dropped, state.max_pose_gap_s,
                            state.median_pose_interval_s, config)
@@ -290,8 +289,7 @@ def _sync(
 
 def _metrics(
     log_path: Path,
-    fmt: str,
-    duration_s: float,
+    info: LogInfo,
     sv: Survey,
     sensors: SensorTable,
     mappers: dict[str, Mapper],
@@ -331,11 +329,15 @@ def _metrics(
             "path": str(log_path),
             "name": log_path.name,
             "sha256": sha256_of(log_path),
-            "format": fmt,
-            "duration_s": duration_s,
+            "format": info.format,
+            "duration_s": info.duration_s,
             "start_ns": sv.ranges.t_min,
             "end_ns": sv.ranges.t_max,
             "max_range_m": sv.ranges.max_range_m,
+            # A damaged log is mapped from its intact part; what was lost is recorded.
+            "bytes_lost": info.bytes_lost,
+            "messages_recovered": info.message_count if info.losses else None,
+            "losses": list(info.losses),
         },
         run={
             "tool_version": __version__,

@@ -21,6 +21,8 @@ code                      severity  what
 ``pose_stamps_backwards`` WARNING   pose stamps go backwards (the pipeline sorts them)
 ``bad_beam``              ERROR     a beam width (fov) or range limits from the log that
                                     cannot be mapped
+``damaged_log``           WARNING   the log is truncated or corrupt: what was lost (the
+                                    intact part is mapped)
 ``outside_pose_coverage`` WARNING   readings before the first / after the last pose
 ``nan_readings``          ERROR     NaN ranges (REP 117: erroneous reading)
 ``negative_readings``     ERROR     negative finite ranges
@@ -480,6 +482,17 @@ def validate_log(reader: LogReader, config: Config) -> ValidationReport:
                 )
             )
 
+    if info.losses:
+        findings.append(
+            Finding(
+                "WARNING",
+                "damaged_log",
+                f"the log is damaged, {info.bytes_lost} bytes lost: {'; '.join(info.losses)}; "
+                f"sonarmap maps the intact part ({info.message_count} messages)",
+                counts={"bytes_lost": info.bytes_lost, "messages_recovered": info.message_count,
+                        "losses": len(info.losses)},
+            )
+        )
     findings.sort(key=lambda f: (_SEVERITY_ORDER[f.severity], f.code, natural_key(f.sensor or "")))
     t_first = min((int(t.min()) for t in all_pose_t), default=None)
     t_last = max((int(t.max()) for t in all_pose_t), default=None)

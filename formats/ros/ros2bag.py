@@ -49,6 +49,9 @@ class _StorageFile(Protocol):
     @property
     def warnings(self) -> list[str]: ...
 
+    @property
+    def bytes_lost(self) -> int: ...
+
     def raw_batches(self, connection_ids: Collection[int]) -> Iterator[RawBatch]: ...
 
     def close(self) -> None: ...
@@ -299,6 +302,10 @@ class Ros2BagSource(SourceAccessors):
         self._end = max(ends) if ends else None
 
     # -- MessageSource -------------------------------------------------------------------
+
+    @property
+    def bytes_lost(self) -> int:
+        return self._bytes_lost + sum(f.bytes_lost for f in self._files)
 
     @property
     def warnings(self) -> list[str]:
