@@ -195,3 +195,27 @@ def test_all_readings_at_max_range_is_an_error_naming_the_key(tmp_path: Path) ->
     (tmp_path / "mount.toml").write_text(MOUNT + "\n[mapper]\nclear_on_max_range = true\n")
     code, out, _ = _run(tmp_path, log, "-q")
     assert code == 0, out
+
+
+# --------------------------------------------------------------------------- fuzz.values
+
+
+def test_every_numeric_config_key_with_every_hostile_number() -> None:
+    from fuzz.values import HOSTILE, check_config, numeric_keys
+
+    keys = numeric_keys()
+    assert ("grid", "resolution") in keys and ("mapper", "seed") in keys
+    defects = [o.detail for s, k in keys for v in HOSTILE
+               if (o := check_config(s, k, v)).status == "defect"]
+    assert defects == []
+
+
+def test_hostile_logs_map_or_are_refused_in_one_line(tmp_path: Path) -> None:
+    import random
+
+    from fuzz.values import check_log
+
+    rnd = random.Random(12)
+    outcomes = [check_log(tmp_path, rnd, i) for i in range(12)]
+    assert [o.detail for o in outcomes if o.status == "defect"] == []
+    assert {o.status for o in outcomes} == {"ok", "rejected"}
