@@ -1,8 +1,9 @@
-"""Progress of a run's two passes on stderr: "reading" counts the readings pass 1 finds (no
+"""Progress of a run's passes on stderr: "reading" counts the readings pass 1 finds (no
 total yet: a log's reading count is only known once it has been read), then "mapping" runs
-against that real total, with the rate (readings/s) and time left.
+against that real total, with the rate (readings/s) and time left, then "writing" while
+the outputs are written.
 
-On a terminal: a rich bar. CI logs and batch jobs have no terminal: there a line
+On a terminal: rich bars. CI logs and batch jobs have no terminal: there a line
 ``sonarmap: mapping: N of M readings (P %), R readings/s, E s`` is printed at most every
 PLAIN_EVERY_S seconds (and the final state at the end, once any line was printed), so a
 long job shows it is alive without flooding the log, and a short one prints nothing."""
@@ -18,7 +19,6 @@ from typing import TextIO
 from rich.console import Console
 from rich.progress import (
     BarColumn,
-    MofNCompleteColumn,
     Progress,
     TaskProgressColumn,
     TextColumn,
@@ -29,6 +29,12 @@ from rich.progress import (
 PLAIN_EVERY_S = 5.0
 
 Update = Callable[[str, int, int | None], None]  # (stage, done, total or None)
+
+
+def _count(stage: str, done: int, total: int | None) -> str:
+    if stage == "writing":
+        return "outputs"
+    return f"{done:,}/{total:,} readings" if total is not None else f"{done:,} readings found"
 
 
 @contextmanager
@@ -42,8 +48,7 @@ def reading_progress() -> Iterator[Update]:
     with Progress(
         TextColumn("{task.description:<8}"),
         BarColumn(),
-        MofNCompleteColumn(),
-        TextColumn("readings"),
+        TextColumn("{task.fields[count]}"),
         TaskProgressColumn(),
         TextColumn("{task.fields[rate]}"),
         TimeElapsedColumn(),
@@ -51,16 +56,21 @@ def reading_progress() -> Iterator[Update]:
         console=console,
         transient=True,
     ) as bar:
-        task = bar.add_task("reading", total=None, rate="")
-        stage_of_task = ["reading"]
+        tasks = {"reading": bar.add_task("reading", total=None, count="", rate="")}
+        started = {"reading": time.monotonic()}
+        last = [time.monotonic()]
 
         def update(stage: str, done: int, total: int | None) -> None:
-            if stage != stage_of_task[0]:  # pass 2 starts: a fresh bar with the real total
-                stage_of_task[0] = stage
-                bar.reset(task, total=total, description=stage, rate="")
-            elapsed = bar.tasks[0].elapsed or 0.0
-            rate = f"{done / elapsed:,.0f}/s" if elapsed > 0 else ""
-            bar.update(task, completed=done, total=total, rate=rate)
+            now = time.monotonic()
+            if stage not in tasks:  # the next stage: a fresh bar (its own total or none)
+                for old in tasks.values():
+                    bar.update(old, visible=False)
+                tasks[stage] = bar.add_task(stage, total=total, count="", rate="")
+                started[stage] = last[0]  # the previous stage's last word: this one began
+            elapsed = now - started[stage]
+            rate = f"{done / elapsed:,.0f}/s" if elapsed > 0.5 and done else ""
+            bar.update(tasks[stage], completed=done, count=_count(stage, done, total), rate=rate)
+            last[0] = now
 
         yield update
 
@@ -81,6 +91,9 @@ def plain_progress(
 
     def line(stage: str, done: int, total: int | None) -> None:
         elapsed = clock() - t0
+        if total is None and done == 0:  # a stage without a count (writing the outputs)
+            print(f"sonarmap: {stage}, {elapsed:.0f} s", file=stream, flush=True)
+            return
         of = f" of {total:,}" if total is not None else ""
         share = f" ({100.0 * done / total:.0f} %)" if total else ""
         rate = f", {done / elapsed:,.0f} {unit}/s" if elapsed > 0 else ""
