@@ -12,12 +12,12 @@ cone as a fan of rays one cell apart at the echo distance with ``insertPointClou
 to OctoMap, and the §7 mean feature variance with/without correction and split guard.
 
 Figures: see ``benchmarks/RESULTS.md`` (``python -m benchmarks`` runs this at 32/scan
-beside the other benchmarks). Last full run, 100k readings at 32/scan, 2-core machine
-shared with other jobs: OctoMap 8.0k readings/s; full method 17.7k (2.2× OctoMap; 6.4k
-before ``integrate_many`` and the call-count work); without correction 53.9k (6.7×);
-classic 26.6k (3.3×). The 10× OctoMap target is not reached by the full method: its cost
-is numpy call overhead per scan (merge rounds, correction of ~27 touched features), see
-RESULTS.md.
+beside the other benchmarks). Timed runs follow a warm-up, so they load the compiled
+kernels as every run but a machine's first does; the one-off compile and the per-process
+load are measured apart, in fresh processes with an empty numba cache directory. Wall and
+CPU-time ratios are both printed: on a shared machine wall time also measures the other
+jobs. 2026-11-29 (load average ~15): full method 19.8x OctoMap in wall time, ~17x per CPU
+second; classic ~30x per CPU second.
 """
 
 from __future__ import annotations
