@@ -106,6 +106,10 @@ class LaserLog:
             return np.isfinite(r) & (r >= self.range_min[:, None]) & (r < self.range_max[:, None])
 
 
+# Scan period given to a CARMEN log whose stamps are all equal (it has no time), ns.
+UNSTAMPED_SCAN_PERIOD_NS = 1_000_000_000
+
+
 def _wrap(a: npt.ArrayLike) -> F64:
     return np.asarray((np.asarray(a, np.float64) + np.pi) % (2 * np.pi) - np.pi)
 
@@ -200,8 +204,17 @@ def _load_carmen(
     if log.skipped:
         skipped = ", ".join(f"{k} {v}" for k, v in sorted(log.skipped.items()))
         notes.append(f"CARMEN lines not used: {skipped}")
+    t_ns = las.t_ns
+    if s_n > 1 and np.all(t_ns == t_ns[0]):
+        # Some Radish logs (Örebro) carry no time at all: every stamp is the same. The
+        # scans are in log order; stamping them a fixed period apart keeps that order.
+        t_ns = t_ns[0] + np.arange(s_n, dtype=np.int64) * UNSTAMPED_SCAN_PERIOD_NS
+        notes.append(
+            f"every FLASER stamp is {t_ns[0] / 1e9:g} s: scans stamped "
+            f"{UNSTAMPED_SCAN_PERIOD_NS / 1e9:g} s apart in log order"
+        )
     return LaserLog(
-        t_ns=las.t_ns,
+        t_ns=t_ns,
         ranges=las.ranges,
         angles=np.broadcast_to(las.angles, las.ranges.shape).copy(),
         range_min=np.zeros(s_n),
