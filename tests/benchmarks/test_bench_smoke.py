@@ -38,8 +38,8 @@ def test_runner_smoke_prints_every_section(tmp_path: Path) -> None:
     assert "ros1 lz4: 1260 msgs, sonarmap" in by_case
     assert "ros2 mcap: 5100 msgs, sonarmap" in by_case
     assert by_case["ros1 lz4: 1260 msgs, sonarmap"][4].endswith("x rosbags")
-    # Mapper: every method against OctoMap (when octomap-python is installed, an optional
-    # benchmark extra), on the same 320 readings.
+    # Mapper: the four methods against OctoMap (when octomap-python is installed, an
+    # optional benchmark extra), on the same 320 readings.
     has_octomap = importlib.util.find_spec("octomap") is not None
     for label in ("default method (echo attribution, 2 passes)", "paper's method (correction on)",
                   "without correction", "classic log-odds baseline"):
