@@ -50,7 +50,7 @@ bench: $(STAMP)
 
 # Thousands of mutated logs per format through every reader (about 12 minutes).
 fuzz: $(STAMP)
-	$(BIN)/python -m fuzz.run_fuzz --examples 1000
+	$(BIN)/python -m fuzz.run_fuzz --examples 1000 --values 300
 
 # Refresh the regression goldens on purpose (review `git diff sample_logs/goldens` after).
 goldens: $(STAMP)

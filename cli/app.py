@@ -169,9 +169,9 @@ def run(
     elif not quiet:
         pm = m.paper_metric
         typer.echo(
-            f"mapped {m.counts['readings_used']} of {m.counts['readings']} readings into "
-            f"{m.counts['features']} features; mean feature variance "
-            f"{_fmt(pm['mean_feature_variance_m2'])} m²; "
+            f"used {m.counts['readings_mapped']} of {m.counts['readings']} readings; "
+            f"{m.counts['features']} features; "
+            f"mean feature variance {_fmt(pm['mean_feature_variance_m2'])} m²; "
             f"{m.map['cells_occupied']} occupied / {m.map['cells_free']} free cells"
         )
         for w in m.warnings:

@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from formats.errors import ConfigError
-from formats.options import InputConfig, SensorsConfig, doc_field
+from formats.options import FOV_MAX_DEG, FOV_MIN_DEG, InputConfig, SensorsConfig, doc_field
 from formats.presets import PRESETS
 
 
@@ -136,7 +136,11 @@ class GridConfig:
         default=(),
     )
     margin: float = doc_field("extra border around an automatic extent, m", default=0.5)
-    max_cells: int = doc_field("refuse grids larger than this many cells", default=200_000_000)
+    max_cells: int = doc_field(
+        "refuse grids larger than this many cells (~32 bytes each while mapping: the "
+        "default keeps a run under ~1.5 GB)",
+        default=40_000_000,
+    )
 
 
 @dataclass(frozen=True)
@@ -157,7 +161,9 @@ class PoseSyncConfig:
     """Interpolating the robot pose at each reading's stamp."""
 
     max_pose_gap_s: float = doc_field(
-        "readings inside a pose gap longer than this are dropped, s", default=0.5
+        "readings inside a pose gap longer than this are dropped, s; 0 = automatic: 3 x "
+        "the log's median pose interval, within [0.5, 5] s (1 Hz odometry gets 2.7 s)",
+        default=0.0,
     )
     time_offset_s: float = doc_field(
         "added to range stamps before lookup (sensor clock offset), s", default=0.0
@@ -273,7 +279,22 @@ def _coerce(tp: Any, value: Any, key: str) -> Any:
     raise ConfigError(f"'{key}': unsupported type {tp}")  # pragma: no cover
 
 
+def _check_finite(obj: Any, where: str) -> None:
+    """Every number of the configuration is finite: the range checks below compare with
+    < and >, which inf passes and NaN makes meaningless (no key means inf or NaN)."""
+    for f in dataclasses.fields(obj):
+        v, key = getattr(obj, f.name), _join(where, f.name)
+        items = v if isinstance(v, tuple) else (v,)
+        for i, item in enumerate(items):
+            k = f"{key}[{i}]" if isinstance(v, tuple) else key
+            if dataclasses.is_dataclass(item) and not isinstance(item, type):
+                _check_finite(item, k)
+            elif isinstance(item, float) and not math.isfinite(item):
+                raise ConfigError(f"'{k}' must be a finite number, got {item!r}")
+
+
 def _check_ranges(cfg: Config) -> None:
+    _check_finite(cfg, "")
     m, g, s, ps = cfg.mapper, cfg.grid, cfg.scans, cfg.pose_sync
 
     def need(ok: bool, key: str, rule: str, value: Any) -> None:
@@ -293,6 +314,7 @@ def _check_ranges(cfg: Config) -> None:
     need(0 < m.keep_fraction < 1, "mapper.keep_fraction", "must be in (0, 1)", m.keep_fraction)
     need(m.protect_times >= 1, "mapper.protect_times", "must be >= 1", m.protect_times)
     need(m.sigma_min >= 0, "mapper.sigma_min", "must be >= 0", m.sigma_min)
+    need(0 <= m.seed < 2**63, "mapper.seed", "must be in [0, 2**63)", m.seed)
     for key in ("p_free", "p_clamp_min", "p_clamp_max", "p_occ", "classic_p_occ"):
         prob(f"mapper.{key}", getattr(m, key))
     need(m.p_free < 0.5, "mapper.p_free", "must be < 0.5 (a free observation)", m.p_free)
@@ -320,15 +342,21 @@ def _check_ranges(cfg: Config) -> None:
     need(s.window_s > 0, "scans.window_s", "must be > 0", s.window_s)
     need(s.max_travel_m > 0, "scans.max_travel_m", "must be > 0", s.max_travel_m)
     need(s.max_turn_deg > 0, "scans.max_turn_deg", "must be > 0", s.max_turn_deg)
-    need(ps.max_pose_gap_s > 0, "pose_sync.max_pose_gap_s", "must be > 0", ps.max_pose_gap_s)
+    need(ps.max_pose_gap_s >= 0, "pose_sync.max_pose_gap_s", "must be >= 0 (0 = automatic)",
+         ps.max_pose_gap_s)
     need(math.isfinite(ps.time_offset_s), "pose_sync.time_offset_s", "must be finite", ps.time_offset_s)
     sc = cfg.sensors
-    need(0 <= sc.fov_deg < 180, "sensors.fov_deg", "must be in [0, 180)", sc.fov_deg)
+    fov_rule = f"must be 0 (from the log) or in [{FOV_MIN_DEG:g}, {FOV_MAX_DEG:g})"
+
+    def fov_ok(v: float) -> bool:
+        return v == 0 or FOV_MIN_DEG <= v < FOV_MAX_DEG
+
+    need(fov_ok(sc.fov_deg), "sensors.fov_deg", fov_rule, sc.fov_deg)
     _check_limits("sensors", sc.min_range, sc.max_range)
     for i, mt in enumerate(sc.mounts):
         key = f"sensors.mounts[{i}]"
         need(bool(mt.name), f"{key}.name", "must be set", mt.name)
-        need(0 <= mt.fov_deg < 180, f"{key}.fov_deg", "must be in [0, 180)", mt.fov_deg)
+        need(fov_ok(mt.fov_deg), f"{key}.fov_deg", fov_rule, mt.fov_deg)
         _check_limits(key, mt.min_range, mt.max_range)
     names = [mt.name for mt in sc.mounts]
     dup = sorted({n for n in names if names.count(n) > 1})

@@ -251,7 +251,12 @@ def _load_ros(
     from formats.ros.columns import LASER_TYPES, TF_TYPES, LaserScanColumns, TransformColumns
     from formats.ros.decode import decode
     from formats.ros.reader import RosLogReader
-    from pipeline.pose_sync import POSE_OK, build_pose_track, interpolate_poses
+    from pipeline.pose_sync import (
+        POSE_OK,
+        build_pose_track,
+        interpolate_poses,
+        pose_gap_limit_s,
+    )
 
     source = _ros_source(p, fmt)
     with RosLogReader(source, cfg) as reader:
@@ -325,7 +330,8 @@ def _load_ros(
         )
     else:
         notes.append(f"laser {frame} at ({mount.x:.3f}, {mount.y:.3f}) m, yaw {mount.yaw:.3f} rad")
-    look = interpolate_poses(track, t, round(cfg.pose_sync.max_pose_gap_s * 1e9))
+    gap_s = pose_gap_limit_s(cfg.pose_sync.max_pose_gap_s, track.median_interval_s())
+    look = interpolate_poses(track, t, round(gap_s * 1e9))
     ok = look.reason == POSE_OK
     if not ok.any():
         raise InputError(f"no robot pose at any of the {len(t)} laser scan stamps", p)

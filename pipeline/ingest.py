@@ -62,7 +62,13 @@ class StampOrder:
 
     def backwards(self, b: RangeBatch) -> npt.NDArray[np.bool_]:
         """Mask of the batch's readings that went backwards; updates the per-sensor state."""
-        out = np.zeros(len(b), dtype=bool)
+        return self.steps_back(b) > 0
+
+    def steps_back(self, b: RangeBatch) -> npt.NDArray[np.int64]:
+        """How far (ns) each reading's stamp lies below the largest earlier stamp of its
+        sensor (0 = not backwards); updates the per-sensor state. ``validate`` reports
+        with the same rule the pipeline drops by."""
+        out = np.zeros(len(b), dtype=np.int64)
         order = np.argsort(b.sensor_id, kind="stable")  # each sensor's readings in log order
         sid, t = b.sensor_id[order], b.t_ns[order]
         starts = np.flatnonzero(np.r_[True, sid[1:] != sid[:-1]])
@@ -73,7 +79,7 @@ class StampOrder:
             prev = self._last.get(key)
             head = seg[:1] if prev is None else np.array([prev], dtype=np.int64)
             before = np.maximum.accumulate(np.r_[head, seg[:-1]])  # max of all earlier stamps
-            out[order[s:e]] = seg < before
+            out[order[s:e]] = np.maximum(before - seg, 0)
             self._last[key] = int(max(before[-1], seg[-1]))
         return out
 

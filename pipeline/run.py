@@ -25,13 +25,14 @@ from typing import Any
 import numpy as np
 
 from formats import open_log
-from formats.contract import LogReader, RangeBatch
+from formats.contract import LogInfo, LogReader, RangeBatch
 from formats.errors import ConfigError, InputError
 from formats.map_types import GridSpec
 from formats.writers.trajectory_tum import Trajectory
 from pipeline import __version__
 from pipeline.config import Config, dump_config
 from pipeline.ingest import Survey, ordered_ranges, survey
+from pipeline.mapped_share import check_mapped_share, mapped_readings
 from pipeline.mapper import Mapper, make_mapper
 from pipeline.mapper.types import MapSnapshot, Scan
 from pipeline.metrics import (
@@ -46,12 +47,13 @@ from pipeline.pose_sync import (
     POSE_REASONS,
     PoseTrack,
     interpolate_poses,
+    pose_gap_limit_s,
     sonar_geometry,
 )
 from pipeline.reading_quality import REASONS
 from pipeline.run_warnings import run_warnings
 from pipeline.scans import ScanBuilder, ScanKeys
-from pipeline.sensors import SensorTable, resolve_sensors
+from pipeline.sensors import SensorTable, beam_problem, resolve_sensors
 
 log = logging.getLogger("sonarmap")
 
@@ -78,6 +80,8 @@ class StreamState:
     dropped: Counter[str]
     per_sensor: Counter[int]
     scans: int
+    max_pose_gap_s: float
+    median_pose_interval_s: float
 
 
 def run(
@@ -126,22 +130,30 @@ def run(
                 off = dataclasses.replace(config.mapper, feature_correction=False)
                 mappers["no_correction"] = make_mapper(off, grid)
             passes = max(m.passes for m in mappers.values())
-            for index in range(passes):
-                # Every pass streams the log again: nothing grows with the log's length.
-                active = {k: m for k, m in mappers.items() if index < m.passes}
-                for m in active.values():
-                    m.begin_pass(index)
-                if index:
-                    sv.track.release_before(None)  # the pose walk starts again
-                state = _map_stream(
-                    reader, sv, sensors, active, config, timer, _pass_progress(progress, index, passes)
-                )
+            try:
+                for index in range(passes):
+                    # Every pass streams the log again: nothing grows with the log's length.
+                    active = {k: m for k, m in mappers.items() if index < m.passes}
+                    for m in active.values():
+                        m.begin_pass(index)
+                    if index:
+                        sv.track.release_before(None)  # the pose walk starts again
+                    state = _map_stream(
+                        reader, sv, sensors, grid, active, config, timer,
+                        _pass_progress(progress, index, passes),
+                    )
+            except InputError as err:
+                if err.path is not None:
+                    raise
+                raise InputError(err.reason, log_path) from err
         with timer.stage("mapping"):
             snapshots = {k: m.snapshot() for k, m in mappers.items()}
         if progress is not None:
             progress("writing", 0, None)  # the outputs: no reading count to show
-        metrics = _metrics(log_path, info.format, info.duration_s, sv, sensors, mappers,
-                           snapshots, state, config)
+        metrics = _metrics(log_path, info, sv, sensors, mappers, snapshots, state, config)
+        # A map of (almost) nothing is an error, not an empty result with exit 0.
+        check_mapped_share(log_path, metrics.counts, metrics.dropped, state.max_pose_gap_s,
+                           state.median_pose_interval_s, config)
         _write_outputs(out, config, sv, drawn, snapshots, metrics, timer, t_start)
         if on_complete is not None:
             on_complete(out.tmp_dir, metrics)
@@ -164,7 +176,11 @@ def prepare(
 
 
 def grid_for(sv: Survey, sensors: SensorTable, config: Config) -> GridSpec:
-    """The grid: ``[grid] extent`` if given, else the poses' box grown by the sonars' reach."""
+    """The grid: ``[grid] extent`` if given, else the poses' box grown by the sonars' reach.
+
+    The box leaves out isolated pose outliers (:meth:`PoseTrack.bulk_bounds`: an odometry
+    glitch must not blow the grid up to kilometres); readings placed outside the grid are
+    dropped and counted (``outside_grid``)."""
     g = config.grid
     if g.extent:
         x0, y0, x1, y1 = g.extent
@@ -180,15 +196,17 @@ def grid_for(sv: Survey, sensors: SensorTable, config: Config) -> GridSpec:
         offsets = np.hypot(sensors.mount_x, sensors.mount_y)
         offset = float(np.nanmax(offsets)) if np.isfinite(offsets).any() else 0.0
         reach = max(finite) + offset + g.margin
-        bx0, by0, bx1, by1 = sv.track.bounds()
+        (bx0, by0, bx1, by1), _ = sv.track.bulk_bounds()
         x0, x1 = bx0 - reach, bx1 + reach
         y0, y1 = by0 - reach, by1 + reach
     grid = GridSpec.covering(x0, y0, x1, y1, g.resolution)
     cells = grid.width * grid.height
     if cells > g.max_cells:
         raise ConfigError(
-            f"grid of {grid.width}x{grid.height} = {cells} cells exceeds grid.max_cells = "
-            f"{g.max_cells}; use a coarser grid.resolution or a [grid] extent"
+            f"grid of {grid.width}x{grid.height} = {cells} cells "
+            f"({grid.width * g.resolution:.0f} x {grid.height * g.resolution:.0f} m) exceeds "
+            f"grid.max_cells = {g.max_cells}; use a coarser grid.resolution, a [grid] extent, "
+            "or a larger grid.max_cells if the memory is there (~32 bytes a cell)"
         )
     return grid
 
@@ -197,6 +215,7 @@ def _map_stream(
     reader: LogReader,
     sv: Survey,
     sensors: SensorTable,
+    grid: GridSpec,
     mappers: dict[str, Mapper],
     config: Config,
     timer: StageTimer,
@@ -208,26 +227,30 @@ def _map_stream(
         with timer.stage("mapping"):
             _integrate(mappers, scans)
 
-    return stream_scans(reader, sv, sensors, config, integrate, timer, progress)
+    return stream_scans(reader, sv, sensors, grid, config, integrate, timer, progress)
 
 
 def stream_scans(
     reader: LogReader,
     sv: Survey,
     sensors: SensorTable,
+    grid: GridSpec,
     config: Config,
     consume: Callable[[list[Scan]], None],
     timer: StageTimer | None = None,
     progress: Progress | None = None,
 ) -> StreamState:
     """Pose sync and scan building over the log's time-ordered readings: ``consume`` gets
-    the scans in order, chunk by chunk (any mapper, or a baseline such as OctoMap)."""
+    the scans in order, chunk by chunk (any mapper, or a baseline such as OctoMap);
+    readings placed outside ``grid`` are dropped (``outside_grid``)."""
     timer = timer if timer is not None else StageTimer()
     track = sv.track
     offset_ns = round(config.pose_sync.time_offset_s * 1e9)
-    max_gap_ns = round(config.pose_sync.max_pose_gap_s * 1e9)
+    median_s = track.median_interval_s()
+    gap_s = pose_gap_limit_s(config.pose_sync.max_pose_gap_s, median_s)
+    max_gap_ns = round(gap_s * 1e9)
     builder = ScanBuilder(ScanKeys(config.scans, track))
-    state = StreamState(0, Counter(), Counter(), 0)
+    state = StreamState(0, Counter(), Counter(), 0, gap_s, median_s)
     total = sv.ranges.count
     stream = ordered_ranges(reader)
     while True:
@@ -242,7 +265,7 @@ def stream_scans(
         if len(batch) == 0:
             continue
         with timer.stage("pose_sync"):
-            scan_ids, readings = _sync(batch, track, sensors, offset_ns, max_gap_ns, state)
+            scan_ids, readings = _sync(batch, track, sensors, grid, offset_ns, max_gap_ns, state)
         with timer.stage("scan_building"):
             scans = list(builder.push(scan_ids, readings))
         # Later readings are newer than this chunk: the poses before it are done with.
@@ -280,11 +303,13 @@ def _sync(
     batch: RangeBatch,
     track: PoseTrack,
     sensors: SensorTable,
+    grid: GridSpec,
     offset_ns: int,
     max_gap_ns: int,
     state: StreamState,
 ) -> tuple[np.ndarray, Scan]:
-    """Pose sync of one chunk: drop readings without a pose, resolve world geometry."""
+    """Pose sync of one chunk: drop readings without a pose or placed outside the grid,
+    check beam widths and limits, resolve world geometry."""
     look = interpolate_poses(track, batch.t_ns + offset_ns, max_gap_ns)
     codes, counts = np.unique(look.reason, return_counts=True)
     for c, n in zip(codes.tolist(), counts.tolist(), strict=True):
@@ -293,6 +318,17 @@ def _sync(
     ok = look.reason == POSE_OK
     b = batch.take(ok)
     sid = b.sensor_id
+    ox, oy, alpha = sonar_geometry(
+        look.x[ok], look.y[ok], look.yaw[ok],
+        sensors.mount_x[sid], sensors.mount_y[sid], sensors.mount_yaw[sid],
+    )
+    x0, y0 = grid.origin_x, grid.origin_y
+    inside = (ox >= x0) & (ox < x0 + grid.width * grid.resolution)
+    inside &= (oy >= y0) & (oy < y0 + grid.height * grid.resolution)
+    if not inside.all():  # a pose outlier left out of the grid extent
+        state.dropped["outside_grid"] += int((~inside).sum())
+        b, ox, oy, alpha = b.take(inside), ox[inside], oy[inside], alpha[inside]
+        sid = b.sensor_id
     ids, per = np.unique(sid, return_counts=True)
     state.per_sensor.update(dict(zip(ids.tolist(), per.tolist(), strict=True)))
     fov, lo, hi = sensors.apply_limits(b)
@@ -302,10 +338,9 @@ def _sync(
             f"no beam width (fov) for sensor(s) {', '.join(bad)}: the log carries none; set "
             f"fov_deg in [sensors] or [[sensors.mounts]]"
         )
-    ox, oy, alpha = sonar_geometry(
-        look.x[ok], look.y[ok], look.yaw[ok],
-        sensors.mount_x[sid], sensors.mount_y[sid], sensors.mount_yaw[sid],
-    )
+    problem = beam_problem(sensors.names, sid, fov, lo, hi)
+    if problem is not None:
+        raise InputError(problem)
     scan = Scan(
         t_ns=b.t_ns, sensor_id=sid, range_m=b.range_m, origin_x=ox, origin_y=oy, alpha=alpha,
         fov=fov, min_range=lo, max_range=hi,
@@ -315,8 +350,7 @@ def _sync(
 
 def _metrics(
     log_path: Path,
-    fmt: str,
-    duration_s: float,
+    info: LogInfo,
     sv: Survey,
     sensors: SensorTable,
     mappers: dict[str, Mapper],
@@ -327,6 +361,7 @@ def _metrics(
     main = mappers["main"]
     counters = main.counters.as_dict()
     dropped = {name: int(state.dropped.get(name, 0)) for name in list(POSE_REASONS.values())[1:]}
+    dropped["outside_grid"] = int(state.dropped.get("outside_grid", 0))
     dropped["late"] = int(state.dropped.get("late", 0))
     dropped["stamp_backwards"] = int(state.dropped.get("stamp_backwards", 0))
     for name in list(REASONS.values())[1:]:
@@ -355,11 +390,15 @@ def _metrics(
             "path": str(log_path),
             "name": log_path.name,
             "sha256": sha256_of(log_path),
-            "format": fmt,
-            "duration_s": duration_s,
+            "format": info.format,
+            "duration_s": info.duration_s,
             "start_ns": sv.ranges.t_min,
             "end_ns": sv.ranges.t_max,
             "max_range_m": sv.ranges.max_range_m,
+            # A damaged log is mapped from its intact part; what was lost is recorded.
+            "bytes_lost": info.bytes_lost,
+            "messages_recovered": info.message_count if info.losses else None,
+            "losses": list(info.losses),
         },
         run={
             "tool_version": __version__,
@@ -367,15 +406,21 @@ def _metrics(
             "feature_correction": config.mapper.feature_correction,
             "config_hash": config.hash(),
             "scan_policy": config.scans.policy,
+            "max_pose_gap_s": state.max_pose_gap_s,
+            "median_pose_interval_s": state.median_pose_interval_s,
         },
         counts={
             "readings": sv.ranges.count,
             "readings_pose_synced": int(sum(state.per_sensor.values())),
             "readings_used": counters.get("readings_used", 0),
+            "readings_mapped": mapped_readings(
+                counters.get("readings_used", 0), dropped, config.mapper.clear_on_max_range
+            ),
             "readings_stamp_backwards": sv.ranges.backwards,
             "poses": len(track),
             "poses_stamp_backwards": track.backwards,
             "poses_duplicate_stamp": track.duplicates,
+            "poses_outliers": track.bulk_bounds()[1],
             "scans": state.scans,
             **{k: v for k, v in counters.items() if not k.startswith("skipped_") and k not in ("readings", "readings_used", "scans")},
             "features": len(snap.features),
