@@ -14,7 +14,7 @@ import pytest
 from typer.testing import CliRunner
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "formats" / "ros"))
-from split_logs import anything, before, split_mcap, split_ros1, topics
+from split_logs import anything, before, split_mcap, split_ros1, split_ros2, topics
 
 from cli.app import app
 
@@ -39,6 +39,9 @@ def logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[Path]]:
     split_ros1(d / "whole.bag", [(d / "rec_0.bag", before(T0 + 13 * S)),
                                  (d / "rec_1.bag", before(T0 + 26 * S)),
                                  (d / "rec_2.bag", anything())])
+    split_ros2(OFFICE / "office_ros2", [(d / "whole_ros2", first_40s)])
+    split_ros2(d / "whole_ros2", [(d / "ros2_sonar", topics("/sonar", "/tf_static")),
+                                  (d / "ros2_odom", anything())])
     # Another recording of the same robot, a minute later.
     split_mcap(d / "rec_1.mcap", [(d / "later.mcap", anything())], shift_ns=60 * S)
     # The odometry recorded on the topic name the sonar has in the other file.
@@ -50,6 +53,8 @@ def logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[Path]]:
         "topic": [d / "sonar.mcap", d / "odom.mcap"],
         "whole_bag": [d / "whole.bag"],
         "ros1_split": [d / "rec_0.bag", d / "rec_1.bag", d / "rec_2.bag"],
+        "whole_ros2": [d / "whole_ros2"],
+        "ros2_topic": [d / "ros2_sonar", d / "ros2_odom"],  # bag directories
         "later": [d / "rec_0.mcap", d / "later.mcap"],
         "clash": [d / "sonar.mcap", d / "odom_on_sonar.mcap"],
     }
@@ -86,10 +91,11 @@ def _run(paths: list[Path], out: Path) -> None:
 @pytest.fixture(scope="module")
 def runs(logs: dict[str, list[Path]], tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     d = tmp_path_factory.mktemp("runs")
-    for name in ("whole_mcap", "time", "topic", "whole_bag", "ros1_split"):
+    names = ("whole_mcap", "time", "topic", "whole_bag", "ros1_split", "whole_ros2",
+             "ros2_topic")
+    for name in names:
         _run(logs[name], d / name)
-    return {name: d / name for name in ("whole_mcap", "time", "topic", "whole_bag",
-                                        "ros1_split")}
+    return {name: d / name for name in names}
 
 
 def _metrics(run: Path) -> dict:
@@ -97,7 +103,8 @@ def _metrics(run: Path) -> dict:
 
 
 @pytest.mark.parametrize(("parts", "whole"), [("time", "whole_mcap"), ("topic", "whole_mcap"),
-                                              ("ros1_split", "whole_bag")])
+                                              ("ros1_split", "whole_bag"),
+                                              ("ros2_topic", "whole_ros2")])
 def test_the_parts_of_a_recording_map_to_the_bytes_of_the_whole(
     runs: dict[str, Path], parts: str, whole: str
 ) -> None:
