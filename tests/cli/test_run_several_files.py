@@ -14,7 +14,7 @@ import pytest
 from typer.testing import CliRunner
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "formats" / "ros"))
-from split_logs import anything, before, split_mcap, split_ros1, split_ros2, topics
+from split_logs import Accept, anything, before, split_mcap, split_ros1, split_ros2, topics
 
 from cli.app import app
 
@@ -35,6 +35,9 @@ def logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[Path]]:
                                   (d / "rec_1.mcap", anything())])
     split_mcap(d / "whole.mcap", [(d / "odom.mcap", topics("/odom")),
                                   (d / "sonar.mcap", anything())])
+    # Two recorders of one /sonar topic (even and odd sonars), overlapping all along.
+    split_mcap(d / "whole.mcap", [(d / "even.mcap", _odd_sonar(False)),
+                                  (d / "odd.mcap", anything())], chunk_size=64 * 1024)
     split_ros1(OFFICE / "office.bag", [(d / "whole.bag", first_40s)])
     split_ros1(d / "whole.bag", [(d / "rec_0.bag", before(T0 + 13 * S)),
                                  (d / "rec_1.bag", before(T0 + 26 * S)),
@@ -51,6 +54,7 @@ def logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[Path]]:
         "whole_mcap": [d / "whole.mcap"],
         "time": [d / "rec_1.mcap", d / "rec_0.mcap"],  # named out of order on purpose
         "topic": [d / "sonar.mcap", d / "odom.mcap"],
+        "sensors": [d / "even.mcap", d / "odd.mcap"],
         "whole_bag": [d / "whole.bag"],
         "ros1_split": [d / "rec_0.bag", d / "rec_1.bag", d / "rec_2.bag"],
         "whole_ros2": [d / "whole_ros2"],
@@ -58,6 +62,21 @@ def logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[Path]]:
         "later": [d / "rec_0.mcap", d / "later.mcap"],
         "clash": [d / "sonar.mcap", d / "odom_on_sonar.mcap"],
     }
+
+
+def _odd_sonar(odd: bool) -> Accept:
+    """Accept the /sonar messages of odd (or even) numbered sonars, and all others."""
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+
+    def accept(topic: str, t: int, data: bytes) -> bool:
+        if topic != "/sonar":
+            return True
+        frame = store.deserialize_cdr(data, "sensor_msgs/msg/Range").header.frame_id
+        return (int(frame.rsplit("_", 1)[1]) % 2 == 1) == odd
+
+    return accept
 
 
 def _rename_topic(path: Path, old: str, new: str) -> None:
@@ -91,7 +110,7 @@ def _run(paths: list[Path], out: Path) -> None:
 @pytest.fixture(scope="module")
 def runs(logs: dict[str, list[Path]], tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     d = tmp_path_factory.mktemp("runs")
-    names = ("whole_mcap", "time", "topic", "whole_bag", "ros1_split", "whole_ros2",
+    names = ("whole_mcap", "time", "topic", "sensors", "whole_bag", "ros1_split", "whole_ros2",
              "ros2_topic")
     for name in names:
         _run(logs[name], d / name)
@@ -103,6 +122,7 @@ def _metrics(run: Path) -> dict:
 
 
 @pytest.mark.parametrize(("parts", "whole"), [("time", "whole_mcap"), ("topic", "whole_mcap"),
+                                              ("sensors", "whole_mcap"),
                                               ("ros1_split", "whole_bag"),
                                               ("ros2_topic", "whole_ros2")])
 def test_the_parts_of_a_recording_map_to_the_bytes_of_the_whole(
