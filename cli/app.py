@@ -182,7 +182,7 @@ def info(
     from formats import open_log
 
     cfg = _load(config, format=format)
-    with open_log(log, format, cfg) as reader:
+    with open_log(log, cfg) as reader:
         li = reader.info()
     if json_out:
         typer.echo(json.dumps(dataclasses.asdict(li) | {"duration_s": li.duration_s}, indent=2))
@@ -243,7 +243,7 @@ def validate(
     from pipeline.validate import validate_log
 
     cfg = _load(config, format=format, range_topics=range_topic, pose_topic=pose_topic)
-    with open_log(log, format, cfg) as reader:
+    with open_log(log, cfg) as reader:
         report = validate_log(reader, cfg)
     if json_out:
         typer.echo(json.dumps(report.to_dict(), indent=2))

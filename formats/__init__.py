@@ -2,7 +2,8 @@
 
 Entry point: :func:`open_log` returns a :class:`~formats.contract.LogReader` for any
 supported log. The format is detected from the content (magic bytes, a rosbag2
-``metadata.yaml``, a CSV header), not from the suffix; ``format=`` overrides the guess.
+``metadata.yaml``, a CSV header), not from the suffix; ``[input] format`` (``--format``)
+overrides the guess.
 The registry :data:`FORMATS` maps each format name to the function that opens it: an
 explicit table, no plugin discovery.
 """
@@ -100,11 +101,11 @@ def detect_format(path: str | Path) -> str:
     )
 
 
-def open_log(path: str | Path, format: str | None = None, config: ReaderSettings | None = None) -> LogReader:
-    """Open a log for reading; ``format`` (a key of FORMATS) overrides detection."""
+def open_log(path: str | Path, config: ReaderSettings | None = None) -> LogReader:
+    """Open a log for reading; ``config.input.format`` (a key of FORMATS) overrides detection."""
     p = Path(path)
     cfg = config if config is not None else ReaderOptions()
-    name = format or cfg.input.format or detect_format(p)
+    name = cfg.input.format or detect_format(p)
     if name not in FORMATS:
         raise FormatError(f"unknown format '{name}' (known: {', '.join(sorted(FORMATS))})", p)
     if not p.exists():

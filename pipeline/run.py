@@ -78,7 +78,6 @@ def run(
     out_dir: str | Path,
     config: Config,
     *,
-    format: str | None = None,
     force: bool = False,
     compare_correction: bool = False,
     progress: Progress | None = None,
@@ -93,7 +92,7 @@ def run(
     t_start = time.perf_counter()
     with OutputDir(Path(out_dir), force=force) as out:
         with timer.stage("ingest"):
-            reader = open_log(log_path, format, config)
+            reader = open_log(log_path, config)
         with reader:
             with timer.stage("ingest"):
                 sv = survey(reader)

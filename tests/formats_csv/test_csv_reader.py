@@ -12,7 +12,7 @@ from csvlog_helpers import make_config, read_all, write
 import formats.csv_log as csv_log
 from formats import detect_format, open_log
 from formats.contract import LogReader, PoseBatch, RangeBatch
-from formats.csv_log import CsvLogReader, configured_limits, looks_like_csv
+from formats.csv_log import CsvLogReader, looks_like_csv
 
 MOUNTS = {
     "mounts": [
@@ -370,16 +370,6 @@ def test_reading_twice_is_identical(tmp_path: Path) -> None:
         assert getattr(a, f).tobytes() == getattr(b, f).tobytes()
 
 
-def test_configured_limits_preset_overridden_by_mounts() -> None:
-    cfg = make_config(
-        sensors={"preset": "udacity-8sonar", "mounts": [{"name": "sonar_1", "max_range": 3.0}]}
-    )
-    per_name, defaults = configured_limits(cfg)
-    assert per_name["sonar_0"] == pytest.approx((math.radians(20), 0.17, 5.0))
-    assert per_name["sonar_1"][2] == 3.0 and math.isnan(per_name["sonar_1"][0])
-    assert all(math.isnan(v) for v in defaults)
-
-
 def test_looks_like_csv(tmp_path: Path) -> None:
     assert looks_like_csv(write(tmp_path, "a.csv", "# x\nt,x,y\n"))
     assert looks_like_csv(write(tmp_path, "b.txt", "1686487 5110 5110\n"))
@@ -406,7 +396,7 @@ def test_looks_like_csv(tmp_path: Path) -> None:
 def test_detected_and_opened_through_open_log(tmp_path: Path) -> None:
     path = write(tmp_path, "log.csv", SINGLE)
     assert detect_format(path) == "csv"
-    with open_log(path, None, make_config()) as reader:
+    with open_log(path, make_config()) as reader:
         assert isinstance(reader, CsvLogReader)
         assert reader.info().topics[0].count == 5
 

@@ -56,7 +56,7 @@ def test_sample_reads_with_exact_values() -> None:
 
 def test_sample_opens_through_open_log_with_its_config() -> None:
     cfg = load_config(SAMPLE / "sonarmap.toml")
-    with open_log(SAMPLE, None, cfg) as reader:
+    with open_log(SAMPLE, cfg) as reader:
         info = reader.info()
     assert info.format == "csv"
     assert [(t.name, t.count) for t in info.topics] == [

@@ -46,7 +46,7 @@ def content():
 
 
 def _read(path: Path):
-    with open_log(path, None, Config()) as reader:
+    with open_log(path, Config()) as reader:
         ranges, poses, mounts = [], [], {}
         for b in reader.batches():
             if isinstance(b, RangeBatch):
