@@ -15,12 +15,8 @@ from pathlib import Path
 
 from formats.contract import LogReader
 from formats.errors import FormatError
+from formats.magic import MCAP_MAGIC, ROS1_MAGIC, SQLITE_MAGIC, ZSTD_MAGIC
 from formats.options import ReaderOptions, ReaderSettings
-
-ROS1_MAGIC = b"#ROSBAG V2.0\n"
-MCAP_MAGIC = b"\x89MCAP0\r\n"
-SQLITE_MAGIC = b"SQLite format 3\x00"
-ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
 
 
 def _open_ros1(path: Path, config: ReaderSettings) -> LogReader:

@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any, Protocol, cast
 import numpy as np
 import numpy.typing as npt
 
+from formats.angles import wrap_angle
 from formats.arrays import F64, I64
 from formats.contract import PoseBatch, RangeBatch, SensorMount
 from formats.errors import ConfigError, OutputError
@@ -505,7 +506,7 @@ def _pose_at(p: PoseBatch, t_ns: I64) -> tuple[F64, F64, F64]:
     tp = (p.t_ns[o] - base).astype(np.float64)
     t = (t_ns - base).astype(np.float64)
     yaw = np.interp(t, tp, np.unwrap(p.yaw[o]))
-    yaw = (yaw + math.pi) % (2 * math.pi) - math.pi
+    yaw = wrap_angle(yaw)
     return np.interp(t, tp, p.x[o]), np.interp(t, tp, p.y[o]), yaw
 
 

@@ -6,7 +6,7 @@ sensor mounts. Each section is a frozen dataclass; each field's ``doc`` metadata
 comment ``sonarmap config`` prints. Loading validates names, types and ranges and raises
 :class:`~formats.errors.ConfigError` with one line naming the file and the key.
 
-TOML is parsed with the standard library's ``tomllib``: no code is executed.
+TOML is read by :func:`formats.toml_file.read_toml` (``tomllib``: no code is executed).
 """
 
 from __future__ import annotations
@@ -15,7 +15,6 @@ import dataclasses
 import hashlib
 import json
 import math
-import tomllib
 import types
 import typing
 from dataclasses import dataclass, field
@@ -25,6 +24,7 @@ from typing import Any, Literal
 from formats.errors import ConfigError
 from formats.options import InputConfig, SensorsConfig, doc_field
 from formats.presets import PRESETS
+from formats.toml_file import read_toml
 
 
 @dataclass(frozen=True)
@@ -170,15 +170,7 @@ def load_config(path: str | Path | None) -> Config:
     if path is None:
         return Config().validate()
     p = Path(path)
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError as err:
-        raise ConfigError("configuration file not found", p) from err
-    except (OSError, UnicodeDecodeError) as err:
-        raise ConfigError(f"cannot read configuration: {err}", p) from err
-    except tomllib.TOMLDecodeError as err:
-        raise ConfigError(f"invalid TOML: {err}", p) from err
-    return config_from_dict(data, source=p)
+    return config_from_dict(read_toml(p, "configuration"), source=p)
 
 
 def config_from_dict(data: dict[str, Any], source: str | Path | None = None) -> Config:

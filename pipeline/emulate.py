@@ -38,6 +38,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
+from formats.angles import wrap_angle
 from formats.arrays import F32, F64, I32, I64
 from formats.contract import PoseBatch, SensorMount, make_range_batch
 from formats.errors import ConfigError, FormatError, InputError, OutputError, TopicError
@@ -96,7 +97,7 @@ class LaserLog:
         return (
             self.x + c * m.x - s * m.y,
             self.y + s * m.x + c * m.y,
-            _wrap(self.yaw + m.yaw),
+            wrap_angle(self.yaw + m.yaw),
         )
 
     def valid_returns(self) -> npt.NDArray[np.bool_]:
@@ -104,10 +105,6 @@ class LaserLog:
         r = self.ranges
         with np.errstate(invalid="ignore"):
             return np.isfinite(r) & (r >= self.range_min[:, None]) & (r < self.range_max[:, None])
-
-
-def _wrap(a: npt.ArrayLike) -> F64:
-    return np.asarray((np.asarray(a, np.float64) + np.pi) % (2 * np.pi) - np.pi)
 
 
 def _sorted_by_time(log: LaserLog) -> LaserLog:
@@ -147,8 +144,9 @@ def load_laser_log(
     order); ``laser_topic`` chooses a LaserScan topic when there are several;
     ``laser_max_range`` (m) overrides a CARMEN log's laser maximum.
     """
-    from formats import ROS1_MAGIC, detect_format
+    from formats import detect_format
     from formats.carmen import looks_like_carmen
+    from formats.magic import ROS1_MAGIC
 
     cfg = config if config is not None else Config()
     p = Path(path)
@@ -187,7 +185,7 @@ def _load_carmen(
         raise InputError("the CARMEN log has no FLASER laser scans", p)
     m = log.laser_mount
     # FLASER x y theta is the laser's pose: the base is the laser pose ∘ mount⁻¹.
-    yaw = _wrap(las.yaw - m.yaw)
+    yaw = wrap_angle(las.yaw - m.yaw)
     c, s = np.cos(yaw), np.sin(yaw)
     x = las.x - (c * m.x - s * m.y)
     y = las.y - (s * m.x + c * m.y)
@@ -502,7 +500,7 @@ def emulate_ranges(log: LaserLog, ring: VirtualRing) -> F64:
         sl = slice(a, min(a + step, s_n))
         dx = ex[sl, :, None] - ring.x
         dy = ey[sl, :, None] - ring.y
-        bearing = _wrap(np.arctan2(dy, dx) - ring.yaw)
+        bearing = wrap_angle(np.arctan2(dy, dx) - ring.yaw)
         inside = valid[sl, :, None] & (np.abs(bearing) <= half)
         out[sl] = np.where(inside, np.hypot(dx, dy), np.inf).min(axis=1)
     reading = np.where(out < ring.max_range, out, ring.max_range)

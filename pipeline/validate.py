@@ -10,7 +10,7 @@ code                      severity  what
 ========================  ========  =====================================================
 ``no_ranges``             ERROR     the log has no range readings
 ``no_poses``              ERROR     the log has no poses
-``stamps_backwards``      ERROR     a sensor's header stamps go backwards
+``stamps_backwards``      ERROR     stamps older than an earlier stamp of the sensor
 ``stamp_skew``            WARNING   header stamp vs record time differ by more than 0.1 s
 ``pose_gap``              WARNING   pose stream gaps longer than ``max_pose_gap_s``
 ``pose_stamps_backwards`` WARNING   pose stamps go backwards (the pipeline sorts them)
@@ -39,7 +39,9 @@ import numpy as np
 import numpy.typing as npt
 
 from formats.contract import Kind, LogReader, MountBatch, PoseBatch, RangeBatch, SensorMount
+from formats.tables import text_table
 from pipeline.config import Config
+from pipeline.ingest import stamps_behind
 from pipeline.reading_quality import (
     MAX_RANGE,
     NAN,
@@ -163,7 +165,7 @@ class ValidationReport:
         """A plain-text report for the terminal: findings, then a per-sensor table."""
         out = [f"Log: {self.path} ({self.format})", ""]
         if self.findings:
-            out += _table(
+            out += text_table(
                 ["SEVERITY", "CODE", "SENSOR", "MESSAGE"],
                 [[f.severity, f.code, f.sensor or "-", f.message] for f in self.findings],
             )
@@ -172,7 +174,7 @@ class ValidationReport:
         out.append("")
         names = list(REASONS.values())
         if self.sensors:
-            out += _table(
+            out += text_table(
                 ["SENSOR", "READINGS", *(n.upper() for n in names), "OUTSIDE_POSES", "MOUNT"],
                 [
                     [
@@ -198,18 +200,6 @@ class ValidationReport:
         return "\n".join(out)
 
 
-def _table(head: list[str], rows: list[list[str]], right: range | None = None) -> list[str]:
-    widths = [max(len(r[i]) for r in [head, *rows]) for i in range(len(head))]
-    right_cols = set(right or ())
-
-    def line(cells: list[str]) -> str:
-        parts = [
-            c.rjust(w) if i in right_cols else c.ljust(w)
-            for i, (c, w) in enumerate(zip(cells, widths, strict=True))
-        ]
-        return "  ".join(parts).rstrip()
-
-    return [line(head), *(line(r) for r in rows)]
 
 
 # --------------------------------------------------------------------------- running state
@@ -222,7 +212,7 @@ class _SensorState:
         self.readings = 0
         self.t_min: int | None = None
         self.t_max: int | None = None
-        self.prev_t: int | None = None
+        self.newest_t: int | None = None
         self.backwards = 0
         self.max_back_ns = 0
         self.reasons = dict.fromkeys(REASONS.values(), 0)
@@ -248,14 +238,11 @@ class _SensorState:
         lo, hi = int(t.min()), int(t.max())
         self.t_min = lo if self.t_min is None else min(self.t_min, lo)
         self.t_max = hi if self.t_max is None else max(self.t_max, hi)
-        # Stamps going backwards: compare each stamp with the one before it.
-        prev = t if self.prev_t is None else np.concatenate(([self.prev_t], t))
-        step = np.diff(prev)
-        back = step < 0
+        # Stamps going backwards, as the pipeline counts (and drops) them.
+        back, behind, self.newest_t = stamps_behind(t, self.newest_t)
         if back.any():
             self.backwards += int(back.sum())
-            self.max_back_ns = max(self.max_back_ns, int(-step.min()))
-        self.prev_t = int(t[-1])
+            self.max_back_ns = max(self.max_back_ns, int(behind.max()))
         for name, n in count_reasons(codes).items():
             self.reasons[name] += n
         skew = np.abs(rec - t)

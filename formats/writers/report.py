@@ -21,6 +21,7 @@ import numpy as np
 
 from formats.errors import OutputError
 from formats.map_types import FeatureTable
+from formats.tables import markdown_table
 from formats.writers.atomic import atomic_write_text
 from formats.writers.ellipse import covariance_axes
 
@@ -171,17 +172,6 @@ def _data_uri(image: Path) -> str:
     return "data:image/png;base64," + base64.b64encode(data).decode("ascii")
 
 
-def _md_cell(text: str) -> str:
-    return text.replace("\\", "\\\\").replace("|", "\\|").replace("\n", " ")
-
-
-def _md_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
-    lines = ["| " + " | ".join(_md_cell(h) for h in header) + " |"]
-    lines.append("|" + "|".join(" --- " for _ in header) + "|")
-    lines += ["| " + " | ".join(_md_cell(c) for c in r) + " |" for r in rows]
-    return lines
-
-
 def _html_table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
     out = ["<table><thead><tr>"]
     out += [f"<th>{html.escape(h)}</th>" for h in header]
@@ -296,20 +286,20 @@ def write_reports(
         if images:
             m.append(" ".join(f"![{label}]({_image_ref(img, out_dir)})" for label, img in images))
             m.append("")
-        m += _md_table(["metric", *columns], [[r[0], *map(format_value, r[1:])] for r in rows])
+        m += markdown_table(["metric", *columns], [[r[0], *map(format_value, r[1:])] for r in rows])
     m += ["", "## Metrics", ""]
-    m += _md_table(["metric", "value"], [[k, format_value(v)] for k, v in flat.items()])
+    m += markdown_table(["metric", "value"], [[k, format_value(v)] for k, v in flat.items()])
     m += ["", "## Feature uncertainty", "", f"{len(features)} features; σ_major histogram.", ""]
-    m += _md_table(["σ_major (m)", "features"], hist_rows) if hist_rows else ["_no features_"]
+    m += markdown_table(["σ_major (m)", "features"], hist_rows) if hist_rows else ["_no features_"]
     m += ["", "## Readings per sensor", ""]
     m += (
-        _md_table(["sensor", "readings"], [[k, str(v)] for k, v in sensors])
+        markdown_table(["sensor", "readings"], [[k, str(v)] for k, v in sensors])
         if sensors
         else ["_none_"]
     )
     m += ["", "## Dropped readings by reason", ""]
     m += (
-        _md_table(["reason", "readings"], [[k, str(v)] for k, v in dropped])
+        markdown_table(["reason", "readings"], [[k, str(v)] for k, v in dropped])
         if dropped
         else ["_none_"]
     )

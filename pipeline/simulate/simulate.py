@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from formats.angles import wrap_angle
 from formats.arrays import F64, I32, I64
 from formats.contract import PoseBatch, SensorMount, make_range_batch
 from formats.errors import ConfigError
@@ -32,7 +33,6 @@ from pipeline.simulate.trajectory import (
     load_waypoints,
     plan_motion,
     sample_trajectory,
-    wrap_angle,
 )
 from pipeline.simulate.world import World, load_world
 

@@ -187,8 +187,11 @@ def test_reach_from_config_and_metrics(tmp_path: Path) -> None:
     preset = write_run(tmp_path / "preset", config_toml='[sensors]\npreset = "pioneer-p3dx"\n')
     assert run_sensor_reach(preset, {}) == (5.0, "config.toml")
     doc = metrics_doc()
-    doc["sensors"][0]["max_range_m"] = 3.0
+    doc["input"]["max_range_m"] = 3.0
     assert run_sensor_reach(tmp_path / "nowhere", doc) == (3.0, "metrics.json")
+    doc["input"]["max_range_m"] = None  # a sensor row's max_range_m is not a source (run writes none)
+    doc["sensors"][0]["max_range_m"] = 3.0
+    assert run_sensor_reach(tmp_path / "nowhere", doc) == (None, "unknown")
     bare = write_run(tmp_path / "bare")
     ev = evaluate_run(bare, truth, trajectory=traj)
     assert ev.recall_scope == "all" and ev.reach_m is None

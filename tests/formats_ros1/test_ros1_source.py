@@ -12,7 +12,8 @@ from ros1_bags import DATA, NS, Msg, range_msg, write_bag
 from rosbags.rosbag1 import Reader
 
 from formats.errors import FormatError
-from formats.ros.ros1bag import Ros1BagSource, normalize_msgtype
+from formats.ros.ros1bag import Ros1BagSource
+from formats.ros.source import normalize_msgtype
 
 # Per-topic counts of the rosbag.js example bags, as ROS's rosbag library (and rosbags'
 # reader, checked once when writing this test) reports them.

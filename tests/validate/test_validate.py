@@ -14,6 +14,7 @@ import formats.csv_log as csv_log
 from formats.contract import ALL_KINDS, Batch, Kind, LogInfo, PoseBatch, make_range_batch
 from formats.csv_log import CsvLogReader
 from pipeline.config import Config, config_from_dict, load_config
+from pipeline.ingest import StampOrder
 from pipeline.validate import Finding, ValidationReport, validate_log
 
 SENSORS = {
@@ -84,6 +85,20 @@ def test_stamps_going_backwards(tmp_path: Path) -> None:
     assert (f.severity, f.sensor) == ("ERROR", "s0")
     assert f.counts == {"backwards": 1, "max_step_back_s": pytest.approx(0.35)}
     assert not report.ok
+
+
+def test_stamps_backwards_counts_what_run_drops(tmp_path: Path) -> None:
+    """One jump back, then stamps that rise but stay below the earlier maximum: each of
+    them is older than a stamp already seen, so validate counts them all, as run drops."""
+    s0 = [0.0, 0.2, 0.4, 0.6, 0.1, 0.3, 0.5, 0.8, 1.0]  # back to 0.1, then 0.3, 0.5 (< 0.6)
+    rows = [(t, "s0", f"{1.0 + 0.01 * i:.2f}") for i, t in enumerate(s0)]
+    rows += [(0.05 + 0.1 * i, "s1", "1.00") for i in range(9)]
+    report = _validate(_write_set(tmp_path, rows))
+    f = _one(report, "stamps_backwards")
+    assert f.counts == {"backwards": 3, "max_step_back_s": pytest.approx(0.5)}
+    t_ns = np.array([round(t * 1e9) for t in s0], dtype=np.int64)
+    dropped = StampOrder().backwards(make_range_batch(t_ns, 0, 1.0, 0.5, 0.1, 5.0))
+    assert int(dropped.sum()) == 3 and dropped.tolist()[4:7] == [True, True, True]
 
 
 def test_pose_gap_lists_the_largest(tmp_path: Path) -> None:
