@@ -28,6 +28,7 @@ from formats.contract import (
     MountBatch,
     PoseBatch,
     RangeBatch,
+    SensorMount,
     TopicInfo,
     make_range_batch,
 )
@@ -42,6 +43,7 @@ from formats.ros.columns import (
     SONARARRAY_TYPES,
     TF_TYPES,
     Columns,
+    LaserScanColumns,
     PointColumns,
     PoseColumns,
     RangeColumns,
@@ -205,6 +207,58 @@ class RosLogReader:
             group.append(raw)
         if group:
             yield from self._convert_group(group, rings, state)
+
+    # ------------------------------------------------------------------ laser scans
+
+    def laser_topic(self, requested: str | None = None) -> str:
+        """The sensor_msgs/LaserScan topic: ``requested``, else the log's only one."""
+        conns = self._connections
+        lasers = sorted({c.topic for c in conns if c.msgtype in LASER_TYPES})
+        listing = ", ".join(sorted({f"{c.topic}:{c.msgtype}" for c in conns})) or "nothing"
+        if requested:
+            if requested not in lasers:
+                raise TopicError(
+                    f"laser topic {requested} is not a sensor_msgs/LaserScan topic of the "
+                    f"log; the log contains: {listing}",
+                    self.path,
+                )
+            return requested
+        if len(lasers) == 1:
+            return lasers[0]
+        if not lasers:
+            raise TopicError(
+                f"no sensor_msgs/LaserScan topic; the log contains: {listing}", self.path
+            )
+        raise TopicError(
+            f"several LaserScan topics ({', '.join(lasers)}): choose one with --laser-topic",
+            self.path,
+        )
+
+    def laser_columns(self, topic: str, max_scans: int | None = None) -> list[LaserScanColumns]:
+        """The decoded messages of a LaserScan topic, in log order; reading stops once
+        ``max_scans`` messages are in."""
+        parts: list[LaserScanColumns] = []
+        count = 0
+        gen = self.source.raw_batches([c.id for c in self._topics.get(topic, [])])
+        try:
+            for raw in gen:
+                cols = self._decode(raw)
+                assert isinstance(cols, LaserScanColumns)
+                parts.append(cols)
+                count += cols.stamp_ns.shape[0]
+                if max_scans is not None and count >= max_scans:
+                    break
+        finally:
+            close = getattr(gen, "close", None)
+            if close is not None:
+                close()
+        return parts
+
+    def static_mount(self, frame: str) -> SensorMount | None:
+        """The static transform base frame → ``frame`` from tf, None when there is none."""
+        self._prepass(need_frames=False)
+        assert self._links is not None
+        return tflib.static_mount(self._links, self.config.input.base_frame, frame.lstrip("/"))
 
     # ------------------------------------------------------------------ selection
 
