@@ -23,7 +23,7 @@ from pipeline.simulate import (
 from pipeline.simulate.trajectory import plan_motion, sample_trajectory
 from pipeline.simulate.world import World
 
-WORLDS = Path(__file__).resolve().parents[2] / "sample_logs" / "worlds"
+WORLDS = Path(__file__).resolve().parents[3] / "sample_logs" / "worlds"
 BOX = World(
     np.array([[-1, -1, 4, -1], [4, -1, 4, 3], [4, 3, -1, 3], [-1, 3, -1, -1]], dtype=float),
     np.array([[2.0, 2.0, 0.15]]),

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2.enums import CompressionMode
+from test_ros2_written_bags import JAZZY, N, write_bag
 
 from formats.errors import FormatError
 from formats.ros.columns import RangeColumns
@@ -17,8 +18,6 @@ from formats.ros.decode_cdr import decode_cdr
 from formats.ros.mcap_source import McapSource
 from formats.ros.ros2bag import Ros2BagSource
 from formats.ros.source import RawBatch
-
-from .test_ros2_written_bags import JAZZY, N, write_bag
 
 
 @pytest.fixture
@@ -166,7 +165,7 @@ def _range_batch(datas: list[bytes]) -> RawBatch:
 
 
 def _good() -> bytes:
-    from .test_ros2_written_bags import _range
+    from test_ros2_written_bags import _range
 
     return bytes(JAZZY.serialize_cdr(_range(JAZZY, 1), "sensor_msgs/msg/Range"))
 
@@ -215,7 +214,7 @@ def test_missing_fixture_dir_file(tmp_path: Path) -> None:
 
 
 def test_many_frames_keep_first_appearance_order() -> None:
-    from .test_ros2_written_bags import _header
+    from test_ros2_written_bags import _header
 
     rng = np.random.default_rng(3)
     names = [f"f{k}" * (k % 5 + 1) for k in range(40)]  # lengths 2 ... 15 bytes

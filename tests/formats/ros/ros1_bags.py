@@ -14,7 +14,7 @@ from rosbags.rosbag1 import Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
-DATA = Path(__file__).resolve().parent.parent / "data" / "ros1"
+DATA = Path(__file__).resolve().parents[2] / "data" / "ros1"
 SONARARRAY_DEF = "Header header\nint32 ranges_count\nfloat64[] ranges"
 NS = 1_000_000_000
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 import zstandard
 
-ARCHIVE = Path(__file__).parents[1] / "data" / "ros2" / "ros2-fixtures.tar.zst"
+ARCHIVE = Path(__file__).parents[2] / "data" / "ros2" / "ros2-fixtures.tar.zst"
 
 
 @pytest.fixture(scope="session")

@@ -13,7 +13,7 @@ from formats.map_types import GridSpec
 from pipeline.simulate import load_waypoints, load_world, world_from_occupancy
 from pipeline.simulate.world import World
 
-WORLDS = Path(__file__).resolve().parents[2] / "sample_logs" / "worlds"
+WORLDS = Path(__file__).resolve().parents[3] / "sample_logs" / "worlds"
 
 
 def _write(tmp_path: Path, text: str) -> Path:

@@ -12,7 +12,7 @@ from csvlog_helpers import read_all
 from formats import open_log
 from pipeline.config import load_config
 
-SAMPLE = Path(__file__).resolve().parents[2] / "sample_logs" / "udacity-8sonar"
+SAMPLE = Path(__file__).resolve().parents[3] / "sample_logs" / "udacity-8sonar"
 
 
 def test_sample_config_loads() -> None:

@@ -12,7 +12,7 @@ from pipeline.config import Config
 from pipeline.evaluate import evaluate_run
 from pipeline.regress import regress
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 WORLD = REPO / "sample_logs" / "worlds" / "corridor.toml"
 
 

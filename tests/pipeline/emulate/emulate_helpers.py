@@ -16,7 +16,7 @@ from pipeline.emulate import LaserLog
 
 NS = 1_000_000_000
 BASE = SensorMount(0.0, 0.0, 0.0)
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[3]
 INTEL = REPO / "sample_logs" / "intel-lab" / "intel-corrected.log.gz"
 
 

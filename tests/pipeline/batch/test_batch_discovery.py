@@ -68,7 +68,7 @@ def test_csv_set_directory_is_one_log(tmp_path: Path) -> None:
 
 
 def test_udacity_sample_set_is_one_log_with_its_config() -> None:
-    root = Path(__file__).resolve().parents[2] / "sample_logs"
+    root = Path(__file__).resolve().parents[3] / "sample_logs"
     sample = root / "udacity-8sonar"
     if not sample.is_dir():
         pytest.skip("sample_logs/udacity-8sonar not present")

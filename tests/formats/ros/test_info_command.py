@@ -6,13 +6,12 @@ import json
 from pathlib import Path
 
 import pytest
+from test_ros2_fixture_bags import BOTH
 from typer.testing import CliRunner
 
 from cli.app import app
 
-from .test_ros2_fixture_bags import BOTH
-
-ROS1 = Path(__file__).parents[1] / "data" / "ros1"
+ROS1 = Path(__file__).parents[2] / "data" / "ros1"
 
 
 def _info(path: Path) -> dict:

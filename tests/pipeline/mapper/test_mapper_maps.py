@@ -19,7 +19,7 @@ from pipeline.mapper.occupancy import FreeLayer, logit
 from pipeline.mapper.synthetic import ring_scans, room_grid
 
 CFG = MapperConfig()
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 def test_free_layer_update_and_clamp() -> None:
