@@ -247,6 +247,12 @@ class McapSource(FileSource, SourceAccessors):
         self._open_file()
         self._connections = self._make_connections()
 
+    @property
+    def message_indexed(self) -> bool:
+        """Every block has Message Index records (a finalised file): channels are read
+        through them, without walking the records of chunks that lack the channel."""
+        return all(b.msg_index for b in self._blocks)
+
     # -- MessageSource -------------------------------------------------------------------
 
     def raw_batches(self, connection_ids: Collection[int]) -> Iterator[RawBatch]:

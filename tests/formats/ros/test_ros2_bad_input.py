@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import shutil
 import struct
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -140,14 +141,19 @@ def test_corrupt_file_compression(tmp_path: Path) -> None:
         Ros2BagSource(bag)
 
 
-def test_file_compressed_bag_cleans_its_temp_copy(tmp_path: Path) -> None:
+def test_file_compressed_bag_cleans_its_temp_copy(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     bag = write_bag(tmp_path / "bag", JAZZY, StoragePlugin.MCAP, CompressionMode.FILE)
+    temp_root = tmp_path / "temp"
+    temp_root.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(temp_root))
     src = Ros2BagSource(bag)
-    tmp = src._tmpdir
-    assert tmp is not None and (tmp / "bag.mcap").is_file()
+    copies = list(temp_root.glob("*/bag.mcap"))
+    assert len(copies) == 1  # the decompressed copy, while the bag is open
     assert _count(src) == N + 21
     src.close()
-    assert not tmp.exists()
+    assert list(temp_root.iterdir()) == []
 
 
 def _range_batch(datas: list[bytes]) -> RawBatch:

@@ -153,7 +153,7 @@ def test_mcap_source_matches_mcap_library(ros2_fixtures: Path) -> None:
             assert sorted(_messages(src)) == ref, path.name
             assert src.warnings == []
             # Finalised files are read through their Message Index records.
-            assert all(b.msg_index for b in src._blocks), path.name
+            assert src.message_indexed, path.name
 
 
 def test_missing_storage_file(ros2_fixtures: Path, tmp_path: Path) -> None:
