@@ -18,6 +18,9 @@ $(STAMP): pyproject.toml
 	# OctoMap is only the mapper benchmark's baseline; without a wheel for this Python the
 	# benchmark skips its row instead of failing the set-up.
 	$(BIN)/python -m pip install --quiet -e ".[bench]" || echo "octomap-python not installed: the OctoMap benchmark row will be skipped"
+	# Compile the mapper's numba kernels into their on-disk cache once, here, rather than
+	# in the first run (or in both test workers at once).
+	$(BIN)/python -m pipeline.mapper.kernels.warm
 	touch $(STAMP)
 
 setup: $(STAMP)

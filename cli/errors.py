@@ -7,9 +7,12 @@ sonarmap and keeps its traceback.
 
 from __future__ import annotations
 
+import contextlib
 import functools
+import signal
 import sys
-from collections.abc import Callable
+import threading
+from collections.abc import Callable, Iterator
 from typing import ParamSpec, TypeVar
 
 import typer
@@ -22,6 +25,30 @@ R = TypeVar("R")
 EXIT_OK = 0
 EXIT_FAILURE = 1
 EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130  # 128 + SIGINT
+EXIT_TERMINATED = 143  # 128 + SIGTERM
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised like Ctrl-C so that the same cleanup runs (temporary outputs)."""
+
+
+def _raise_terminated(signum: int, frame: object) -> None:
+    raise Terminated
+
+
+@contextlib.contextmanager
+def sigterm_as_interrupt() -> Iterator[None]:
+    """While inside, SIGTERM unwinds the command like SIGINT (``with`` blocks clean up:
+    no ``.OUT.tmp-*`` is left behind). Only the main thread can install handlers."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGTERM, _raise_terminated)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def fail(message: str) -> typer.Exit:
@@ -31,16 +58,21 @@ def fail(message: str) -> typer.Exit:
 
 
 def handle_errors(fn: Callable[P, R]) -> Callable[P, R]:
-    """Decorate a command: SonarmapError → one line on stderr and exit 1."""
+    """Decorate a command: SonarmapError → one line on stderr and exit 1; Ctrl-C → 130,
+    SIGTERM → 143, both after the ``with`` blocks cleaned up."""
 
     @functools.wraps(fn)
     def wrapper(*args: P.args, **kwargs: P.kwargs) -> R:
         try:
-            return fn(*args, **kwargs)
+            with sigterm_as_interrupt():
+                return fn(*args, **kwargs)
         except SonarmapError as err:
             raise fail(str(err)) from None
+        except Terminated:
+            print("sonarmap: terminated", file=sys.stderr)
+            raise typer.Exit(EXIT_TERMINATED) from None
         except KeyboardInterrupt:
             print("sonarmap: interrupted", file=sys.stderr)
-            raise typer.Exit(130) from None
+            raise typer.Exit(EXIT_INTERRUPTED) from None
 
     return wrapper

@@ -7,10 +7,14 @@ Only paths, the configuration (a plain dict) and small result dicts travel throu
 scheduler; each worker opens and streams its own input.
 
 Resume: a finished log's directory holds ``.sonarmap-done.json`` (input sha256, config
-hash and its summary values). The marker is written into a staging directory before it is
-swapped into place, so a directory under the final name with a marker is always complete;
-one without a marker (a plain ``sonarmap run`` output) is re-mapped and replaced. A log
-whose input sha256 and config hash match its marker is skipped unless ``rerun``.
+hash and its summary values). The marker is written into the run's own staging directory
+(:class:`~formats.writers.atomic.OutputDir`) before it is committed, so a directory under
+the final name with a marker is always complete; one without a marker (a plain
+``sonarmap run`` output) is re-mapped and replaced. Only sonarmap outputs are replaced:
+an ``OUT/<name>`` that is an input, holds one or holds the user's files makes that log
+fail with a one-line reason. A log whose input sha256 and config hash match its marker is
+skipped unless ``rerun``. At start, the staging directories of interrupted batches whose
+processes are dead are removed (a concurrent batch's are left alone).
 
 Failure isolation: a log that raises :class:`~formats.errors.SonarmapError` is recorded
 with its one-line message; any other exception with its type, message and traceback (the
@@ -27,7 +31,6 @@ import json
 import logging
 import os
 import secrets
-import shutil
 import time
 import traceback
 from collections.abc import Callable, Iterator, Sequence
@@ -45,6 +48,7 @@ MARKER = ".sonarmap-done.json"
 SUMMARY_PARQUET = "summary.parquet"
 SUMMARY_MD = "summary.md"
 MARKER_VERSION = 1
+MAX_NAME_BYTES = 200  # an output name, so that OutputDir's temporary sibling fits 255
 SCHEDULER_TIMEOUT_S = 10.0  # connecting to an existing scheduler (--scheduler)
 
 BatchProgress = Callable[[int, int], None]  # (logs finished, logs total)
@@ -134,9 +138,11 @@ def read_manifest(path: Path) -> list[Path]:
 
 def is_sonarmap_output(d: Path) -> bool:
     """Whether a directory is an output of sonarmap (a run's or a batch's)."""
+    from formats.writers.output_marker import is_run_output
+
     return (
         (d / MARKER).is_file()
-        or ((d / "metrics.json").is_file() and (d / "features.parquet").is_file())
+        or is_run_output(d)
         or ((d / SUMMARY_PARQUET).is_file() and (d / SUMMARY_MD).is_file())
     )
 
@@ -237,18 +243,27 @@ def find_logs(
 def output_names(paths: Sequence[Path]) -> dict[Path, str]:
     """Output directory name of each log: the file stem (or directory name); names that
     collide (case-insensitively, or with the summary files) all get ``-<8 hex of the
-    sha256 of the path>``, so a name depends only on its own path and its peers."""
+    sha256 of the path>``, so a name depends only on its own path and its peers; a name
+    longer than MAX_NAME_BYTES is cut and gets the same suffix (its output directory and
+    the temporary sibling must fit the file system's 255-byte limit)."""
     base = {p: (p.name if p.is_dir() else p.stem) or "log" for p in paths}
     counts: dict[str, int] = {}
     for n in base.values():
         counts[n.casefold()] = counts.get(n.casefold(), 0) + 1
     out = {}
     for p, n in base.items():
-        if counts[n.casefold()] > 1 or n in _RESERVED_NAMES or n.startswith("."):
+        long = len(os.fsencode(n)) > MAX_NAME_BYTES
+        if counts[n.casefold()] > 1 or n in _RESERVED_NAMES or n.startswith(".") or long:
             digest = hashlib.sha256(str(p).encode()).hexdigest()[:8]
-            n = f"{n}-{digest}"
+            n = f"{_clip(n, MAX_NAME_BYTES - 9)}-{digest}"
         out[p] = n
     return out
+
+
+def _clip(name: str, max_bytes: int) -> str:
+    """``name`` cut to at most ``max_bytes`` of UTF-8 (on a character boundary)."""
+    raw = os.fsencode(name)[:max_bytes]
+    return raw.decode("utf-8", errors="ignore") or "log"
 
 
 # --------------------------------------------------------------------------- the worker
@@ -298,11 +313,11 @@ def _map_one_checked(
         return LogOutcome.from_dict(
             {**saved, "path": str(path), "name": name, "status": "skipped", "error": None}
         )
-    _remove_stale_staging(out_dir, name)
-    staging = out_dir / f".{name}.run-{os.getpid()}-{secrets.token_hex(4)}"
-    try:
-        result = run(path, staging, cfg)
-        m = result.metrics
+    from formats.writers.atomic import atomic_write_text
+
+    outcome: list[LogOutcome] = []
+
+    def add_marker(tmp_dir: Path, m: Any) -> None:
         row = LogOutcome(
             path=str(path),
             name=name,
@@ -321,13 +336,13 @@ def _map_one_checked(
             "row": {k: v for k, v in asdict(row).items()
                     if k not in ("path", "status", "error", "seconds")},
         }
-        from formats.writers.atomic import atomic_write_text
+        atomic_write_text(tmp_dir / MARKER, json.dumps(marker_data, indent=2) + "\n")
+        outcome.append(row)
 
-        atomic_write_text(staging / MARKER, json.dumps(marker_data, indent=2) + "\n")
-        _swap_into_place(staging, final)
-    finally:
-        _remove_tree(staging)
-    return row
+    # The run's own OutputDir stages, commits and replaces: only a previous sonarmap
+    # output of this log is ever replaced, never an input or the user's files.
+    run(path, final, cfg, force=True, on_complete=add_marker)
+    return outcome[0]
 
 
 def _num(v: Any) -> float | None:
@@ -345,40 +360,6 @@ def read_marker(run_dir: Path) -> dict[str, Any] | None:
     except (OSError, ValueError):
         return None
     return data if isinstance(data, dict) else None
-
-
-def _swap_into_place(staging: Path, final: Path) -> None:
-    """Rename the complete ``staging`` directory to ``final``, replacing an old one; the
-    final name never holds a partial run (old moved aside, new renamed in, old deleted)."""
-    if final.is_symlink() or (final.exists() and not final.is_dir()):
-        raise OutputError("exists and is not a directory; not replacing it", final)
-    old: Path | None = None
-    try:
-        if final.exists():
-            old = final.parent / f".{final.name}.old-{os.getpid()}-{secrets.token_hex(4)}"
-            os.rename(final, old)
-        try:
-            os.rename(staging, final)
-        except OSError:
-            if old is not None:
-                os.rename(old, final)  # put the previous complete output back
-            raise
-    except OSError as err:
-        raise OutputError(f"cannot move the finished output into place: {err}", final) from err
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
-
-
-def _remove_tree(p: Path) -> None:
-    if p.is_dir() and not p.is_symlink():
-        shutil.rmtree(p, ignore_errors=True)
-
-
-def _remove_stale_staging(out_dir: Path, name: str) -> None:
-    """Leftovers of an interrupted earlier batch for this log (hidden siblings)."""
-    for pattern in (f".{name}.run-*", f"..{name}.run-*", f".{name}.old-*"):
-        for p in out_dir.glob(pattern):
-            _remove_tree(p)
 
 
 # --------------------------------------------------------------------------- the driver
@@ -469,6 +450,11 @@ def run_batch(
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as err:
         raise OutputError(f"cannot create output directory: {err.strerror or err}", out_dir) from err
+    from formats.writers.atomic import clean_stale_entries
+
+    # Staging left by interrupted batches (their processes are dead), whatever log it
+    # was for; a concurrent batch's live staging stays.
+    clean_stale_entries(out_dir)
     names = output_names(logs)
     cfg_dict = cfg.to_dict()
     total = len(logs)

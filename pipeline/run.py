@@ -81,8 +81,14 @@ def run(
     force: bool = False,
     compare_correction: bool = False,
     progress: Progress | None = None,
+    on_complete: Callable[[Path, RunMetrics], None] | None = None,
 ) -> RunResult:
-    """Map one log into ``out_dir``. Raises SonarmapError subclasses on bad input."""
+    """Map one log into ``out_dir``. Raises SonarmapError subclasses on bad input.
+
+    ``force`` replaces a previous sonarmap output only (never the input's directory, the
+    working directory or the user's files: :class:`~formats.writers.atomic.OutputDir`).
+    ``on_complete(tmp_dir, metrics)`` may add files after the outputs are written and
+    before the directory is committed (a batch's resume marker)."""
     from formats.writers.atomic import OutputDir
 
     log_path = Path(log_path)
@@ -90,7 +96,7 @@ def run(
         raise ConfigError("--compare-correction needs mapper.method = 'andersone'")
     timer = StageTimer()
     t_start = time.perf_counter()
-    with OutputDir(Path(out_dir), force=force) as out:
+    with OutputDir(Path(out_dir), force=force, protect=(log_path,)) as out:
         with timer.stage("ingest"):
             reader = open_log(log_path, config)
         with reader:
@@ -121,6 +127,8 @@ def run(
         metrics = _metrics(log_path, info.format, info.duration_s, sv, sensors, mappers,
                            snapshots, state, config)
         _write_outputs(out, config, sv, drawn, snapshots, metrics, timer, t_start)
+        if on_complete is not None:
+            on_complete(out.tmp_dir, metrics)
     return RunResult(Path(out_dir), metrics, snapshots["main"])
 
 

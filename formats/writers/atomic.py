@@ -16,8 +16,19 @@ from pathlib import Path, PurePath
 from types import TracebackType
 
 from formats.errors import OutputError
+from formats.writers.output_marker import not_replaceable_reason, write_output_marker
 
-__all__ = ["OutputDir", "atomic_write_bytes", "atomic_write_text", "clean_stale_siblings"]
+__all__ = [
+    "OutputDir",
+    "atomic_write_bytes",
+    "atomic_write_text",
+    "clean_stale_entries",
+    "clean_stale_siblings",
+]
+
+NAME_MAX = 255  # bytes in one path component (Linux, macOS, Windows)
+# What _sibling_name adds around the name: ".", ".tmp-", a pid (up to 10 digits), "-", 8 hex.
+_SIBLING_EXTRA = len(".") + len(".tmp-") + 10 + len("-") + 8
 
 
 def _fsync_path(path: Path) -> None:
@@ -49,7 +60,8 @@ def _pid_alive(pid: int) -> bool:
     return True
 
 
-_STALE = re.compile(r"\.(?P<name>.+)\.(?P<tag>tmp|old)-(?P<pid>\d+)-[0-9a-f]{8}")
+# ``run`` is the staging directory of batches before they used OutputDir (dead = garbage).
+_STALE = re.compile(r"\.(?P<name>.+)\.(?P<tag>tmp|old|run)-(?P<pid>\d+)-[0-9a-f]{8}")
 
 
 def clean_stale_siblings(final: Path) -> list[Path]:
@@ -58,24 +70,37 @@ def clean_stale_siblings(final: Path) -> list[Path]:
     and ``.<name>.old-<pid>-<hex>`` ones when ``final`` itself exists. Returns what was
     removed. Siblings of live processes (a concurrent run) are left alone.
     """
+    return _clean_stale(final.parent, final.name)
+
+
+def clean_stale_entries(parent: Path) -> list[Path]:
+    """:func:`clean_stale_siblings` for every name in ``parent`` (a batch's output directory
+    at start: the staging its interrupted predecessors left, whatever log it was for)."""
+    return _clean_stale(parent, None)
+
+
+def _clean_stale(parent: Path, name: str | None) -> list[Path]:
     removed: list[Path] = []
-    parent = final.parent
     try:
         entries = list(parent.iterdir())
     except OSError:
         return removed
     for p in sorted(entries):
         m = _STALE.fullmatch(p.name)
-        if m is None or m["name"] != final.name or p.is_symlink() or not p.is_dir():
+        if m is None or (name is not None and m["name"] != name):
             continue
-        if _pid_alive(int(m["pid"])):
-            continue
+        if p.is_symlink() or not p.is_dir() or _pid_alive(int(m["pid"])):
+            continue  # a concurrent run's (or batch worker's) directory stays
         # A dead run's old copy is only garbage once a newer complete run is in place.
-        if m["tag"] == "old" and not final.is_dir():
+        if m["tag"] == "old" and not (parent / m["name"]).is_dir():
             continue
         shutil.rmtree(p, ignore_errors=True)
         removed.append(p)
     return removed
+
+
+def _inside(p: Path, root: Path) -> bool:
+    return p == root or p.is_relative_to(root)
 
 
 def _remove(path: Path) -> None:
@@ -92,16 +117,26 @@ class OutputDir:
     ``with OutputDir(final, force) as out:`` creates ``.<name>.tmp-<pid>-<random>`` next to
     ``final``; ``out.path("map.pgm")`` names files inside it. On a clean exit every file is
     fsynced and the directory renamed to ``final``; on an exception it is removed and the
-    exception propagates. With ``force`` an existing ``final`` directory is renamed aside,
-    the new one renamed in, then the old one deleted — the final name never holds a partial
-    run. Refuses (OutputError) an existing ``final`` without ``force``, a ``final`` that is
-    not a directory, and a ``final`` or parent that is a symlink. Entering also removes the
-    stale temporary siblings of runs that were killed (:func:`clean_stale_siblings`).
+    exception propagates, as an OutputError naming ``final`` when it is an OSError (a full
+    disk). The commit lists every file in ``.sonarmap-output``
+    (:mod:`formats.writers.output_marker`). With ``force`` an existing ``final`` is renamed
+    aside, the new one renamed in, then the old one deleted — the final name never holds a
+    partial run — but only when ``final`` is a sonarmap output holding nothing else.
+
+    Refuses (OutputError): an existing ``final`` without ``force``; one that is not a
+    sonarmap output, holds other files, is not a directory, is or contains the working
+    directory or one of ``protect`` (the input log); a ``final`` or parent that is a
+    symlink; a parent that is a file; a name too long for its temporary sibling. Entering
+    also removes the stale temporary siblings of runs that were killed
+    (:func:`clean_stale_siblings`).
     """
 
-    def __init__(self, final: Path, force: bool = False) -> None:
+    def __init__(
+        self, final: Path, force: bool = False, protect: tuple[Path, ...] = ()
+    ) -> None:
         self.final = Path(final)
         self.force = force
+        self.protect = tuple(Path(p) for p in protect)
         self._tmp: Path | None = None
         self.committed = False
 
@@ -118,11 +153,44 @@ class OutputDir:
                 "parent of the output directory is a symlink; refusing to write through it",
                 final.parent,
             )
+        if len(os.fsencode(final.name)) + _SIBLING_EXTRA > NAME_MAX:
+            raise OutputError(
+                f"output directory name is too long ({len(os.fsencode(final.name))} bytes; "
+                f"at most {NAME_MAX - _SIBLING_EXTRA})",
+                final,
+            )
+        for anc in final.parents:
+            if anc.exists() or anc.is_symlink():
+                if not anc.is_dir():
+                    raise OutputError("is a file, not a directory: cannot create the output "
+                                      "directory inside it", anc)
+                break
         if final.exists():
-            if not self.force:
-                raise OutputError("exists already; use --force to replace", final)
-            if not final.is_dir():
-                raise OutputError("exists and is not a directory; not replacing it", final)
+            self._check_replaceable()
+
+    def _check_replaceable(self) -> None:
+        """An existing ``final`` may only be replaced when it is a previous sonarmap output
+        (and ``force``); the refusal never suggests --force for anything else."""
+        final = self.final
+        if not final.is_dir():
+            raise OutputError("exists and is not a directory; choose another output "
+                              "directory", final)
+        real = final.resolve()
+        kept = [(p, f"the input {p}") for p in self.protect]
+        with contextlib.suppress(OSError):  # a deleted working directory contains nothing
+            kept.append((Path.cwd(), "the working directory"))
+        for p, what in kept:
+            rp = p.resolve()
+            if rp == real or rp.is_relative_to(real):
+                raise OutputError(f"is or contains {what}; not replacing it, choose another "
+                                  "output directory", final)
+        reason = not_replaceable_reason(final)
+        if reason is not None:
+            raise OutputError(f"exists and {reason}; not replacing it, choose another "
+                              "output directory", final)
+        if not self.force:
+            raise OutputError("exists already (an earlier sonarmap output); use --force to "
+                              "replace it, or choose another output directory", final)
 
     # -- context manager ----------------------------------------------------------------
 
@@ -145,6 +213,11 @@ class OutputDir:
                 continue
             except OSError as err:
                 raise OutputError(f"cannot create temporary directory: {err}", tmp) from err
+            except BaseException:
+                # SIGTERM/Ctrl-C right after mkdir: __exit__ will not run for a failed
+                # __enter__, so the directory is removed here.
+                _remove(tmp)
+                raise
             self._tmp = tmp
             return self
         raise OutputError("cannot find a free temporary directory name", self.final.parent)
@@ -161,12 +234,28 @@ class OutputDir:
             return
         if exc_type is not None:
             _remove(tmp)
+            if isinstance(exc, OSError) or (
+                isinstance(exc, OutputError) and exc.path and _inside(Path(exc.path), tmp)
+            ):
+                raise self._public_error(exc, tmp) from exc
             return  # the exception propagates
         try:
             self._commit(tmp)
         except BaseException:
             _remove(tmp)
             raise
+
+    def _public_error(self, exc: BaseException, tmp: Path) -> OutputError:
+        """``exc`` as an OutputError naming ``final`` (the user's name), not the hidden
+        temporary directory it happened in."""
+        if isinstance(exc, OutputError):
+            where, reason = Path(exc.path or tmp), exc.reason
+        else:
+            err = exc if isinstance(exc, OSError) else OSError(str(exc))
+            where = Path(err.filename) if isinstance(err.filename, str) else tmp
+            reason = f"cannot write: {err.strerror or err}"
+        target = self.final / where.relative_to(tmp) if _inside(where, tmp) else self.final
+        return OutputError(reason.replace(str(tmp), str(self.final)), target)
 
     @property
     def tmp_dir(self) -> Path:
@@ -198,6 +287,7 @@ class OutputDir:
 
     def _commit(self, tmp: Path) -> None:
         try:
+            write_output_marker(tmp)
             for dirpath, _dirnames, filenames in os.walk(tmp):
                 for fname in filenames:
                     p = Path(dirpath) / fname
@@ -213,8 +303,7 @@ class OutputDir:
             raise OutputError("output directory is a symlink; refusing to replace it", final)
         old: Path | None = None
         if final.exists():
-            if not self.force:
-                raise OutputError("exists already; use --force to replace", final)
+            self._check_replaceable()  # again: it may have appeared while we mapped
             old = _sibling_name(final, "old")
             try:
                 os.rename(final, old)

@@ -1,10 +1,12 @@
-"""The mapping method (ALGORITHM.md §1-5) and the classic baseline (§8), pure numpy.
+"""The mapping method (ALGORITHM.md §1-5) and the classic baseline (§8); no I/O.
 
 ``make_mapper(config, grid)`` picks :class:`AndersoneMapper` or :class:`ClassicMapper` by
 ``config.method``; both follow the :class:`Mapper` protocol. Module map:
 ``reading_features`` (eqs. 1-4), ``feature_set`` (eqs. 5-8 + spatial index),
 ``free_space`` (§3), ``correction`` (§4), ``occupancy`` (§5), ``grid_raster`` (shapes →
-cells), ``andersone`` / ``classic`` (the mappers).
+cells), ``andersone`` / ``classic`` (the mappers); ``kernels`` (the compiled per-scan loops, numba,
+compared with the numpy modules above, which stay as the readable reference), and
+``feature_store`` (the feature set the kernels work on).
 """
 
 from __future__ import annotations

@@ -1,14 +1,23 @@
 """Andersone's probabilistic sonar mapper (ALGORITHM.md §1-5): features + free-space scans.
 
 Per scan, in the order of §6: (1) the usable readings become Gaussian features (eqs. 1-4)
-and are merged into the feature set (eqs. 5-8, :mod:`~pipeline.mapper.feature_set`);
-(2) the scan's free-space scan is rasterised (§3); (3) if ``feature_correction``, features
-touched by it are corrected with particles (§4, eqs. 9-10); (4) the free layer is updated
-(eq. 11). The occupied layer and the final map (eq. 12) are only computed by
-:meth:`AndersoneMapper.snapshot`.
+and are merged into the feature set (eqs. 5-8); (2) the scan's free-space scan is
+rasterised (§3); (3) if ``feature_correction``, features touched by it are corrected with
+particles (§4, eqs. 9-10); (4) the free layer is updated (eq. 11). The occupied layer and
+the final map (eq. 12) are only computed by :meth:`AndersoneMapper.snapshot`.
+
+Two implementations of the per-scan loop, with the same results bit for bit (the tests
+compare them on random and real logs): the compiled kernels of
+:mod:`pipeline.mapper.kernels` (the default: merge, rasters, correction and layer updates
+run per scan in machine code), and the numpy reference (``reference=True``:
+:mod:`~pipeline.mapper.feature_set`, :mod:`~pipeline.mapper.free_space`,
+:mod:`~pipeline.mapper.correction`), which states the method readably. Both prepare what
+does not depend on the map state (reading classes, reading features, cone geometry) with
+numpy, for up to ``_GROUP`` scans at once.
 
 The particle generator is ``np.random.Generator(np.random.PCG64(config.seed))``, drawn from
-in scan order, so the same scans and configuration give the same state, bit for bit.
+in scan order (the kernels draw from the same generator with numpy's algorithms), so the
+same scans and configuration give the same state, bit for bit.
 """
 
 from __future__ import annotations
@@ -21,16 +30,28 @@ import numpy as np
 from pipeline.config import MapperConfig
 from pipeline.mapper.correction import correct_features
 from pipeline.mapper.feature_set import FeatureSet
-from pipeline.mapper.free_space import FreeSpaceScan, free_space_scan, free_space_scans
+from pipeline.mapper.feature_store import FeatureStore
+from pipeline.mapper.free_space import cone_table, free_radius, free_space_scans
+from pipeline.mapper.kernels import andersone_scans
+from pipeline.mapper.kernels.ellipse import occupied_cells
 from pipeline.mapper.occupancy import FreeLayer, final_probability, occupied_layer
-from pipeline.mapper.reading_features import classify_scan, count_readings, reading_features
-from pipeline.mapper.types import I64, FeatureTable, GridSpec, MapperCounters, MapSnapshot, Scan
+from pipeline.mapper.reading_features import (
+    ReadingFeatures,
+    classify_scan,
+    count_readings,
+    reading_features,
+)
+from pipeline.mapper.types import I64, B, FeatureTable, GridSpec, MapperCounters, MapSnapshot, Scan
 
-# Scans whose stateless work (classification, reading features, free-space rasters) is
-# done in one vectorised pass by ``integrate_many``: enough to amortise the numpy call
-# overhead, small enough to keep the pass's temporaries to ~15 MB (measured: 64 is as
-# fast as 256, whose one-hour run peaked 25 MB higher).
+# Scans whose stateless work (classification, reading features, cone geometry) is done in
+# one vectorised pass: enough to amortise the numpy call overhead, small enough to keep
+# the pass's temporaries small (measured: 64 is as fast as 256, whose one-hour run peaked
+# 25 MB higher with the numpy reference).
 _GROUP = 64
+
+# The kernels' counters array, in its order (kernels.correction.CREATED..CELLS_FREED).
+_KERNEL_COUNTERS = ("features_created", "features_merged", "features_corrected",
+                    "features_deleted", "features_protected", "features_split", "cells_freed")
 
 
 def concat_scans(scans: Sequence[Scan]) -> tuple[Scan, I64]:
@@ -45,65 +66,79 @@ def concat_scans(scans: Sequence[Scan]) -> tuple[Scan, I64]:
 
 
 class AndersoneMapper:
-    """The paper's method on one grid; feed it scans with :meth:`integrate`."""
+    """The paper's method on one grid; feed it scans with :meth:`integrate_many`.
 
-    def __init__(self, config: MapperConfig, grid: GridSpec) -> None:
+    ``reference=True`` runs the numpy reference instead of the compiled kernels (tests).
+    """
+
+    def __init__(self, config: MapperConfig, grid: GridSpec, reference: bool = False) -> None:
         self.config = config
         self.grid = grid
+        self.reference = reference
         self.counters = MapperCounters()
-        self.features = FeatureSet(grid, config.match_distance)
+        self.features: FeatureSet | FeatureStore = (
+            FeatureSet(grid, config.match_distance) if reference
+            else FeatureStore(grid, config.match_distance)
+        )
         self.free_layer = FreeLayer(grid, config.p_free, config.p_clamp_min, config.p_clamp_max)
         self.rng = np.random.Generator(np.random.PCG64(config.seed))
-        self.last_free_space: FreeSpaceScan | None = None
 
     def integrate(self, scan: Scan) -> None:
         """Add one scan (§6 order: merge, free-space scan, correction, free layer)."""
-        codes = classify_scan(scan, self.config)
-        count_readings(codes, self.counters)
-        feats = reading_features(scan, codes, self.config)
-        if len(feats):
-            created, merged = self.features.merge_readings(feats.mean, feats.cov, feats.t_ns)
-            self.counters.features_created += created
-            self.counters.features_merged += merged
-        free = free_space_scan(scan, codes, self.config, self.grid)
-        self.last_free_space = free
-        if free.count == 0:
-            return
-        if self.config.feature_correction:
-            correct_features(self.features, free, self.config, self.grid, self.rng, self.counters)
-        self.free_layer.update_window(free.row0, free.col0, free.mask)
-        self.counters.cells_freed += free.count
+        self.integrate_many([scan])
 
     def integrate_many(self, scans: Sequence[Scan]) -> None:
-        """Add scans in order; the same state as :meth:`integrate` on each, bit for bit.
-
-        What does not depend on the map state (reading classes, reading features,
-        free-space rasters) is computed for up to ``_GROUP`` scans in one vectorised pass;
-        merge, correction and the free-layer update then run scan by scan.
-        """
+        """Add scans in order; the same state as :meth:`integrate` on each, bit for bit."""
         for g in range(0, len(scans), _GROUP):
-            self._integrate_group(scans[g : g + _GROUP])
+            group = scans[g : g + _GROUP]
+            if group:
+                self._integrate_group(group)
 
     def _integrate_group(self, scans: Sequence[Scan]) -> None:
-        if not scans:
-            return
         cat, bounds = concat_scans(scans)
         codes = classify_scan(cat, self.config)
         count_readings(codes, self.counters)
         self.counters.scans += len(scans) - 1  # count_readings counted one scan
         feats = reading_features(cat, codes, self.config)
-        fcut = np.searchsorted(feats.row, bounds).tolist()
-        frees = free_space_scans(cat, bounds, codes, self.config, self.grid)
+        fcut = np.searchsorted(feats.row, bounds)
+        if self.reference:
+            self._reference_group(cat, bounds, codes, feats, fcut)
+        else:
+            self._kernel_group(cat, bounds, codes, feats, fcut)
+
+    def _kernel_group(self, cat: Scan, bounds: I64, codes: np.ndarray, feats: ReadingFeatures,
+                      fcut: I64) -> None:
+        cfg, g = self.config, self.grid
+        assert isinstance(self.features, FeatureStore)
+        rows, cones, up_down = cone_table(cat, free_radius(cat, codes, cfg))
+        ccut = np.searchsorted(rows, bounds)
+        self.features.reserve(len(feats))
+        counts = np.zeros(len(_KERNEL_COUNTERS), dtype=np.int64)
+        andersone_scans.integrate_scans(
+            self.features.arrays, feats.mean, feats.cov, feats.t_ns, fcut, cones, up_down, ccut,
+            g.origin_x, g.origin_y, g.resolution, g.width, g.height, cfg.match_distance,
+            cfg.feature_correction, self.rng, cfg.n_particles,
+            cfg.keep_fraction * cfg.n_particles, cfg.protect_times,
+            cfg.sigma_floor(g.resolution) ** 2, cfg.split_guard, cfg.refit_positions == "cell",
+            self.free_layer.counts, counts,
+        )
+        for name, value in zip(_KERNEL_COUNTERS, counts.tolist(), strict=True):
+            setattr(self.counters, name, getattr(self.counters, name) + value)
+
+    def _reference_group(self, cat: Scan, bounds: I64, codes: np.ndarray,
+                         feats: ReadingFeatures, fcut: I64) -> None:
         fs, cfg, counters = self.features, self.config, self.counters
+        assert isinstance(fs, FeatureSet)
+        frees = free_space_scans(cat, bounds, codes, cfg, self.grid)
+        cut = fcut.tolist()
         for k, free in enumerate(frees):
-            a, b = fcut[k], fcut[k + 1]
+            a, b = cut[k], cut[k + 1]
             if b > a:
                 created, merged = fs.merge_readings(
                     feats.mean[a:b], feats.cov[a:b], feats.t_ns[a:b]
                 )
                 counters.features_created += created
                 counters.features_merged += merged
-            self.last_free_space = free
             if free.count == 0:
                 continue
             if cfg.feature_correction:
@@ -111,10 +146,21 @@ class AndersoneMapper:
             self.free_layer.update_window(free.row0, free.col0, free.mask)
             counters.cells_freed += free.count
 
+    def occupied(self) -> B:
+        """Eq. 12's occupied layer: cells in any live feature's 2σ ellipse (and mean cells)."""
+        s = self.features.alive_slots()
+        mean, cov = self.features.mean[s], self.features.cov[s]
+        if self.reference:
+            return occupied_layer(mean, cov, self.grid)
+        g = self.grid
+        occ = np.zeros(g.shape, dtype=np.bool_)
+        occupied_cells(mean, cov, 2.0, g.origin_x, g.origin_y, g.resolution, g.width, g.height,
+                       occ)
+        return occ
+
     def snapshot(self) -> MapSnapshot:
         """The map now: eq. 12 probability (NaN unknown), both layers, features, counters."""
-        s = self.features.alive_slots()
-        occupied = occupied_layer(self.features.mean[s], self.features.cov[s], self.grid)
+        occupied = self.occupied()
         logodds = self.free_layer.logodds.copy()
         return MapSnapshot(
             grid=self.grid,

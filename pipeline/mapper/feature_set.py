@@ -64,6 +64,18 @@ def _upper(k: int) -> npt.NDArray[np.bool_]:
     return mask
 
 
+def bucket_layout(grid: GridSpec, match_distance: float) -> tuple[float, int, int]:
+    """The spatial index's bucket size (m) and bucket columns, rows over ``grid``:
+    ``match_distance`` wide, or wider when that would exceed ``_MAX_BUCKETS``."""
+    span_x = grid.width * grid.resolution
+    span_y = grid.height * grid.resolution
+    size = float(match_distance)
+    if (span_x / size + 1) * (span_y / size + 1) > _MAX_BUCKETS:
+        size = math.sqrt(span_x * span_y / _MAX_BUCKETS) + 1e-9
+    size = max(size, float(match_distance))
+    return size, math.ceil(span_x / size) + 1, math.ceil(span_y / size) + 1
+
+
 def kalman_merge(mu_f: F64, p_f: F64, mu_z: F64, p_z: F64) -> tuple[F64, F64]:
     """Eqs. 5-8 for ``n`` pairs at once: means ``(n, 2)`` (m), covariances ``(n, 3)`` xx, xy, yy (m²).
 
@@ -112,14 +124,7 @@ class FeatureSet:
     def __init__(self, grid: GridSpec, match_distance: float, capacity: int = 1024) -> None:
         self.grid = grid
         self.match_distance = float(match_distance)
-        span_x = grid.width * grid.resolution
-        span_y = grid.height * grid.resolution
-        size = self.match_distance
-        if (span_x / size + 1) * (span_y / size + 1) > _MAX_BUCKETS:
-            size = math.sqrt(span_x * span_y / _MAX_BUCKETS) + 1e-9
-        self._bucket_size = max(size, self.match_distance)
-        self._nbx = math.ceil(span_x / self._bucket_size) + 1
-        self._nby = math.ceil(span_y / self._bucket_size) + 1
+        self._bucket_size, self._nbx, self._nby = bucket_layout(grid, self.match_distance)
         self._b_origin = np.array([grid.origin_x, grid.origin_y])
         self._b_last = np.array([self._nbx - 1, self._nby - 1], dtype=np.float64)
         # Bucket → row of the pool (0 = the shared, always empty row); a row lists the

@@ -23,7 +23,7 @@ import numpy.typing as npt
 
 from pipeline import reading_quality as rq
 from pipeline.config import MapperConfig
-from pipeline.mapper.grid_raster import Spans, sector_spans
+from pipeline.mapper.grid_raster import Spans, cone_edges, sector_spans
 from pipeline.mapper.reading_features import distance_sigma
 from pipeline.mapper.types import F64, I64, B, GridSpec, Scan
 
@@ -130,6 +130,20 @@ def cone_spans(scan: Scan, radius: F64, grid: GridSpec) -> tuple[I64, Spans]:
         grid,
     )
     return rows, spans
+
+
+def cone_table(scan: Scan, radius: F64) -> tuple[I64, F64, B]:
+    """The cones with positive ``radius`` (m) as the compiled rasteriser takes them.
+
+    Returns the scan rows, ``(k, 7)`` columns ``ox, oy, radius, sin e1, cos e1, sin e2,
+    cos e2`` and ``(k, 2)`` whether each wedge holds +90° / −90° — the values
+    :func:`cone_spans` computes, from the same numpy calls.
+    """
+    rows = np.flatnonzero(radius > 0).astype(np.int64)
+    s1, c1, s2, c2, up, down = cone_edges(scan.alpha[rows], 0.5 * scan.fov[rows])
+    cones = np.stack([scan.origin_x[rows], scan.origin_y[rows], radius[rows], s1, c1, s2, c2],
+                     axis=1)
+    return rows, cones, np.stack([up, down], axis=1)
 
 
 def union_of_spans(spans: Spans, grid: GridSpec) -> FreeSpaceScan:

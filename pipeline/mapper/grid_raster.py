@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.mapper.types import F64, I64, GridSpec
+from pipeline.mapper.types import F64, I64, B, GridSpec
 
 # Beams of half-width ≥ 90° would need the union, not the intersection, of two half-planes;
 # sonar beams are far narrower, so wider values are clamped just below 90°.
@@ -88,6 +88,17 @@ def _finish(owner: I64, row: I64, ox: F64, lo: F64, hi: F64, ok: np.ndarray, gri
     return Spans(owner[ok], row[ok], c0, c1)
 
 
+def cone_edges(alpha: F64, half_beam: F64) -> tuple[F64, F64, F64, F64, B, B]:
+    """Sines and cosines of the cone edges ``e1 = α − β/2``, ``e2 = α + β/2`` (half-width
+    clamped to [0, 90°)), and whether the wedge holds the +90° / −90° direction."""
+    hb = np.clip(half_beam, 0.0, _MAX_HALF_BEAM)
+    e1 = alpha - hb
+    e2 = alpha + hb
+    up = np.abs(wrap_angle(0.5 * np.pi - alpha)) <= hb
+    down = np.abs(wrap_angle(-0.5 * np.pi - alpha)) <= hb
+    return np.sin(e1), np.cos(e1), np.sin(e2), np.cos(e2), up, down
+
+
 def sector_spans(
     ox: F64, oy: F64, alpha: F64, half_beam: F64, radius: F64, grid: GridSpec
 ) -> Spans:
@@ -98,17 +109,11 @@ def sector_spans(
     by the cone edges ``e1 = α − β/2`` and ``e2 = α + β/2``:
     ``cross(e1, p) ≥ 0`` and ``cross(p, e2) ≥ 0``; each clips the row's disk chord.
     """
-    hb = np.clip(half_beam, 0.0, _MAX_HALF_BEAM)
-    e1 = alpha - hb
-    e2 = alpha + hb
-    s1, c1 = np.sin(e1), np.cos(e1)
-    s2, c2 = np.sin(e2), np.cos(e2)
+    s1, c1, s2, c2, up, down = cone_edges(alpha, half_beam)
     # y extent of the sector: the origin, both edge tips, and ±radius if the wedge holds ±90°.
     ys = np.stack([np.zeros_like(radius), radius * s1, radius * s2])
     lo_y = ys.min(axis=0)
     hi_y = ys.max(axis=0)
-    up = np.abs(wrap_angle(0.5 * np.pi - alpha)) <= hb
-    down = np.abs(wrap_angle(-0.5 * np.pi - alpha)) <= hb
     hi_y = np.where(up, radius, hi_y)
     lo_y = np.where(down, -radius, lo_y)
     r0, r1 = _rows_for(oy + lo_y, oy + hi_y, grid)

@@ -10,7 +10,7 @@ from pipeline.mapper.types import FeatureTable, GridSpec, MapperCounters, MapSna
 
 
 class Mapper(Protocol):
-    """A mapper fed scan by scan; pure numpy, no I/O."""
+    """A mapper fed scan by scan; no I/O."""
 
     config: MapperConfig
     grid: GridSpec

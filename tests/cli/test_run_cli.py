@@ -19,7 +19,7 @@ ROOT = Path(__file__).resolve().parents[2]
 SAMPLES = ROOT / "sample_logs"
 
 OUTPUTS = {"map.pgm", "map.yaml", "map.png", "features.parquet", "metrics.json", "config.toml",
-           "report.html", "report.md"}
+           "report.html", "report.md", ".sonarmap-output"}
 
 SAMPLE_RUNS = [
     ("office.mcap", [str(SAMPLES / "office" / "office.mcap")], "mcap"),
@@ -110,16 +110,22 @@ def test_reruns_are_byte_identical(runner, tmp_path):
 
 def test_existing_output_is_refused_and_force_replaces(runner, tmp_path):
     out = tmp_path / "o"
-    out.mkdir()
-    (out / "keep.txt").write_text("x")
     log = str(SAMPLES / "office" / "office.mcap")
+    assert _run(runner, ["run", log, "-o", str(out), "-q"]).exit_code == 0
     result = _run(runner, ["run", log, "-o", str(out), "-q"])
     assert result.exit_code == 1
-    assert "exists already" in result.output and "--force" in result.output
-    assert (out / "keep.txt").exists()
+    assert "earlier sonarmap output" in result.output and "--force" in result.output
     result = _run(runner, ["run", log, "-o", str(out), "-q", "--force"])
     assert result.exit_code == 0, result.output
-    assert not (out / "keep.txt").exists() and (out / "map.pgm").exists()
+    assert (out / "map.pgm").exists()
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "keep.txt").write_text("x")
+    for force in ([], ["--force"]):
+        result = _run(runner, ["run", log, "-o", str(mine), "-q", *force])
+        assert result.exit_code == 1 and "is not a sonarmap output" in result.output
+        assert "--force" not in result.output
+    assert sorted(p.name for p in mine.iterdir()) == ["keep.txt"]
 
 
 @pytest.mark.parametrize(

@@ -20,7 +20,7 @@ from fuzz.harness import ROOT
 
 LOG = ROOT / "sample_logs" / "office" / "office.mcap"
 FILES = {"map.pgm", "map.yaml", "map.png", "features.parquet", "metrics.json", "config.toml",
-         "report.html", "report.md"}
+         "report.html", "report.md", ".sonarmap-output"}
 
 
 def _start(out: Path) -> subprocess.Popen[bytes]:

@@ -96,7 +96,9 @@ def test_cli_refuses_symlinked_and_existing_outputs(targets: dict[str, Target], 
     assert "symlink" in res.stderr and len(res.stderr.strip().splitlines()) == 1
     res = runner.invoke(app, ["run", log, "-o", str(link / "OUT"), "-q"])
     assert res.exit_code == 1 and "symlink" in res.stderr
-    res = runner.invoke(app, ["run", log, "-o", str(real), "-q"])
-    assert res.exit_code == 1 and "exists already" in res.stderr
+    for force in ([], ["--force"]):
+        res = runner.invoke(app, ["run", log, "-o", str(real), "-q", *force])
+        assert res.exit_code == 1 and "is not a sonarmap output" in res.stderr
+        assert "--force" not in res.stderr
     assert sorted(p.name for p in real.iterdir()) == ["keep.txt"]
     assert (real / "keep.txt").read_text() == "mine"

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
 
@@ -9,6 +10,7 @@ import pytest
 
 from formats.errors import OutputError
 from formats.writers.atomic import OutputDir, atomic_write_bytes, atomic_write_text
+from formats.writers.output_marker import OUTPUT_MARKER
 
 
 def _siblings(parent: Path) -> list[str]:
@@ -39,12 +41,24 @@ def test_exception_leaves_nothing(tmp_path: Path) -> None:
     assert _siblings(tmp_path) == []
 
 
-def test_existing_dir_refused_without_force(tmp_path: Path) -> None:
-    final = tmp_path / "run"
-    final.mkdir()
-    (final / "old.txt").write_text("old")
+def _earlier_output(final: Path, *files: str) -> Path:
+    """A directory as an earlier OutputDir commit leaves it (files plus the marker)."""
+    with OutputDir(final) as out:
+        for f in files:
+            out.path(f).write_text("old")
+    return final
+
+
+def test_commit_lists_every_file_in_the_marker(tmp_path: Path) -> None:
+    final = _earlier_output(tmp_path / "run", "map.yaml", "charts/hist.svg")
+    marker = json.loads((final / OUTPUT_MARKER).read_text())
+    assert marker == {"written_by": "sonarmap", "files": ["charts/hist.svg", "map.yaml"]}
+
+
+def test_earlier_output_refused_without_force_naming_force(tmp_path: Path) -> None:
+    final = _earlier_output(tmp_path / "run", "old.txt")
     with (
-        pytest.raises(OutputError, match="exists already; use --force to replace"),
+        pytest.raises(OutputError, match=r"\(an earlier sonarmap output\); use --force to replace"),
         OutputDir(final),
     ):
         pass
@@ -53,25 +67,103 @@ def test_existing_dir_refused_without_force(tmp_path: Path) -> None:
 
 
 def test_force_replaces_the_old_run(tmp_path: Path) -> None:
-    final = tmp_path / "run"
-    final.mkdir()
-    (final / "old.txt").write_text("old")
+    final = _earlier_output(tmp_path / "run", "old.txt")
     with OutputDir(final, force=True) as out:
         out.path("new.txt").write_text("new")
         assert (final / "old.txt").exists()  # the old run stays complete until commit
-    assert _siblings(final) == ["new.txt"]
+    assert _siblings(final) == [OUTPUT_MARKER, "new.txt"]
     assert _siblings(tmp_path) == ["run"]  # old copy deleted, no temp left
 
 
-def test_force_with_failure_keeps_the_old_run(tmp_path: Path) -> None:
+@pytest.mark.parametrize("force", [False, True])
+def test_a_directory_sonarmap_did_not_write_is_never_replaced(tmp_path: Path, force: bool) -> None:
     final = tmp_path / "run"
     final.mkdir()
-    (final / "old.txt").write_text("old")
+    (final / "mine.txt").write_text("mine")
+    with pytest.raises(OutputError, match="is not a sonarmap output") as err, OutputDir(
+        final, force=force
+    ):
+        pass
+    assert "--force" not in str(err.value)  # never pointed at the destructive flag
+    assert (final / "mine.txt").read_text() == "mine"
+
+
+def test_an_output_holding_the_users_files_is_not_replaced(tmp_path: Path) -> None:
+    final = _earlier_output(tmp_path / "run", "map.yaml")
+    (final / "notes.txt").write_text("mine")
+    with pytest.raises(OutputError, match=r"holds files sonarmap did not write \(notes.txt\)"), \
+            OutputDir(final, force=True):
+        pass
+    assert (final / "notes.txt").read_text() == "mine"
+
+
+def test_legacy_output_without_marker_is_replaced_only_when_it_holds_run_files(
+    tmp_path: Path,
+) -> None:
+    final = tmp_path / "run"
+    final.mkdir()
+    for f in ("metrics.json", "features.parquet", "map.pgm"):
+        (final / f).write_text("old")
+    with OutputDir(final, force=True) as out:
+        out.path("metrics.json").write_text("new")
+    assert (final / "metrics.json").read_text() == "new"
+    (final / OUTPUT_MARKER).unlink()
+    (final / "thesis.tex").write_text("mine")
+    with pytest.raises(OutputError, match="is not a sonarmap output"), OutputDir(final, force=True):
+        pass
+
+
+def test_directory_holding_the_input_or_the_cwd_is_refused(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    final = _earlier_output(tmp_path / "run", "map.yaml")
+    log = final / "sub" / "robot.mcap"
+    log.parent.mkdir()
+    log.write_bytes(b"log")
+    with pytest.raises(OutputError, match=r"is or contains the input .*robot\.mcap"), \
+            OutputDir(final, force=True, protect=(log,)):
+        pass
+    assert log.read_bytes() == b"log"
+    log.unlink()
+    log.parent.rmdir()
+    monkeypatch.chdir(final)
+    with pytest.raises(OutputError, match="is or contains the working directory"), \
+            OutputDir(Path("..") / "run", force=True):
+        pass
+    assert (final / "map.yaml").exists()
+
+
+def test_force_with_failure_keeps_the_old_run(tmp_path: Path) -> None:
+    final = _earlier_output(tmp_path / "run", "old.txt")
     with pytest.raises(ValueError), OutputDir(final, force=True) as out:
         out.path("new.txt").write_text("new")
         raise ValueError("half-way")
-    assert _siblings(final) == ["old.txt"]
+    assert _siblings(final) == [OUTPUT_MARKER, "old.txt"]
     assert _siblings(tmp_path) == ["run"]
+
+
+def test_parent_that_is_a_file_is_named(tmp_path: Path) -> None:
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    with pytest.raises(OutputError, match=r"afile: is a file, not a directory"), \
+            OutputDir(afile / "sub"):
+        pass
+
+
+def test_name_too_long_for_the_temporary_sibling_names_the_output(tmp_path: Path) -> None:
+    final = tmp_path / ("n" * 240)
+    with pytest.raises(OutputError, match=r"n{240}: output directory name is too long \(240 bytes"), \
+            OutputDir(final):
+        pass
+    assert _siblings(tmp_path) == []
+
+
+def test_os_error_while_writing_names_the_output_not_the_temporary(tmp_path: Path) -> None:
+    final = tmp_path / "OUT"
+    with pytest.raises(OutputError) as err, OutputDir(final) as out:
+        raise OSError(28, "No space left on device", str(out.path("map.pgm")))
+    assert str(err.value) == f"{final / 'map.pgm'}: cannot write: No space left on device"
+    assert _siblings(tmp_path) == []
 
 
 def test_force_refuses_to_replace_a_file(tmp_path: Path) -> None:
@@ -118,7 +210,7 @@ def test_escaping_names_refused(tmp_path: Path, name: str) -> None:
         with pytest.raises(OutputError, match="leads outside the output directory"):
             out.path(name)
         out.path("ok.txt").write_text("ok")
-    assert _siblings(tmp_path / "run") == ["ok.txt"]
+    assert _siblings(tmp_path / "run") == [OUTPUT_MARKER, "ok.txt"]
     assert _siblings(tmp_path) == ["run"]
 
 

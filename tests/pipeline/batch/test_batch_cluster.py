@@ -137,12 +137,24 @@ def test_config_change_and_markerless_output_are_remapped(
 ) -> None:
     logs, cfg = _logs(tmp_path)
     out = tmp_path / "out"
-    (out / "run0").mkdir(parents=True)
-    (out / "run0" / "stale.txt").write_text("from an interrupted or manual run")
+    # A plain `sonarmap run` output (no batch marker) is re-mapped and replaced ...
+    ran = CliRunner().invoke(cli_app, ["run", str(logs[0]), "-o", str(out / "run0"), "-q",
+                                       "--config", str(cfg)])
+    assert ran.exit_code == 0, ran.output
+    # ... a directory of the user's under a log's name is not: that log fails, files kept.
+    (out / "run1").mkdir(parents=True)
+    (out / "run1" / "notes.txt").write_text("the user's own")
     args = [str(logs[0]), str(logs[1]), "-o", str(out), "--scheduler", scheduler_address, "-q"]
-    assert _invoke(cli_app, *args, "--config", str(cfg))[0] == 0
-    assert not (out / "run0" / "stale.txt").exists()  # a dir without marker is replaced
+    code, _, err = _invoke(cli_app, *args, "--config", str(cfg))
+    assert code == 1
+    assert err.strip() == (f"sonarmap: failed: run1: {out / 'run1'}: exists and is not a "
+                           "sonarmap output; not replacing it, choose another output directory")
+    assert (out / "run1" / "notes.txt").read_text() == "the user's own"
+    assert sorted(p.name for p in (out / "run1").iterdir()) == ["notes.txt"]
     assert (out / "run0" / batch.MARKER).is_file()
+    (out / "run1" / "notes.txt").unlink()
+    (out / "run1").rmdir()
+    assert _invoke(cli_app, *args, "--config", str(cfg))[0] == 0
     cfg2 = write_config(tmp_path / "coarse.toml").read_text().replace(
         "resolution = 0.1", "resolution = 0.2")
     (tmp_path / "coarse.toml").write_text(cfg2)

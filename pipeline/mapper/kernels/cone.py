@@ -1,0 +1,166 @@
+"""A sonar cone on the grid, one reading at a time, as row spans (compiled).
+
+The cell rule is that of :func:`pipeline.mapper.grid_raster.sector_spans`, computed with
+the same arithmetic in the same order, so the two give the same cells bit for bit: a cell
+(row r, col c) belongs to the sector when its centre lies within ``half_fov`` of the axis
+``alpha`` (the intersection of the half-planes of the two cone edges) and within the row's
+chord of the disk of radius ``r_outer`` (rows with ``dy² ≥ r_outer²`` are empty; a centre
+exactly on the chord's end counts). With ``r_inner > 0`` cells whose centre is strictly
+closer than ``r_inner`` are left out (the row's inner chord, open), which can split a
+row in two spans. Spans are clipped to the grid.
+
+Use from numba code::
+
+    n = sector_spans(ox, oy, alpha, half_fov, r_inner, r_outer,
+                     gx, gy, res, width, height, rows, c0s, c1s)
+    for k in range(n):            # columns c0s[k]..c1s[k] (inclusive) of rows[k]
+        ...
+
+with buffers of at least :func:`max_sector_spans` ``(r_outer, res)`` entries. The lower
+level :func:`cone_edges`, :func:`cone_rows` and :func:`cone_row_span` take the edges'
+sines and cosines precomputed (the andersone kernel takes them from numpy, so its cones
+match the numpy reference on any CPU).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+# As grid_raster._MAX_HALF_BEAM: half-widths of 90° and more are clamped just below it.
+MAX_HALF_BEAM = 0.5 * math.pi - 1e-9
+
+
+@njit(cache=True)
+def wrap_angle(a: float) -> float:
+    """``a`` wrapped to [−π, π), rad (``np.mod`` semantics, as grid_raster.wrap_angle)."""
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+@njit(cache=True)
+def cone_edges(alpha: float, half_fov: float) -> tuple[float, float, float, float, bool, bool]:
+    """Sines and cosines of the edges ``α ∓ β/2`` and whether the wedge holds +90° / −90°."""
+    hb = min(max(half_fov, 0.0), MAX_HALF_BEAM)
+    e1 = alpha - hb
+    e2 = alpha + hb
+    up = abs(wrap_angle(0.5 * math.pi - alpha)) <= hb
+    down = abs(wrap_angle(-0.5 * math.pi - alpha)) <= hb
+    return math.sin(e1), math.cos(e1), math.sin(e2), math.cos(e2), up, down
+
+
+@njit(cache=True)
+def cone_rows(oy: float, radius: float, s1: float, s2: float, up: bool, down: bool,
+              gy: float, res: float, height: int) -> tuple[int, int]:
+    """First and last grid row (inclusive, clipped; empty when r1 < r0) of a sector's extent."""
+    y1 = radius * s1
+    y2 = radius * s2
+    lo_y = min(0.0, min(y1, y2))
+    hi_y = max(0.0, max(y1, y2))
+    if up:
+        hi_y = radius
+    if down:
+        lo_y = -radius
+    r0 = math.ceil(((oy + lo_y) - gy) / res - 0.5)
+    r1 = math.floor(((oy + hi_y) - gy) / res - 0.5)
+    return min(max(r0, 0), height), min(max(r1, -1), height - 1)
+
+
+@njit(cache=True)
+def cone_row_chord(oy: float, radius: float, s1: float, c1: float, s2: float, c2: float,
+                   row: int, gy: float, res: float) -> tuple[float, float, bool]:
+    """The sector's x interval ``[lo, hi]`` (m, relative to the origin) on a row's centre line."""
+    dy = (gy + (row + 0.5) * res) - oy
+    h2 = radius * radius - dy * dy
+    ok = h2 > 0
+    h = math.sqrt(h2) if ok else 0.0
+    lo = -h
+    hi = h
+    if s1 != 0.0:
+        b1 = c1 * dy / s1
+        if s1 > 0:
+            hi = min(hi, b1)
+        else:
+            lo = max(lo, b1)
+    elif c1 * dy < 0:
+        ok = False
+    if s2 != 0.0:
+        b2 = c2 * dy / s2
+        if s2 > 0:
+            lo = max(lo, b2)
+        else:
+            hi = min(hi, b2)
+    elif c2 * dy > 0:
+        ok = False
+    return lo, hi, ok
+
+
+@njit(cache=True)
+def columns_of(ox: float, lo: float, hi: float, gx: float, res: float) -> tuple[int, int]:
+    """Columns (unclipped) whose centre x lies in ``[ox + lo, ox + hi]``."""
+    c0 = math.ceil(((ox + lo) - gx) / res - 0.5)
+    c1 = math.floor(((ox + hi) - gx) / res - 0.5)
+    return c0, c1
+
+
+@njit(cache=True)
+def cone_row_span(ox: float, oy: float, radius: float, s1: float, c1: float, s2: float,
+                  c2: float, row: int, gx: float, gy: float, res: float,
+                  width: int) -> tuple[int, int]:
+    """Columns ``c0..c1`` of the sector on ``row``, clipped to the grid; empty when c0 > c1."""
+    lo, hi, ok = cone_row_chord(oy, radius, s1, c1, s2, c2, row, gy, res)
+    if not ok:
+        return 0, -1
+    a, b = columns_of(ox, lo, hi, gx, res)
+    if not (a <= b and b >= 0 and a <= width - 1):
+        return 0, -1
+    return min(max(a, 0), width - 1), min(max(b, 0), width - 1)
+
+
+@njit(cache=True)
+def max_sector_spans(r_outer: float, res: float) -> int:
+    """An upper bound of the spans :func:`sector_spans` writes for a sector of radius ``r_outer``."""
+    return 2 * (math.ceil(2.0 * r_outer / res) + 3)
+
+
+@njit(cache=True)
+def sector_spans(ox: float, oy: float, alpha: float, half_fov: float, r_inner: float,
+                 r_outer: float, gx: float, gy: float, res: float, width: int, height: int,
+                 rows: np.ndarray, c0s: np.ndarray, c1s: np.ndarray) -> int:
+    """Write the spans of the sector ``r_inner ≤ dist < r_outer``, ``|bearing − α| ≤ β/2``
+    (module doc for the exact rule) into ``rows, c0s, c1s``; returns how many, by row."""
+    n = 0
+    if not r_outer > 0.0:
+        return 0
+    s1, c1, s2, c2, up, down = cone_edges(alpha, half_fov)
+    r0, r1 = cone_rows(oy, r_outer, s1, s2, up, down, gy, res, height)
+    rin2 = r_inner * r_inner if r_inner > 0.0 else 0.0
+    for row in range(r0, r1 + 1):
+        a, b = cone_row_span(ox, oy, r_outer, s1, c1, s2, c2, row, gx, gy, res, width)
+        if a > b:
+            continue
+        dy = (gy + (row + 0.5) * res) - oy
+        h2 = rin2 - dy * dy
+        if h2 > 0:
+            # Columns strictly inside the inner chord (ox − h, ox + h) are left out.
+            h = math.sqrt(h2)
+            e0 = math.floor(((ox - h) - gx) / res - 0.5) + 1
+            e1 = math.ceil(((ox + h) - gx) / res - 0.5) - 1
+            if e0 <= e1 and e1 >= a and e0 <= b:
+                if e0 > a:
+                    rows[n] = row
+                    c0s[n] = a
+                    c1s[n] = e0 - 1
+                    n += 1
+                if e1 < b:
+                    rows[n] = row
+                    c0s[n] = e1 + 1
+                    c1s[n] = b
+                    n += 1
+                continue
+        rows[n] = row
+        c0s[n] = a
+        c1s[n] = b
+        n += 1
+    return n
