@@ -151,7 +151,8 @@ class Config:
         return self
 
     def to_dict(self) -> dict[str, Any]:
-        return _to_plain(self)
+        plain: dict[str, Any] = _to_plain(self)
+        return plain
 
     def hash(self) -> str:
         """sha256 of the canonical JSON of the configuration (first 16 hex digits)."""
@@ -176,7 +177,7 @@ def load_config(path: str | Path | None) -> Config:
 def config_from_dict(data: dict[str, Any], source: str | Path | None = None) -> Config:
     """Build a validated Config from plain data (as parsed from TOML)."""
     try:
-        cfg = _build(Config, data, "")
+        cfg: Config = _build(Config, data, "")
         return cfg.validate()
     except ConfigError as err:
         if source is not None and err.path is None:

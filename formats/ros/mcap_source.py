@@ -186,7 +186,8 @@ def _decompress(compression: str, data: bytes | memoryview, size: int) -> bytes 
     if compression == "lz4":
         import lz4.frame
 
-        return lz4.frame.decompress(bytes(data))
+        out: bytes = lz4.frame.decompress(bytes(data))
+        return out
     raise NotImplementedError(compression)
 
 
