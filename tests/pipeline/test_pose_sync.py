@@ -186,3 +186,33 @@ def test_release_gives_back_the_track_pages_again_after_a_full_walk():
     high = _rss_file_kb()
     tr.release_before(int(tr.t_ns[n // 2]))  # half of every column
     assert high - _rss_file_kb() > 5_000
+
+
+def test_sonar_geometry_at_a_general_heading():
+    """A heading where both the sine and the cosine terms count (not a multiple of π/2)."""
+    yaw = math.radians(30.0)
+    ox, oy, a = sonar_geometry(
+        np.array([1.0]), np.array([-2.0]), np.array([yaw]),
+        np.array([0.3]), np.array([0.1]), np.array([math.radians(170.0)]),
+    )
+    c, s = math.cos(yaw), math.sin(yaw)
+    assert ox[0] == pytest.approx(1.0 + 0.3 * c - 0.1 * s)  # 1.2098
+    assert oy[0] == pytest.approx(-2.0 + 0.3 * s + 0.1 * c)  # -1.7634
+    assert a[0] == pytest.approx(math.radians(-160.0))  # 200° wrapped into [-π, π)
+
+
+def test_pose_track_running_maximum_carries_across_batches():
+    """A stamp below an earlier batch's maximum went backwards, even when it rises within
+    its own batch."""
+    from pipeline.pose_sync import PoseTrackBuilder
+
+    builder = PoseTrackBuilder()
+    for t in ([0, 10], [5, 6, 11], [11, 12]):
+        n = len(t)
+        builder.add(
+            PoseBatch(np.array(t, np.int64) * S, np.arange(n, dtype=float), np.zeros(n),
+                      np.zeros(n), "odom", "base_link")
+        )
+    tr = builder.finish()
+    assert tr.t_ns.tolist() == [0, 10 * S, 11 * S, 12 * S]
+    assert (tr.backwards, tr.duplicates) == (2, 1)

@@ -236,3 +236,34 @@ def test_broken_files_are_format_errors(tmp_path: Path) -> None:
     _write_yaml(tmp_path / "junk.yaml", "junk.png")
     with pytest.raises(FormatError, match=r"junk\.png: not a readable image"):
         load_nav2_map(tmp_path / "junk.yaml")
+
+
+def test_load_boundary_values(tmp_path: Path) -> None:
+    """Thresholds compare strictly, at their exact values; maxval 256 means 16-bit samples;
+    a zero width is refused; thresholds above 1 make nothing occupied."""
+    # occ = 1 - v/1000: v = 750 -> 0.25 (= free_thresh), v = 250 -> 0.75 (= occupied_thresh)
+    (tmp_path / "edge.pgm").write_bytes(b"P2\n4 1\n1000\n750 749 250 251\n")
+    _write_yaml(tmp_path / "edge.yaml", "edge.pgm", free_thresh=0.25, occupied_thresh=0.75)
+    edge = load_nav2_map(tmp_path / "edge.yaml")
+    assert edge.classes.tolist() == [[-1, -1, -1, -1]]  # none strictly beyond a threshold
+    assert edge.occupancy.tolist() == [[-1, -1, -1, -1]]
+    (tmp_path / "past.pgm").write_bytes(b"P2\n2 1\n1000\n751 249\n")
+    _write_yaml(tmp_path / "past.yaml", "past.pgm", free_thresh=0.25, occupied_thresh=0.75)
+    assert load_nav2_map(tmp_path / "past.yaml").classes.tolist() == [[0, 1]]
+
+    # maxval 256: two bytes per sample, big-endian; 256 is white (free), 0 black (occupied)
+    (tmp_path / "wide.pgm").write_bytes(b"P5\n3 1\n256\n" + np.array([0, 256, 128], ">u2").tobytes())
+    _write_yaml(tmp_path / "wide.yaml", "wide.pgm")
+    wide = load_nav2_map(tmp_path / "wide.yaml")
+    assert wide.classes.tolist() == [[1, 0, -1]]
+    assert wide.probability[0, 2] != wide.probability[0, 2]  # 0.5: between, unknown (NaN)
+
+    (tmp_path / "zero.pgm").write_bytes(b"P5\n0 3\n255\n")
+    _write_yaml(tmp_path / "zero.yaml", "zero.pgm")
+    with pytest.raises(FormatError, match=r"zero\.pgm: bad PGM header: 0x3, maxval 255"):
+        load_nav2_map(tmp_path / "zero.yaml")
+
+    (tmp_path / "hi.pgm").write_bytes(b"P2\n2 1\n255\n0 255\n")
+    _write_yaml(tmp_path / "hi.yaml", "hi.pgm", occupied_thresh=1.5, free_thresh=1.2)
+    hi = load_nav2_map(tmp_path / "hi.yaml")
+    assert hi.classes.tolist() == [[0, 0]]  # black (occ 1.0) is below 1.2: free, not occupied

@@ -15,7 +15,7 @@ from formats.errors import ConfigError
 from formats.map_types import GridSpec
 from pipeline.config import MapperConfig
 from pipeline.mapper import AndersoneMapper, ClassicMapper, make_mapper
-from pipeline.mapper.occupancy import FreeLayer, logit
+from pipeline.mapper.occupancy import FreeLayer, logit, occupied_layer
 from pipeline.mapper.synthetic import ring_scans, room_grid
 
 CFG = MapperConfig()
@@ -160,3 +160,62 @@ def test_benchmark_smoke() -> None:
     for name in ("andersone+correction", "andersone", "classic"):
         assert f"{name} " in out
     assert "readings/s" in out
+
+
+def test_classic_one_scan_frees_only_before_the_echo_and_counts_it(grid) -> None:  # type: ignore[no-untyped-def]
+    """Every touched cell of one echo: free strictly before d − w/2, occupied within w/2
+    of d, nothing beyond; counters and snapshot fields agree with the cells."""
+    cfg = MapperConfig(method="classic")
+    m = make_mapper(cfg, grid)
+    d, alpha, ox, oy = 2.0, 0.3, 0.4, -0.7
+    m.integrate(build_scan([d, 7.0, math.nan], alpha=alpha, ox=ox, oy=oy))  # + max range, NaN
+    snap = m.snapshot()
+    x, y = cell_centres(grid)
+    dist = np.hypot(x - ox, y - oy)
+    half_w = 0.5 * cfg.classic_thickness_cells * grid.resolution
+    touched = ~np.isnan(snap.probability)
+    free = touched & (snap.probability < 0.5)
+    occ = touched & (snap.probability > 0.5)
+    assert free.sum() > 100 and occ.sum() > 5
+    assert (dist[free] < d - half_w).all()
+    assert (np.abs(dist[occ] - d) <= half_w + 1e-9).all()
+    assert not (touched & (dist > d + half_w + 1e-9)).any()  # nothing behind the echo
+    bearing = np.arctan2(y - oy, x - ox) - alpha
+    off_axis = np.abs((bearing + np.pi) % (2 * np.pi) - np.pi)
+    assert (off_axis[touched] <= np.radians(15.0) + grid.resolution / d).all()
+    assert np.array_equal(snap.observed, touched) and np.array_equal(snap.occupied, occ)
+    assert np.array_equal(snap.free_logodds != 0, touched)
+    assert snap.probability[free].max() == pytest.approx(0.35, abs=1e-6)  # one free update
+    assert snap.probability[occ].min() == pytest.approx(0.7, abs=1e-6)  # one occupied update
+    assert len(snap.features) == 0
+    assert snap.counters == m.counters.as_dict()
+    c = snap.counters
+    assert (c["scans"], c["readings"], c["readings_used"]) == (1, 3, 1)
+    assert (c["skipped_max_range"], c["skipped_nan"], c["features_created"]) == (1, 1, 0)
+    assert c["cells_freed"] == int(free.sum())
+
+
+def test_occupied_layer_matches_mahalanobis_over_several_raster_blocks() -> None:
+    """More features than one raster block, none at the origin, x ≠ y: the occupied cells
+    are exactly the cell centres within 2σ of some feature, plus each mean's cell."""
+    grid = GridSpec(-1.3, 0.7, 0.1, 60, 40)  # x in [-1.3, 4.7), y in [0.7, 4.7)
+    rng = np.random.default_rng(5)
+    n = 2600  # > 2048 features rasterised at once
+    mean = np.column_stack([rng.uniform(-1.5, 4.9, n), rng.uniform(0.5, 4.9, n)])
+    sx, sy = rng.uniform(0.01, 0.12, n), rng.uniform(0.01, 0.12, n)
+    rho = rng.uniform(-0.9, 0.9, n)
+    cov = np.column_stack([sx**2, rho * sx * sy, sy**2])
+    got = occupied_layer(mean, cov, grid)
+    x, y = cell_centres(grid)
+    want = np.zeros(grid.shape, dtype=bool)
+    unsure = np.zeros(grid.shape, dtype=bool)
+    for (mx, my), (a, b, c) in zip(mean, cov, strict=True):
+        dx, dy = x - mx, y - my
+        d2 = (c * dx * dx - 2 * b * dx * dy + a * dy * dy) / (a * c - b * b)
+        want |= d2 <= 4.0
+        unsure |= np.abs(d2 - 4.0) < 1e-6
+        col, row = math.floor((mx + 1.3) / 0.1), math.floor((my - 0.7) / 0.1)
+        if 0 <= col < 60 and 0 <= row < 40:
+            want[row, col] = True
+    assert 200 < want.sum() < want.size  # a meaningful, not saturated, layer
+    assert np.array_equal(got[~unsure], want[~unsure])
