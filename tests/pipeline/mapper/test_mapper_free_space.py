@@ -7,11 +7,13 @@ import math
 import numpy as np
 from mapper_helpers import build_scan, cell_centres
 
+from formats.map_types import GridSpec
 from pipeline.config import MapperConfig
 from pipeline.mapper import AndersoneMapper
-from pipeline.mapper.free_space import free_space_scan
+from pipeline.mapper.free_space import free_space_scan, free_space_scans
 from pipeline.mapper.grid_raster import ellipse_spans, span_cells
 from pipeline.mapper.reading_features import classify_scan
+from pipeline.mapper.types import Scan
 
 CFG = MapperConfig()
 HB = math.radians(15.0)
@@ -106,3 +108,36 @@ def test_ellipse_spans_match_mahalanobis(grid) -> None:  # type: ignore[no-untyp
         got[row[owner == k], col[owner == k]] = True
         assert np.array_equal(got & ~(np.abs(m2 - 4) < 1e-9), truth & ~(np.abs(m2 - 4) < 1e-9))
         assert got.sum() > 20
+
+
+def test_batched_free_space_scans_equal_the_per_scan_path() -> None:
+    """free_space_scans over many scans at once (several windows batches, empty scans
+    among them) gives each scan's free_space_scan, cell for cell."""
+    cfg = MapperConfig(clear_on_max_range=True)
+    grid = GridSpec(-12.0, -9.0, 0.02, 1200, 900)
+    rng = np.random.default_rng(11)
+    scans = []
+    for k in range(40):
+        n = int(rng.integers(1, 9))
+        ranges = rng.uniform(0.3, 6.0, n)
+        if k % 7 == 3:
+            ranges[:] = np.nan  # a scan with no free space at all
+        scans.append(
+            build_scan(
+                ranges, alpha=rng.uniform(-math.pi, math.pi, n),
+                ox=rng.uniform(-13.0, 13.0), oy=rng.uniform(-10.0, 10.0),  # some off the grid
+                t_ns=k,
+            )
+        )
+    cat = Scan(*(np.concatenate([getattr(s, f) for s in scans]) for f in Scan.__dataclass_fields__))
+    bounds = np.cumsum([0] + [len(s) for s in scans]).astype(np.int64)
+    batched = free_space_scans(cat, bounds, classify_scan(cat, cfg), cfg, grid)
+    assert len(batched) == len(scans)
+    window_cells = 0
+    for s, b in zip(scans, batched, strict=True):
+        one = free_space_scan(s, classify_scan(s, cfg), cfg, grid)
+        assert b.count == one.count
+        assert b.cells.tolist() == one.cells.tolist()
+        window_cells += b.mask.size
+    assert window_cells > 1_000_000  # more than one batch of windows (1e6 cells)
+    assert sum(b.count == 0 for b in batched) >= 5
