@@ -100,13 +100,14 @@ def batch_seconds(logs: Path, out: Path, cfg: Path, workers: int) -> tuple[float
     return startup, wall, [o.seconds for o in result.outcomes]
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> dict[str, float]:
+    """Run the benchmark, print it; returns logs, readings per log, walls and the speed-up."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--logs", type=int, default=8)
     ap.add_argument("--steps", type=int, default=3000, help="pose steps per log (8 readings each)")
     ap.add_argument("--smoke", action="store_true", help="tiny run: 2 logs of 200 steps")
     ap.add_argument("--keep", type=Path, help="work in this directory and keep it")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     n_logs, steps = (2, 200) if args.smoke else (args.logs, args.steps)
 
     work = args.keep or Path(tempfile.mkdtemp(prefix="bench_batch_"))
@@ -129,6 +130,8 @@ def main() -> None:
                   f"(mean {sum(per_log) / len(per_log):.2f} s)")
         print(f"speed-up 2 vs 1 workers: {times[1][1] / times[2][1]:.2f}x batch wall, "
               f"{times[1][0] / times[2][0]:.2f}x including cluster start-up")
+        return {"logs": n_logs, "readings": steps * len(YAWS_DEG), "wall 1": times[1][1],
+                "wall 2": times[2][1], "speedup": times[1][1] / times[2][1]}
     finally:
         if args.keep is None:
             shutil.rmtree(work, ignore_errors=True)

@@ -26,7 +26,11 @@ import argparse
 import cProfile
 import dataclasses
 import math
+import os
 import pstats
+import subprocess
+import sys
+import tempfile
 import time
 
 import numpy as np
@@ -34,8 +38,33 @@ import numpy as np
 from formats.map_types import GridSpec
 from pipeline.config import MapperConfig
 from pipeline.mapper import Mapper, make_mapper
+from pipeline.mapper.kernels.warm import warm
 from pipeline.mapper.synthetic import ring_scans, room_grid
 from pipeline.mapper.types import Scan
+
+_COMPILE_CHILD = """
+import time
+t0 = time.perf_counter()
+from pipeline.mapper.kernels import warm
+t1 = time.perf_counter()
+print("IMPORT_S", t1 - t0, "WARM_S", warm.warm())
+"""
+
+
+def compile_seconds() -> dict[str, float]:
+    """The kernels' one-off cost, each in a fresh process with an empty numba cache
+    directory: compiling them (a machine's first run), then loading them from that cache
+    (every later process); plus the import time of the mapper with numba."""
+    out: dict[str, float] = {}
+    with tempfile.TemporaryDirectory(prefix="bench_numba_cache_") as cache:
+        env = {**os.environ, "NUMBA_CACHE_DIR": cache}
+        for label in ("cold", "cached"):
+            res = subprocess.run([sys.executable, "-c", _COMPILE_CHILD], env=env, check=True,
+                                 capture_output=True, text=True)
+            words = res.stdout.split()
+            out[f"import {label} s"] = float(words[words.index("IMPORT_S") + 1])
+            out[f"warm {label} s"] = float(words[words.index("WARM_S") + 1])
+    return out
 
 
 def run_mapper(cfg: MapperConfig, grid: GridSpec, scans: list[Scan]) -> tuple[float, Mapper]:
@@ -114,6 +143,12 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     figures: dict[str, float] = {"readings": total}
     print(f"{total} readings ({len(firings)} ring firings), grid {grid.width}x{grid.height} "
           "at 0.05 m, 5 m sonars")
+    if not args.smoke:
+        c = compile_seconds()
+        figures.update(c)
+        print(f"kernels: compile {c['warm cold s']:.1f} s on a machine's first run, load "
+              f"{c['warm cached s']:.2f} s per process after (imports {c['import cached s']:.2f} s)")
+    warm()  # timed runs below load compiled kernels, as every run but a machine's first
     octo = run_octomap(firings, 0.05)
     if octo is not None:
         figures["octomap"] = total / octo

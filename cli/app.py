@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from cli.errors import EXIT_FAILURE, handle_errors
+from cli.help_words import use_words
 
 if TYPE_CHECKING:
     from pipeline.config import Config
@@ -28,19 +29,22 @@ app = typer.Typer(
 ConfigOpt = Annotated[
     Path | None,
     typer.Option("--config", "-c", help="TOML configuration file (see `sonarmap config`).",
-                 dir_okay=False),
+                 dir_okay=False, show_default="built-in defaults"),
 ]
 FormatOpt = Annotated[
     str | None,
-    typer.Option("--format", "-f", help="Log format: ros1, ros2, mcap, csv (default: detect)."),
+    typer.Option("--format", "-f", help="Log format: ros1, ros2, mcap, csv.",
+                 show_default="detected from the content"),
 ]
 RangeTopicOpt = Annotated[
     list[str] | None,
-    typer.Option("--range-topic", help="Range topic to map (repeatable; default: discover)."),
+    typer.Option("--range-topic", help="Range topic to map (repeatable).",
+                 show_default="every sensor_msgs/Range-like topic"),
 ]
 PoseTopicOpt = Annotated[
     str | None,
-    typer.Option("--pose-topic", help="Pose topic (Odometry/PoseStamped or /tf)."),
+    typer.Option("--pose-topic", help="Pose topic (Odometry/PoseStamped or /tf).",
+                 show_default="discovered by type"),
 ]
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")]
 LogArg = Annotated[Path, typer.Argument(help="Log file or bag directory.", show_default=False)]
@@ -109,10 +113,12 @@ def run(
     pose_topic: PoseTopicOpt = None,
     method: Annotated[
         str | None,
-        typer.Option("--method", "-m", help="andersone (the paper's method) or classic."),
+        typer.Option("--method", "-m", help="andersone (the paper's method) or classic.",
+                     show_default="[mapper] method, andersone"),
     ] = None,
     resolution: Annotated[
-        float | None, typer.Option("--resolution", "-r", help="Grid cell size, m.")
+        float | None, typer.Option("--resolution", "-r", help="Grid cell size, m.",
+                                   show_default="[grid] resolution, 0.05")
     ] = None,
     compare_correction: Annotated[
         bool,
@@ -120,9 +126,14 @@ def run(
     ] = False,
     force: Annotated[bool, typer.Option("--force", help="Replace an existing output directory.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar or summary.")] = False,
+    json_out: Annotated[
+        bool, typer.Option("--json", help="Print one JSON summary (outputs, counts, the paper's "
+                           "metric, warnings) instead of the text summary.")
+    ] = False,
 ) -> None:
-    """Map a log: writes map.pgm/map.yaml (nav2), map.png, features.parquet, metrics.json,
-    config.toml and report.html/report.md into OUTPUT.
+    """Map a log: writes map.pgm/map.yaml (nav2), map.png, map.mcap (Foxglove, RViz),
+    trajectory.csv (TUM), features.parquet, metrics.json, config.toml and
+    report.html/report.md into OUT.
 
     Examples:
 
@@ -138,7 +149,7 @@ def run(
         raise typer.BadParameter("must be 'andersone' or 'classic'", param_hint="--method")
     cfg = _load(config, format=format, range_topics=range_topic, pose_topic=pose_topic,
                 method=method, resolution=resolution)
-    if quiet:
+    if quiet or json_out:
         result = run_pipeline(log, output, cfg, force=force, compare_correction=compare_correction)
     else:
         from cli.progress import reading_progress
@@ -146,15 +157,42 @@ def run(
         with reading_progress() as progress:
             result = run_pipeline(log, output, cfg, force=force,
                                   compare_correction=compare_correction, progress=progress)
-    if not quiet:
-        m = result.metrics
+    m = result.metrics
+    if json_out:
+        typer.echo(json.dumps(_run_summary(result), indent=2))
+    elif not quiet:
         pm = m.paper_metric
         typer.echo(
-            f"mapped {m.counts['readings']} readings into {m.counts['features']} features; "
-            f"mean feature variance {_fmt(pm['mean_feature_variance_m2'])} m²; "
+            f"mapped {m.counts['readings_used']} of {m.counts['readings']} readings into "
+            f"{m.counts['features']} features; mean feature variance "
+            f"{_fmt(pm['mean_feature_variance_m2'])} m²; "
             f"{m.map['cells_occupied']} occupied / {m.map['cells_free']} free cells"
         )
+        for w in m.warnings:
+            typer.echo(f"warning: {w}", err=True)
         typer.echo(f"outputs in {result.out_dir}")
+
+
+def _run_summary(result: Any) -> dict[str, Any]:
+    """``run --json``: where the outputs are and what the run found, in one object."""
+    from pipeline.metrics import json_ready
+
+    m = result.metrics
+    outputs = {p.name: str(p) for p in sorted(Path(result.out_dir).iterdir())
+               if p.is_file() and not p.name.startswith(".")}
+    summary: dict[str, Any] = json_ready({
+        "out_dir": str(result.out_dir),
+        "outputs": outputs,
+        "input": {k: m.input[k] for k in ("path", "format", "duration_s") if k in m.input},
+        "counts": {k: m.counts[k] for k in ("readings", "readings_used", "poses", "scans",
+                                            "features") if k in m.counts},
+        "dropped": {k: v for k, v in m.dropped.items() if v},
+        "paper_metric": m.paper_metric,
+        "map": {k: m.map[k] for k in ("cells_occupied", "cells_free", "cells_unknown",
+                                      "mapped_area_m2", "resolution_m")},
+        "warnings": m.warnings,
+    })
+    return summary
 
 
 def _fmt(v: Any) -> str:
@@ -293,6 +331,7 @@ def _register_commands() -> None:
 
 
 _register_commands()
+use_words(app)  # after every command is registered
 
 
 def main() -> None:

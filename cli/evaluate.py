@@ -42,10 +42,15 @@ def evaluate(
                      dir_okay=False),
     ] = None,
     force: Annotated[bool, typer.Option("--force", help="Replace an existing --output.")] = False,
+    no_report: Annotated[
+        bool, typer.Option("--no-report", help="Leave the run's report.html/report.md as they are.")
+    ] = False,
 ) -> None:
     """Score a run's map against a ground-truth map: occupied-cell precision, recall and F1
     within a tolerance, free-space accuracy, unknown fraction, feature distance to the true
-    walls and the paper's mean feature variance. The run directory is never written to.
+    walls and the paper's mean feature variance. The results are added to the run's
+    report.html and report.md (unless --no-report); nothing else in the run directory is
+    ever written to.
 
     Examples:
 
@@ -60,7 +65,7 @@ def evaluate(
     from pipeline.evaluate import evaluate_run
 
     if output is not None:
-        # A run directory is immutable: results go next to it, never into it.
+        # A run's data files are immutable: results go next to them, never into the run.
         if output.resolve().is_relative_to(run_dir.resolve()):
             raise OutputError("will not write into the run directory (it is immutable)", output)
         if (output.exists() or output.is_symlink()) and not force:
@@ -69,6 +74,10 @@ def evaluate(
                           sensor_reach_m=reach)
     if output is not None:
         atomic_write_text(output, result.to_json())
+    if not no_report and (run_dir / "report.html").is_file():
+        from pipeline.run_report import write_run_reports
+
+        write_run_reports(run_dir, evaluation=result.to_dict())
     if json_out:
         typer.echo(json.dumps(result.to_dict(), indent=2))
     else:

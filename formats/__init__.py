@@ -91,8 +91,10 @@ def detect_format(path: str | Path) -> str:
     if looks_like_csv(p):
         return "csv"
     raise FormatError(
-        f"unknown log format (starts with {head[:12]!r}); "
-        f"expected a ROS 1 bag, ROS 2 bag, MCAP or CSV (or pass --format)",
+        f"not a recognised log format (starts with {head[:12]!r}): tried ROS 1 bag "
+        "('#ROSBAG V2.0'), MCAP (magic bytes), ROS 2 bag (sqlite3, zstd, metadata.yaml) and "
+        "CSV (a header of column names such as t,x,y,yaw,sensor,range, or numbers); "
+        "pass --format to force one",
         p,
     )
 

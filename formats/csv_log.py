@@ -43,6 +43,7 @@ import codecs
 import csv
 import itertools
 import math
+import re
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -119,8 +120,14 @@ def looks_like_csv(path: str | Path, config: ReaderSettings | None = None) -> bo
         s = line.strip()
         if not s or s.startswith("#"):
             continue
-        return len(s.split()) >= 2 or any(len(s.split(d)) >= 2 for d in delimiters)
+        splits = [s.split()] + [s.split(d) for d in delimiters]
+        return any(len(f) >= 2 and all(_CSV_FIELD.fullmatch(x.strip().strip('"')) for x in f)
+                   for f in splits)
     return False
+
+
+# A header or data field of a CSV log: a column name or a number (prose and markup are not).
+_CSV_FIELD = re.compile(r"[\w.+\-/()\[\]%° ]*")
 
 
 # --------------------------------------------------------------------------- table reading

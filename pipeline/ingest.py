@@ -9,7 +9,7 @@ bounded by the pose track (small) and one reorder window of readings, not the lo
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -103,8 +103,9 @@ class Survey:
     sensor_names: list[str]
 
 
-def survey(reader: LogReader) -> Survey:
-    """Pass 1: pose track, static mounts and a summary of the readings."""
+def survey(reader: LogReader, on_readings: Callable[[int], None] | None = None) -> Survey:
+    """Pass 1: pose track, static mounts and a summary of the readings. ``on_readings``:
+    called with the number of readings found so far after each batch of them."""
     poses = PoseTrackBuilder()
     mounts: dict[str, SensorMount] = {}
     summary = RangeSummary()
@@ -112,6 +113,8 @@ def survey(reader: LogReader) -> Survey:
     for batch in reader.batches(("poses", "mounts", "ranges")):
         if isinstance(batch, RangeBatch):
             summary.add(batch, stamps)
+            if on_readings is not None:
+                on_readings(summary.count)
         elif isinstance(batch, PoseBatch):
             poses.add(batch)
         elif isinstance(batch, MountBatch):

@@ -90,6 +90,7 @@ class RunMetrics:
     run: dict[str, Any]
     timing: dict[str, Any] = field(default_factory=dict)
     comparison: dict[str, Any] | None = None
+    warnings: list[str] = field(default_factory=list)
 
     def deterministic(self) -> dict[str, Any]:
         out = {
@@ -104,6 +105,7 @@ class RunMetrics:
         }
         if self.comparison is not None:
             out["comparison"] = self.comparison
+        out["warnings"] = self.warnings
         return out
 
     def to_dict(self) -> dict[str, Any]:
@@ -111,6 +113,11 @@ class RunMetrics:
 
     def to_json(self) -> str:
         return json.dumps(_clean(self.to_dict()), indent=2, sort_keys=False) + "\n"
+
+
+def json_ready(v: Any) -> Any:
+    """``v`` with NaN/Inf as null, numpy scalars as Python numbers (what metrics.json holds)."""
+    return _clean(v)
 
 
 def _clean(v: Any) -> Any:

@@ -28,6 +28,7 @@ from formats import open_log
 from formats.contract import LogReader, RangeBatch
 from formats.errors import ConfigError, InputError
 from formats.map_types import GridSpec
+from formats.writers.trajectory_tum import Trajectory
 from pipeline import __version__
 from pipeline.config import Config, dump_config
 from pipeline.ingest import Survey, ordered_ranges, survey
@@ -48,12 +49,15 @@ from pipeline.pose_sync import (
     sonar_geometry,
 )
 from pipeline.reading_quality import REASONS
+from pipeline.run_warnings import run_warnings
 from pipeline.scans import ScanBuilder, ScanKeys
 from pipeline.sensors import SensorTable, resolve_sensors
 
 log = logging.getLogger("sonarmap")
 
-Progress = Callable[[int, int], None]  # (readings done, readings total)
+#: ``(stage, readings done, readings total)``: stage "reading" (pass 1, the total is not
+#: known yet: None) then "mapping" (pass 2, the total counted by pass 1).
+Progress = Callable[[str, int, int | None], None]
 
 
 @dataclass
@@ -101,7 +105,8 @@ def run(
             reader = open_log(log_path, config)
         with reader:
             with timer.stage("ingest"):
-                sv = survey(reader)
+                found = None if progress is None else (lambda n: progress("reading", n, None))
+                sv = survey(reader, found)
                 info = reader.info()
             sensors = resolve_sensors(
                 sv.sensor_names,
@@ -199,7 +204,7 @@ def _map_stream(
         with timer.stage("mapping"):
             _integrate(mappers, scans)
         if progress is not None:
-            progress(state.readings_seen, total)
+            progress("mapping", state.readings_seen, total)
     with timer.stage("mapping"):
         _integrate(mappers, list(builder.flush()))
     state.scans = builder.count
@@ -286,7 +291,7 @@ def _metrics(
             label: _ablation_row(mappers[key], snapshots[key])
             for label, key in (("with_correction", "main"), ("without_correction", "no_correction"))
         }
-    return RunMetrics(
+    metrics = RunMetrics(
         input={
             "path": str(log_path),
             "name": log_path.name,
@@ -332,6 +337,8 @@ def _metrics(
         sensors=sensor_rows,
         comparison=comparison,
     )
+    metrics.warnings = run_warnings(metrics.deterministic())
+    return metrics
 
 
 def _ablation_row(mapper: Mapper, snap: MapSnapshot) -> dict[str, Any]:
@@ -355,25 +362,27 @@ def _ablation_row(mapper: Mapper, snap: MapSnapshot) -> dict[str, Any]:
 MAX_DRAWN_POSES = 20_000
 
 
-def _drawn_trajectory(track: PoseTrack) -> np.ndarray:
-    """The trajectory as drawn in map.png: every pose up to MAX_DRAWN_POSES, else evenly
-    spaced poses plus the last one (a picture at most ~2400 px wide shows no more, and
-    drawing hours of 20 Hz odometry would make memory grow with the log's length)."""
+def _drawn_trajectory(track: PoseTrack) -> Trajectory:
+    """The trajectory as drawn in map.png and published in map.mcap: every pose up to
+    MAX_DRAWN_POSES, else evenly spaced poses plus the last one (a picture at most ~2400 px
+    wide shows no more, and hours of 20 Hz odometry would make memory grow with the log)."""
     n = len(track)
-    if n <= MAX_DRAWN_POSES:
-        xy = np.column_stack([track.x, track.y])
-    else:
-        idx = np.unique(np.r_[np.linspace(0, n - 1, MAX_DRAWN_POSES).astype(np.int64), n - 1])
-        xy = np.column_stack([track.x[idx], track.y[idx]])
+    idx = np.arange(n) if n <= MAX_DRAWN_POSES else np.unique(
+        np.r_[np.linspace(0, n - 1, MAX_DRAWN_POSES).astype(np.int64), n - 1]
+    )
+    drawn = Trajectory(
+        np.asarray(track.t_ns[idx], dtype=np.int64), np.asarray(track.x[idx], dtype=np.float64),
+        np.asarray(track.y[idx], dtype=np.float64), np.asarray(track.yaw[idx], dtype=np.float64),
+    )
     track.release_before(None)
-    return xy
+    return drawn
 
 
 def _write_outputs(
     out: Any,
     config: Config,
     sv: Survey,
-    traj: np.ndarray,
+    traj: Trajectory,
     snapshots: dict[str, MapSnapshot],
     metrics: RunMetrics,
     timer: StageTimer,
@@ -382,15 +391,28 @@ def _write_outputs(
     """Write every output; metrics.json and the reports last, so that they can carry the
     timing of everything before them (total = up to the reports)."""
     from formats.writers.features_parquet import write_features
+    from formats.writers.map_mcap import write_map_mcap
     from formats.writers.map_png import write_map_png
     from formats.writers.nav2_map import write_nav2_map
-    from formats.writers.report import write_reports
+    from formats.writers.trajectory_tum import write_trajectory_tum
+    from pipeline.run_report import COMPARISON_IMAGES, write_run_reports
 
     t_outputs = time.perf_counter()
     snap = snapshots["main"]
     write_nav2_map(out.path("map.yaml"), snap.probability, snap.grid)
     title = f"{metrics.input['name']} - {config.mapper.method}"
-    write_map_png(out.path("map.png"), snap, trajectory_xy=traj, features=snap.features, title=title)
+    traj_xy = np.column_stack([traj.x, traj.y])
+    write_map_png(out.path("map.png"), snap, trajectory_xy=traj_xy, features=snap.features,
+                  title=title)
+    track = sv.track
+    write_trajectory_tum(out.path("trajectory.csv"), track.t_ns, track.x, track.y, track.yaw,
+                         frame=track.parent_frame)
+    track.release_before(None)
+    write_map_mcap(
+        out.path("map.mcap"), probability=snap.probability, grid=snap.grid,
+        features=snap.features, trajectory=traj, frame_id=track.parent_frame,
+        stamp_ns=int(metrics.trajectory["end_ns"]), library=f"sonarmap {__version__}",
+    )
     write_features(
         out.path("features.parquet"),
         snap.features,
@@ -404,21 +426,13 @@ def _write_outputs(
         },
     )
     (out.path("config.toml")).write_text(dump_config(config), encoding="utf-8")
-    labels = {"with_correction": "with feature correction",
-              "without_correction": "without feature correction"}
-    images = {labels["with_correction"]: "map.png"}
     if "no_correction" in snapshots:
         other = snapshots["no_correction"]
         write_map_png(
-            out.path("map_no_correction.png"), other, trajectory_xy=traj, features=other.features,
+            out.path(COMPARISON_IMAGES["without_correction"]), other, trajectory_xy=traj_xy,
+            features=other.features,
             title=f"{metrics.input['name']} - without feature correction",
         )
-        images[labels["without_correction"]] = "map_no_correction.png"
-    readings_per_sensor = {row["name"]: row["readings"] for row in metrics.sensors}
-    comparison = None
-    if metrics.comparison is not None:
-        comparison = {labels[k]: v for k, v in metrics.comparison.items()}
-        comparison["images"] = images
     now = time.perf_counter()
     timer.seconds["outputs"] = now - t_outputs
     timer.seconds["total"] = now - t_start
@@ -429,12 +443,4 @@ def _write_outputs(
         "peak_rss_mb": round(peak_rss_mb(), 1),
     }
     (out.path("metrics.json")).write_text(metrics.to_json(), encoding="utf-8")
-    write_reports(
-        out.tmp_dir,
-        metrics=metrics.to_dict(),
-        map_png=out.path("map.png"),
-        features=snap.features,
-        readings_per_sensor=readings_per_sensor,
-        dropped_by_reason=metrics.dropped,
-        comparison=comparison,
-    )
+    write_run_reports(out.tmp_dir)  # from the files just written, as evaluate does

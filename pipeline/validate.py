@@ -39,6 +39,7 @@ import numpy as np
 import numpy.typing as npt
 
 from formats.contract import Kind, LogReader, MountBatch, PoseBatch, RangeBatch, SensorMount
+from formats.natural_order import natural_key
 from formats.tables import text_table
 from pipeline.config import Config
 from pipeline.ingest import stamps_behind
@@ -397,7 +398,7 @@ def validate_log(reader: LogReader, config: Config) -> ValidationReport:
     mounts = resolve_sensors(names, log_mounts, config, used=[False] * len(names)).source
     before, after = coverage.outside(len(names))
     summaries: list[SensorSummary] = []
-    for sid in sorted(states, key=lambda i: names[i]):
+    for sid in sorted(states, key=lambda i: natural_key(names[i])):
         st, name = states[sid], names[sid]
         findings += _sensor_findings(name, st, mounts[sid])
         summaries.append(
@@ -438,7 +439,7 @@ def validate_log(reader: LogReader, config: Config) -> ValidationReport:
                 )
             )
 
-    findings.sort(key=lambda f: (_SEVERITY_ORDER[f.severity], f.code, f.sensor))
+    findings.sort(key=lambda f: (_SEVERITY_ORDER[f.severity], f.code, natural_key(f.sensor or "")))
     t_first = min((int(t.min()) for t in all_pose_t), default=None)
     t_last = max((int(t.max()) for t in all_pose_t), default=None)
     return ValidationReport(

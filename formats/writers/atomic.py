@@ -12,14 +12,17 @@ import os
 import re
 import secrets
 import shutil
+from collections.abc import Iterator
 from pathlib import Path, PurePath
 from types import TracebackType
+from typing import BinaryIO
 
 from formats.errors import OutputError
 from formats.writers.output_marker import not_replaceable_reason, write_output_marker
 
 __all__ = [
     "OutputDir",
+    "atomic_open",
     "atomic_write_bytes",
     "atomic_write_text",
     "clean_stale_entries",
@@ -325,13 +328,16 @@ class OutputDir:
             shutil.rmtree(old, ignore_errors=True)
 
 
-def atomic_write_bytes(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` atomically: temporary sibling file, fsync, ``os.replace``."""
+@contextlib.contextmanager
+def atomic_open(path: Path) -> Iterator[BinaryIO]:
+    """A binary file to write ``path`` through, atomically: a temporary sibling that is
+    fsynced and renamed over ``path`` when the block ends without an error, and removed
+    otherwise (so large outputs can be streamed, not held in memory)."""
     path = Path(path)
     tmp = _sibling_name(path, "tmp")
     try:
         with open(tmp, "xb") as f:
-            f.write(data)
+            yield f
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
@@ -344,6 +350,12 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
     # Some filesystems refuse directory fsync; the data itself is synced.
     with contextlib.suppress(OSError):
         _fsync_path(path.parent)
+
+
+def atomic_write_bytes(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` atomically (see :func:`atomic_open`)."""
+    with atomic_open(path) as f:
+        f.write(data)
 
 
 def atomic_write_text(path: Path, text: str) -> None:

@@ -37,12 +37,14 @@ __all__ = [
     "UNKNOWN_PIXEL",
     "Nav2Map",
     "load_nav2_map",
+    "trinary_classes",
     "write_nav2_map",
 ]
 
 OCCUPIED_PIXEL = 0
 FREE_PIXEL = 254
 UNKNOWN_PIXEL = 205
+OCCUPIED, FREE, UNKNOWN = 1, 0, -1  # classes of trinary_classes
 YAML_OCCUPIED_THRESH = 0.65
 YAML_FREE_THRESH = 0.196
 
@@ -81,6 +83,19 @@ def _number(value: float, what: str) -> str:
     return repr(v)
 
 
+def trinary_classes(
+    probability: np.ndarray, *, occupied_thresh: float = 0.65, free_thresh: float = 0.196
+) -> npt.NDArray[np.int8]:
+    """The one classification of a probability map (every output uses it): int8, 1 where
+    ``p > occupied_thresh``, 0 where ``p < free_thresh``, −1 otherwise (NaN included)."""
+    prob = np.asarray(probability)
+    classes = np.full(prob.shape, UNKNOWN, dtype=np.int8)
+    with np.errstate(invalid="ignore"):  # NaN compares False: stays unknown
+        classes[prob > occupied_thresh] = OCCUPIED
+        classes[prob < free_thresh] = FREE
+    return classes
+
+
 def write_nav2_map(
     yaml_path: Path,
     probability: np.ndarray,
@@ -107,10 +122,10 @@ def write_nav2_map(
     if not (grid.resolution > 0 and math.isfinite(grid.resolution)):
         raise ValueError(f"resolution must be a positive finite number, got {grid.resolution}")
 
+    classes = trinary_classes(prob, occupied_thresh=occupied_thresh, free_thresh=free_thresh)
     pixels = np.full(prob.shape, UNKNOWN_PIXEL, dtype=np.uint8)
-    with np.errstate(invalid="ignore"):  # NaN compares False: stays unknown
-        pixels[prob > occupied_thresh] = OCCUPIED_PIXEL
-        pixels[prob < free_thresh] = FREE_PIXEL
+    pixels[classes == OCCUPIED] = OCCUPIED_PIXEL
+    pixels[classes == FREE] = FREE_PIXEL
     # Image row 0 is the top of the map (max y); the grid's row 0 is min y.
     body = np.ascontiguousarray(pixels[::-1]).tobytes()
     header = f"P5\n{grid.width} {grid.height}\n255\n".encode("ascii")

@@ -1,156 +1,74 @@
-"""``report.html`` (self-contained) and ``report.md``: the map, charts and metrics of a run.
+"""``report.html`` (self-contained) and ``report.md``: a run's answer first, then the detail.
 
-The HTML embeds the map as a base64 PNG and draws its charts as inline SVG; it references
-nothing outside itself (no CDN, no web fonts, no external images). The Markdown carries the
-same content with the map as an image link and the charts as tables. Both are written
-atomically and depend only on their inputs (no timestamps).
+Order: the summary (log, duration, method, readings used of all with the main drop
+reasons, features, mapped area, trajectory, quality when the run was scored, warnings),
+the map, the comparison with and without feature correction (when run with
+``--compare-correction``: the two maps side by side and the differences named), the
+evaluation (when ``sonarmap evaluate`` scored the run: every section its result has, in
+its order), the charts (σ_major histogram, readings per sensor, dropped readings by
+reason; labelled axes, sensors in natural order, reasons that never happened left out)
+and the metrics by section with readable keys, UTC times and durations.
+
+The HTML embeds the maps as base64 PNGs and draws its charts as inline SVG; it references
+nothing outside itself. The Markdown says the same with the maps as image links and the
+charts as tables. Both depend only on their inputs: the timing of a run (which differs on
+every rerun) is not shown; it stays in metrics.json.
 """
 
 from __future__ import annotations
 
 import base64
 import html
-import json
-import math
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from formats.errors import OutputError
 from formats.map_types import FeatureTable
 from formats.tables import markdown_table
 from formats.writers.atomic import atomic_write_text
-from formats.writers.ellipse import covariance_axes
+from formats.writers.report_charts import sigma_histogram, svg_hbars, svg_histogram
+from formats.writers.report_text import (
+    Summary,
+    comparison_differences,
+    format_value,
+    label,
+    nonzero_drops,
+    sensor_rows,
+    summarise,
+)
 
-__all__ = ["flatten_metrics", "format_value", "write_reports"]
+__all__ = ["COMPARISON_LABELS", "write_reports"]
 
-HIST_BINS = 20
-_IMAGES_KEY = "images"
+#: Column titles of metrics.json ``comparison`` entries.
+COMPARISON_LABELS = {
+    "with_correction": "with feature correction",
+    "without_correction": "without feature correction",
+}
+
+#: Metrics sections shown in the details, in this order (others follow, by name).
+_SECTIONS = ("input", "run", "counts", "paper_metric", "map", "trajectory")
+_SKIP_SECTIONS = {"timing", "comparison", "sensors", "dropped", "warnings"}
 
 _CSS = """
 body { font-family: sans-serif; margin: 1.5em; color: #222; max-width: 1200px; }
 table { border-collapse: collapse; margin: 0.5em 0 1.5em; }
-th, td { border: 1px solid #ccc; padding: 0.2em 0.6em; text-align: left; }
+th, td { border: 1px solid #ccc; padding: 0.2em 0.6em; text-align: left; vertical-align: top; }
 td.num { text-align: right; font-variant-numeric: tabular-nums; }
+table.summary th { background: #f3f3f3; white-space: nowrap; }
+.warnings { background: #fff4e0; border-left: 4px solid #e66100; padding: 0.4em 1em; }
+.ok { color: #1a7f37; }
 img { max-width: 100%; image-rendering: pixelated; border: 1px solid #ccc; }
 .side { display: flex; gap: 1em; flex-wrap: wrap; }
 .side figure { flex: 1 1 45%; margin: 0; }
 svg text { font-family: sans-serif; font-size: 12px; }
 """
 
-
-# -- values ----------------------------------------------------------------------------
-
-
-def flatten_metrics(metrics: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
-    """Nested dicts as one level with dotted keys, sorted by key (deterministic order)."""
-    flat: dict[str, Any] = {}
-    for key, value in metrics.items():
-        name = f"{prefix}{key}"
-        if isinstance(value, Mapping):
-            flat.update(flatten_metrics(value, prefix=f"{name}."))
-        else:
-            flat[name] = value
-    return dict(sorted(flat.items()))
+Row = tuple[str, str]
 
 
-def format_value(value: Any) -> str:
-    """A metric value as text: floats to 6 significant digits, lists as compact JSON."""
-    if value is None:
-        return "—"
-    if isinstance(value, bool | np.bool_):
-        return "true" if value else "false"
-    if isinstance(value, int | np.integer):
-        return str(int(value))
-    if isinstance(value, float | np.floating):
-        v = float(value)
-        return repr(v) if not math.isfinite(v) else f"{v:.6g}"
-    if isinstance(value, list | tuple | np.ndarray):
-        items = value.tolist() if isinstance(value, np.ndarray) else list(value)
-        return json.dumps(items, separators=(",", ":"), default=str)
-    return str(value)
-
-
-def _is_number(value: Any) -> bool:
-    return isinstance(value, int | float | np.integer | np.floating) and not isinstance(
-        value, bool | np.bool_
-    )
-
-
-# -- charts ----------------------------------------------------------------------------
-
-
-def _sigma_histogram(features: FeatureTable) -> tuple[np.ndarray, np.ndarray]:
-    """``(edges (m), counts)`` of the features' σ_major; empty arrays when no features."""
-    major, _minor, _theta = covariance_axes(features.cov_xx, features.cov_xy, features.cov_yy)
-    major = major[np.isfinite(major)]
-    if major.size == 0:
-        return np.zeros(0), np.zeros(0, dtype=np.int64)
-    lo, hi = float(major.min()), float(major.max())
-    if hi - lo < 1e-9:  # all equal: a small window around the value keeps bins non-empty
-        lo, hi = max(lo - 5e-4, 0.0), hi + 5e-4
-    counts, edges = np.histogram(major, bins=HIST_BINS, range=(lo, hi))
-    return edges, counts.astype(np.int64)
-
-
-def _svg_histogram(edges: np.ndarray, counts: np.ndarray, xlabel: str) -> str:
-    if counts.size == 0:
-        return "<p><em>no features</em></p>"
-    w, h, ml, mb, mt = 560, 220, 48, 40, 10
-    pw, ph = w - ml - 10, h - mb - mt
-    top = max(int(counts.max()), 1)
-    bar_w = pw / counts.size
-    parts = [f'<svg width="{w}" height="{h}" viewBox="0 0 {w} {h}" role="img">']
-    parts.append(f'<line x1="{ml}" y1="{mt + ph}" x2="{ml + pw}" y2="{mt + ph}" stroke="#444"/>')
-    parts.append(f'<line x1="{ml}" y1="{mt}" x2="{ml}" y2="{mt + ph}" stroke="#444"/>')
-    for i, c in enumerate(counts.tolist()):
-        bh = ph * c / top
-        x = ml + i * bar_w
-        parts.append(
-            f'<rect x="{x:.1f}" y="{mt + ph - bh:.1f}" width="{max(bar_w - 1, 1):.1f}" '
-            f'height="{bh:.1f}" fill="#0072b2"><title>{edges[i]:.4g}–{edges[i + 1]:.4g}: '
-            f"{c}</title></rect>"
-        )
-    parts.append(f'<text x="{ml - 4}" y="{mt + 10}" text-anchor="end">{top}</text>')
-    parts.append(f'<text x="{ml - 4}" y="{mt + ph}" text-anchor="end">0</text>')
-    parts.append(f'<text x="{ml}" y="{h - 22}" text-anchor="middle">{edges[0]:.3g}</text>')
-    parts.append(f'<text x="{ml + pw}" y="{h - 22}" text-anchor="end">{edges[-1]:.3g}</text>')
-    parts.append(
-        f'<text x="{ml + pw / 2:.1f}" y="{h - 6}" text-anchor="middle">{html.escape(xlabel)}</text>'
-    )
-    parts.append("</svg>")
-    return "".join(parts)
-
-
-def _svg_hbars(items: Sequence[tuple[str, int]], unit: str) -> str:
-    if not items:
-        return "<p><em>none</em></p>"
-    row, label_w, bar_w, w = 22, 240, 260, 600
-    h = row * len(items) + 8
-    top = max(max(v for _k, v in items), 1)
-    parts = [f'<svg width="{w}" height="{h}" viewBox="0 0 {w} {h}" role="img">']
-    for i, (label, value) in enumerate(items):
-        y = 4 + i * row
-        bw = bar_w * value / top
-        short = label if len(label) <= 34 else label[:33] + "…"
-        parts.append(
-            f'<text x="{label_w - 6}" y="{y + 14}" text-anchor="end">'
-            f"<title>{html.escape(label)}</title>{html.escape(short)}</text>"
-        )
-        parts.append(
-            f'<rect x="{label_w}" y="{y + 2}" width="{bw:.1f}" height="{row - 6}" fill="#e66100"/>'
-        )
-        parts.append(
-            f'<text x="{label_w + bw + 6:.1f}" y="{y + 14}">{value} {html.escape(unit)}</text>'
-        )
-    parts.append("</svg>")
-    return "".join(parts)
-
-
-# -- documents -------------------------------------------------------------------------
+# -- content shared by both documents ----------------------------------------------------
 
 
 def _image_ref(image: Path, out_dir: Path) -> str:
@@ -172,138 +90,234 @@ def _data_uri(image: Path) -> str:
     return "data:image/png;base64," + base64.b64encode(data).decode("ascii")
 
 
-def _html_table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
-    out = ["<table><thead><tr>"]
-    out += [f"<th>{html.escape(h)}</th>" for h in header]
-    out.append("</tr></thead><tbody>")
+def _flat_rows(section: Mapping[str, Any], prefix: str = "") -> list[Row]:
+    """A (possibly nested) mapping as (readable key, readable value) rows, in its order."""
+    rows: list[Row] = []
+    for key, value in section.items():
+        name = f"{prefix}{label(str(key))}"
+        if isinstance(value, Mapping):
+            rows += _flat_rows(value, prefix=f"{name}: ")
+        else:
+            rows.append((name, format_value(str(key), value)))
+    return rows
+
+
+def _detail_sections(metrics: Mapping[str, Any]) -> list[tuple[str, list[Row]]]:
+    names = [s for s in _SECTIONS if s in metrics]
+    names += sorted(k for k in metrics if k not in _SECTIONS and k not in _SKIP_SECTIONS
+                    and isinstance(metrics[k], Mapping))
+    return [(label(n).capitalize(), _flat_rows(metrics[n])) for n in names]
+
+
+def _evaluation_parts(
+    evaluation: Mapping[str, Any],
+) -> tuple[list[Row], list[tuple[str, list[str], list[list[str]]]], list[str]]:
+    """Scalars as rows; every nested section as (title, header, rows) — a mapping of
+    mappings becomes one table with a column per inner key; ``notes`` as a list."""
+    scalars: list[Row] = []
+    tables: list[tuple[str, list[str], list[list[str]]]] = []
+    notes: list[str] = []
+    for key, value in evaluation.items():
+        if key == "notes" and isinstance(value, Sequence) and not isinstance(value, str):
+            notes = [str(n) for n in value]
+        elif isinstance(value, Mapping):
+            inner = list(value.values())
+            if inner and all(isinstance(v, Mapping) for v in inner):
+                cols: list[str] = []
+                for v in inner:
+                    cols += [str(c) for c in v if str(c) not in cols]
+                rows = [[label(str(k)), *(format_value(c, v.get(c)) for c in cols)]
+                        for k, v in value.items()]
+                tables.append((label(key).capitalize(), ["", *map(label, cols)], rows))
+            else:
+                tables.append((label(key).capitalize(), ["", "value"],
+                               [list(r) for r in _flat_rows(value)]))
+        else:
+            scalars.append((label(key), format_value(key, value)))
+    return scalars, tables, notes
+
+
+# -- HTML --------------------------------------------------------------------------------
+
+
+def _html_table(header: Sequence[str] | None, rows: Sequence[Sequence[str]],
+                cls: str = "", numeric_from: int = 1) -> str:
+    out = [f'<table class="{cls}">' if cls else "<table>"]
+    if header is not None:
+        out.append("<thead><tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in header)
+                   + "</tr></thead>")
+    out.append("<tbody>")
     for r in rows:
-        out.append("<tr>")
-        for c in r:
-            cls = ' class="num"' if _is_number(c) else ""
-            out.append(f"<td{cls}>{html.escape(format_value(c))}</td>")
-        out.append("</tr>")
+        cells = []
+        for i, c in enumerate(r):
+            if cls == "summary" and i == 0:
+                cells.append(f"<th>{html.escape(c)}</th>")
+            else:
+                num = ' class="num"' if i >= numeric_from and _looks_numeric(c) else ""
+                cells.append(f"<td{num}>{html.escape(c)}</td>")
+        out.append("<tr>" + "".join(cells) + "</tr>")
     out.append("</tbody></table>")
     return "".join(out)
 
 
-def _comparison_parts(
-    comparison: Mapping[str, Any], out_dir: Path
-) -> tuple[list[str], list[list[Any]], list[tuple[str, Path]]]:
-    """Column labels, table rows (metric, value per column) and (label, image) pairs."""
-    columns = [k for k, v in comparison.items() if k != _IMAGES_KEY and isinstance(v, Mapping)]
-    flats = {c: flatten_metrics(comparison[c]) for c in columns}
-    keys = sorted(set().union(*(f.keys() for f in flats.values()))) if flats else []
-    rows = [[k, *(flats[c].get(k) for c in columns)] for k in keys]
-    images_spec = comparison.get(_IMAGES_KEY, {})
-    if not isinstance(images_spec, Mapping):
-        raise ValueError("comparison['images'] must map a column label to an image file name")
-    images = [
-        (str(label), Path(name) if Path(name).is_absolute() else out_dir / str(name))
-        for label, name in images_spec.items()
-    ]
-    return columns, rows, images
+def _looks_numeric(text: str) -> bool:
+    t = text.replace(",", "").replace("−", "-").replace(" %", "").replace("+", "")
+    try:
+        float(t)
+    except ValueError:
+        return False
+    return True
+
+
+def _html_warnings(summary: Summary) -> str:
+    if not summary.warnings:
+        return '<p class="ok">No warnings.</p>'
+    items = "".join(f"<li>{html.escape(w)}</li>" for w in summary.warnings)
+    return f'<div class="warnings"><strong>Warnings</strong><ul>{items}</ul></div>'
+
+
+# -- the documents -----------------------------------------------------------------------
 
 
 def write_reports(
     out_dir: Path,
     *,
-    metrics: dict[str, Any],
-    map_png: Path,
+    metrics: Mapping[str, Any],
     features: FeatureTable,
-    readings_per_sensor: dict[str, int],
-    dropped_by_reason: dict[str, int],
-    comparison: dict[str, Any] | None = None,
+    map_png: Path,
+    comparison_pngs: Mapping[str, Path] | None = None,
+    evaluation: Mapping[str, Any] | None = None,
 ) -> None:
-    """Write ``out_dir/report.html`` and ``out_dir/report.md``.
+    """Write ``out_dir/report.html`` and ``out_dir/report.md`` (see the module docstring).
 
-    ``metrics``: nested dict, shown flattened (dotted keys, sorted). ``map_png``: the map
-    image (embedded in the HTML, linked from the Markdown). Charts: histogram of feature
-    σ_major (m), readings per sensor, dropped readings by reason. ``comparison``: optional
-    side-by-side of runs, ``{"with correction": {metrics}, "without correction": {metrics},
-    "images": {"with correction": "map.png", "without correction": "map_nocorr.png"}}``
-    (image names relative to ``out_dir``), shown as a table with one column per run and
-    the images next to each other.
+    ``metrics``: a run's metrics.json as a dict (a ``timing`` section is ignored);
+    ``features``: its feature table (σ histogram); ``map_png``: the map image;
+    ``comparison_pngs``: column label → image of the maps shown side by side (with
+    ``metrics["comparison"]``); ``evaluation``: a ``sonarmap evaluate`` result as a dict.
     """
     out_dir = Path(out_dir)
     map_png = Path(map_png)
-    flat = flatten_metrics(metrics)
-    edges, counts = _sigma_histogram(features)
-    sensors = sorted((str(k), int(v)) for k, v in readings_per_sensor.items())
-    dropped = sorted((str(k), int(v)) for k, v in dropped_by_reason.items())
-    hist_rows = [
-        [f"{edges[i]:.4g} – {edges[i + 1]:.4g}", str(int(c))] for i, c in enumerate(counts)
-    ]
-    comp = _comparison_parts(comparison, out_dir) if comparison is not None else None
+    summary = summarise(metrics, evaluation)
+    title = f"{summary.title} — sonarmap report"
+    edges, counts = sigma_histogram(features)
+    sensors = sensor_rows(metrics.get("sensors", []))
+    per_sensor = [(r[0], int(r[1].replace(",", ""))) for r in sensors]
+    drops = nonzero_drops(metrics.get("dropped", {}))
+    drops_labelled = [(label(k), n) for k, n in drops]
+    comparison = metrics.get("comparison")
+    comp_cols: list[str] = []
+    comp_rows: list[list[str]] = []
+    differences: list[str] = []
+    if isinstance(comparison, Mapping) and comparison:
+        keys = [k for k in comparison if isinstance(comparison[k], Mapping)]
+        comp_cols = [COMPARISON_LABELS.get(k, label(k)) for k in keys]
+        names: list[str] = []
+        for k in keys:
+            names += [n for n in comparison[k] if n not in names]
+        comp_rows = [[label(n), *(format_value(n, comparison[k].get(n)) for k in keys)]
+                     for n in names]
+        if "with_correction" in comparison and "without_correction" in comparison:
+            differences = comparison_differences(comparison["with_correction"],
+                                                 comparison["without_correction"])
+    images = dict(comparison_pngs or {})
+    details = _detail_sections(metrics)
+    ev = _evaluation_parts(evaluation) if evaluation else None
+    hist_rows = [[f"{edges[i]:.4g} – {edges[i + 1]:.4g}", f"{int(c):,}"]
+                 for i, c in enumerate(counts)]
+    sensor_header = ["sensor", "readings", "mapped", "mount x (m)", "mount y (m)",
+                     "mount yaw (°)", "mount from"]
+    timing_note = ("Timing (seconds per stage, readings/s, peak memory) is in metrics.json "
+                   "and left out here, so that a rerun writes the same report.")
 
     # ---- HTML
     h: list[str] = [
         "<!DOCTYPE html>",
         '<html lang="en"><head><meta charset="utf-8">',
         '<meta name="viewport" content="width=device-width, initial-scale=1">',
-        "<title>sonarmap report</title>",
+        f"<title>{html.escape(title)}</title>",
         f"<style>{_CSS}</style></head><body>",
-        "<h1>sonarmap report</h1>",
+        f"<h1>{html.escape(title)}</h1>",
+        "<h2>Summary</h2>",
+        _html_table(None, summary.rows, cls="summary"),
+        _html_warnings(summary),
         "<h2>Map</h2>",
-        f'<img alt="map" src="{_data_uri(map_png)}">',
+        f'<img alt="map of {html.escape(summary.title)}" src="{_data_uri(map_png)}">',
     ]
-    if comp is not None:
-        columns, rows, images = comp
-        h.append("<h2>Comparison</h2>")
+    if comp_cols:
+        h.append("<h2>With and without feature correction</h2>")
         if images:
             h.append('<div class="side">')
-            for label, img in images:
-                h.append(
-                    f'<figure><img alt="{html.escape(label)}" src="{_data_uri(img)}">'
-                    f"<figcaption>{html.escape(label)}</figcaption></figure>"
-                )
+            for cap, img in images.items():
+                h.append(f'<figure><img alt="{html.escape(cap)}" src="{_data_uri(Path(img))}">'
+                         f"<figcaption>{html.escape(cap)}</figcaption></figure>")
             h.append("</div>")
-        h.append(_html_table(["metric", *columns], rows))
+        if differences:
+            h.append("<p>Differences:</p><ul>"
+                     + "".join(f"<li>{html.escape(d)}</li>" for d in differences) + "</ul>")
+        h.append(_html_table(["", *comp_cols], comp_rows))
+    if ev is not None:
+        scalars, tables, notes = ev
+        h += ["<h2>Evaluation</h2>", _html_table(["", "value"], scalars)]
+        for sub, header, rows in tables:
+            h += [f"<h3>{html.escape(sub)}</h3>", _html_table(header, rows)]
+        if notes:
+            h.append("<ul>" + "".join(f"<li>{html.escape(n)}</li>" for n in notes) + "</ul>")
     h += [
-        "<h2>Metrics</h2>",
-        _html_table(["metric", "value"], [[k, v] for k, v in flat.items()]),
         "<h2>Feature uncertainty</h2>",
-        f"<p>{len(features)} features; histogram of σ_major (m).</p>",
-        _svg_histogram(edges, counts, "σ_major (m)"),
+        f"<p>{len(features):,} features: how many have each σ_major (the standard deviation "
+        "along the ellipse's long axis).</p>",
+        svg_histogram(edges, counts, "σ_major (m)", "features"),
         "<h2>Readings per sensor</h2>",
-        _svg_hbars(sensors, "readings"),
+        svg_hbars(per_sensor, "readings"),
         "<h2>Dropped readings by reason</h2>",
-        _svg_hbars(dropped, "readings"),
-        "</body></html>",
-        "",
+        svg_hbars(drops_labelled, "readings") if drops else "<p>No reading was dropped.</p>",
+        "<h2>Details</h2>",
     ]
+    for sec, sec_rows in details:
+        h += [f"<h3>{html.escape(sec)}</h3>", _html_table(None, sec_rows)]
+    if sensors:
+        h += ["<h3>Sensors</h3>", _html_table(sensor_header, sensors)]
+    h += [f"<p><em>{html.escape(timing_note)}</em></p>", "</body></html>", ""]
 
     # ---- Markdown
-    m: list[str] = [
-        "# sonarmap report",
-        "",
-        "## Map",
-        "",
-        f"![map]({_image_ref(map_png, out_dir)})",
-    ]
-    if comp is not None:
-        columns, rows, images = comp
-        m += ["", "## Comparison", ""]
+    m: list[str] = [f"# {title}", "", "## Summary", ""]
+    m += markdown_table(["", ""], summary.rows)
+    m.append("")
+    if summary.warnings:
+        m += ["**Warnings**", ""] + [f"- {w}" for w in summary.warnings]
+    else:
+        m.append("No warnings.")
+    m += ["", "## Map", "", f"![map of {summary.title}]({_image_ref(map_png, out_dir)})"]
+    if comp_cols:
+        m += ["", "## With and without feature correction", ""]
         if images:
-            m.append(" ".join(f"![{label}]({_image_ref(img, out_dir)})" for label, img in images))
-            m.append("")
-        m += markdown_table(["metric", *columns], [[r[0], *map(format_value, r[1:])] for r in rows])
-    m += ["", "## Metrics", ""]
-    m += markdown_table(["metric", "value"], [[k, format_value(v)] for k, v in flat.items()])
-    m += ["", "## Feature uncertainty", "", f"{len(features)} features; σ_major histogram.", ""]
+            m += [" ".join(f"![{cap}]({_image_ref(Path(img), out_dir)})"
+                           for cap, img in images.items()), ""]
+        if differences:
+            m += ["Differences:", ""] + [f"- {d}" for d in differences] + [""]
+        m += markdown_table(["", *comp_cols], comp_rows)
+    if ev is not None:
+        scalars, tables, notes = ev
+        m += ["", "## Evaluation", ""]
+        m += markdown_table(["", "value"], scalars)
+        for sub, header, rows in tables:
+            m += ["", f"### {sub}", "", *markdown_table(header, rows)]
+        if notes:
+            m += [""] + [f"- {n}" for n in notes]
+    m += ["", "## Feature uncertainty", "", f"{len(features):,} features by σ_major.", ""]
     m += markdown_table(["σ_major (m)", "features"], hist_rows) if hist_rows else ["_no features_"]
     m += ["", "## Readings per sensor", ""]
-    m += (
-        markdown_table(["sensor", "readings"], [[k, str(v)] for k, v in sensors])
-        if sensors
-        else ["_none_"]
-    )
+    m += (markdown_table(["sensor", "readings"], [[k, f"{v:,}"] for k, v in per_sensor])
+          if per_sensor else ["_none_"])
     m += ["", "## Dropped readings by reason", ""]
-    m += (
-        markdown_table(["reason", "readings"], [[k, str(v)] for k, v in dropped])
-        if dropped
-        else ["_none_"]
-    )
-    m.append("")
+    m += (markdown_table(["reason", "readings"], [[k, f"{v:,}"] for k, v in drops_labelled])
+          if drops else ["No reading was dropped."])
+    m += ["", "## Details"]
+    for sec, sec_rows in details:
+        m += ["", f"### {sec}", "", *markdown_table(["", ""], sec_rows)]
+    if sensors:
+        m += ["", "### Sensors", "", *markdown_table(sensor_header, sensors)]
+    m += ["", f"_{timing_note}_", ""]
 
     atomic_write_text(out_dir / "report.html", "\n".join(h))
     atomic_write_text(out_dir / "report.md", "\n".join(m))

@@ -11,6 +11,10 @@ Decisions: like the andersone free-space scan, updates are unions per scan — a
 most one update per scan; a cell both free (in one cone) and occupied (in another) in the
 same scan gets the occupied update, as a hit in a point-cloud insertion overrides misses.
 ``probability`` is NaN where no update ever touched the cell; ``occupied = p > 0.5``.
+
+The update runs as a compiled kernel (:mod:`pipeline.mapper.kernels.classic_scans`) over
+groups of scans; ``reference=True`` runs the numpy code below, which states the rule and
+which the tests compare the kernel with (the same cells and float32 values, bit for bit).
 """
 
 from __future__ import annotations
@@ -21,20 +25,26 @@ import numpy as np
 
 from pipeline import reading_quality as rq
 from pipeline.config import MapperConfig
+from pipeline.mapper.andersone import concat_scans
 from pipeline.mapper.feature_set import empty_table
-from pipeline.mapper.free_space import cone_spans, free_radius
+from pipeline.mapper.free_space import cone_spans, cone_table, free_radius
 from pipeline.mapper.grid_raster import span_cells
+from pipeline.mapper.kernels.classic_scans import classic_scans
 from pipeline.mapper.occupancy import logit
 from pipeline.mapper.reading_features import classify_scan, count_readings
 from pipeline.mapper.types import F32, B, FeatureTable, GridSpec, MapperCounters, MapSnapshot, Scan
+
+# Scans whose classification and cone geometry numpy prepares at once for the kernel.
+_GROUP = 64
 
 
 class ClassicMapper:
     """Occupancy grid with an inverse sonar model; no features."""
 
-    def __init__(self, config: MapperConfig, grid: GridSpec) -> None:
+    def __init__(self, config: MapperConfig, grid: GridSpec, reference: bool = False) -> None:
         self.config = config
         self.grid = grid
+        self.reference = reference
         self.counters = MapperCounters()
         self.logodds: F32 = np.zeros(grid.shape, dtype=np.float32)
         self.touched: B = np.zeros(grid.shape, dtype=np.bool_)
@@ -46,6 +56,41 @@ class ClassicMapper:
 
     def integrate(self, scan: Scan) -> None:
         """Add one scan: free and occupied cells of every cone, one update per cell."""
+        if self.reference:
+            self._integrate_reference(scan)
+        else:
+            self.integrate_many([scan])
+
+    def integrate_many(self, scans: Sequence[Scan]) -> None:
+        """Add scans in order (as :meth:`integrate` on each)."""
+        if self.reference:
+            for scan in scans:
+                self._integrate_reference(scan)
+            return
+        for g in range(0, len(scans), _GROUP):
+            group = scans[g : g + _GROUP]
+            if group:
+                self._integrate_group(group)
+
+    def _integrate_group(self, scans: Sequence[Scan]) -> None:
+        """The kernel over a group: classification and cone geometry by numpy for the group."""
+        cat, bounds = concat_scans(scans)
+        codes = classify_scan(cat, self.config)
+        count_readings(codes, self.counters)
+        self.counters.scans += len(scans) - 1  # count_readings counted one scan
+        half_w = 0.5 * self.thickness
+        outer = free_radius(cat, codes, self.config, margin=np.full(len(cat), -half_w))
+        rows, cones, up_down = cone_table(cat, outer)
+        g = self.grid
+        self.counters.cells_freed += classic_scans(
+            cones, up_down, cat.range_m[rows], codes[rows] == rq.OK,
+            np.searchsorted(rows, bounds), half_w, g.origin_x, g.origin_y, g.resolution,
+            g.width, g.height, self.l_free, self.l_occ, self.l_min, self.l_max, self.logodds,
+            self.touched,
+        )
+
+    def _integrate_reference(self, scan: Scan) -> None:
+        """The numpy reference of one scan's update."""
         codes = classify_scan(scan, self.config)
         count_readings(codes, self.counters)
         half_w = 0.5 * self.thickness
@@ -82,11 +127,6 @@ class ClassicMapper:
         self.touched[r0 : r0 + h, c0 : c0 + w] |= occ2 | free2
         n_free = int(np.count_nonzero(free))
         self.counters.cells_freed += n_free
-
-    def integrate_many(self, scans: Sequence[Scan]) -> None:
-        """Add scans in order (as :meth:`integrate` on each)."""
-        for scan in scans:
-            self.integrate(scan)
 
     def snapshot(self) -> MapSnapshot:
         """Probability from the log-odds (NaN never touched); occupied = p > 0.5."""

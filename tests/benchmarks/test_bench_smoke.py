@@ -32,7 +32,7 @@ def test_runner_smoke_prints_every_section(tmp_path: Path) -> None:
     rows = [line.split("|")[1:-1] for line in out.splitlines() if line.startswith("| ")]
     rows = [[c.strip() for c in r] for r in rows if r[0].strip() != "section"]
     sections = {r[0] for r in rows}
-    assert sections == {"readers", "mapper", "e2e", "scaling"}
+    assert sections == {"readers", "mapper", "e2e", "scaling", "batch"}
     by_case = {r[1]: r for r in rows}
     # Readers: 6 s ROS 1 bags (16 × 10 Hz + 50 Hz odometry) and the 5k-message ROS 2 bag.
     assert "ros1 lz4: 1260 msgs, sonarmap" in by_case
@@ -51,6 +51,10 @@ def test_runner_smoke_prints_every_section(tmp_path: Path) -> None:
     assert len(shares) == 5 and sum(shares) == pytest.approx(100.0, abs=0.1)
     assert "0.5x log (1600 readings)" in by_case
     assert "2x log peak RSS" in by_case
+    assert float(by_case["2x log"][2]) > 0
+    # Batch: 2 smoke logs of 200 steps × 8 sonars, on 1 and on 2 workers.
+    assert float(by_case["2 logs x 1600 readings, 1 worker"][2]) > 0
+    assert by_case["2 workers"][4].endswith("x of 1 worker")
     text = results.read_text(encoding="utf-8")
     assert text.startswith("# Benchmark results") and "Machine: " in text
     assert "| mapper | 320 readings, full method (correction on) |" in text

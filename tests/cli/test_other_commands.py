@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import tomllib
 from pathlib import Path
 
@@ -25,6 +26,35 @@ def test_every_command_has_help_with_examples(runner, command):
     result = runner.invoke(app, [command, "--help"])
     assert result.exit_code == 0
     assert "Examples:" in result.output and "sonarmap " + command in result.output
+
+
+@pytest.mark.parametrize("command", ["run", "info", "validate", "config", "simulate", "emulate", "evaluate", "regress", "batch"])
+def test_help_shows_values_as_words(runner, command):
+    """No type placeholders (<path>, <list[str]>, <float>) or {braces}: words like LOG, OUT."""
+    result = runner.invoke(app, [command, "--help"], terminal_width=120)
+    usage = result.output.splitlines()[0]
+    assert "{" not in usage and "<" not in usage
+    options = result.output[result.output.index("Options:"):]
+    assert not re.search(r"<(path|file|str|int|float|list\[str\]|directory)>", result.output), options
+    if command in ("run", "info", "validate"):
+        assert usage.endswith(" LOG")
+
+
+def test_run_help_names_its_values_and_shows_defaults(runner):
+    out = runner.invoke(app, ["run", "--help"], terminal_width=200).output
+    assert "Usage: sonarmap run [OPTIONS] LOG" in out
+    for line in ("-o, --output OUT", "-c, --config FILE", "--range-topic TOPIC", "--pose-topic TOPIC",
+                 "-f, --format FORMAT", "-r, --resolution METRES"):
+        assert line in out, line
+    assert "[default: ([grid] resolution, 0.05)]" in out
+    assert "[default: ([mapper] method, andersone)]" in out
+    assert "[default: (detected from the content)]" in out
+
+
+def test_validate_lists_sensors_in_natural_order(runner):
+    out = runner.invoke(app, ["validate", str(SAMPLES / "office" / "office.mcap"), "--json"]).output
+    names = [s["name"] for s in json.loads(out)["sensors"]]
+    assert names == [f"sonar_{i}" for i in range(16)]
 
 
 def test_config_prints_the_defaults_as_commented_toml(runner):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 import tomllib
@@ -18,8 +19,8 @@ from formats.writers.nav2_map import load_nav2_map
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLES = ROOT / "sample_logs"
 
-OUTPUTS = {"map.pgm", "map.yaml", "map.png", "features.parquet", "metrics.json", "config.toml",
-           "report.html", "report.md", ".sonarmap-output"}
+OUTPUTS = {"map.pgm", "map.yaml", "map.png", "map.mcap", "trajectory.csv", "features.parquet",
+           "metrics.json", "config.toml", "report.html", "report.md", ".sonarmap-output"}
 
 SAMPLE_RUNS = [
     ("office.mcap", [str(SAMPLES / "office" / "office.mcap")], "mcap"),
@@ -80,6 +81,42 @@ def test_nav2_map_reloads_to_the_same_occupancy_classes(runner, tmp_path):
     assert set(np.frombuffer(pgm[-m.classes.size:], np.uint8).tolist()) <= {0, 205, 254}
 
 
+def test_map_mcap_holds_map_pgm_features_and_trajectory(runner, tmp_path):
+    """Read back with the mcap library and rosbags (not sonarmap's readers)."""
+    from mcap.reader import make_reader
+    from rosbags.typesys import Stores, get_typestore
+
+    out = tmp_path / "o"
+    assert _run(runner, ["run", str(SAMPLES / "office" / "office.mcap"), "-o", str(out), "-q"]).exit_code == 0
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    with (out / "map.mcap").open("rb") as f:
+        msgs = {c.topic: ts.deserialize_cdr(m.data, s.name) for s, c, m in make_reader(f).iter_messages()}
+    metrics = json.loads((out / "metrics.json").read_text())
+    grid = msgs["/map"]
+    frame = metrics["trajectory"]["pose_frames"][0]
+    assert frame == "odom" and grid.header.frame_id == frame
+    yaml_doc = (out / "map.yaml").read_text()
+    assert f"resolution: {grid.info.resolution:.2f}" in yaml_doc
+    assert f"origin: [{grid.info.origin.position.x!r}, {grid.info.origin.position.y!r}, 0.0]" in yaml_doc
+    pgm = (out / "map.pgm").read_bytes()
+    w, h = grid.info.width, grid.info.height
+    assert pgm.startswith(f"P5\n{w} {h}\n255\n".encode())
+    pixels = np.frombuffer(pgm[-w * h:], np.uint8).reshape(h, w)[::-1]  # PGM row 0 = top
+    data = np.asarray(grid.data, np.int8).reshape(h, w)
+    assert np.array_equal(data, np.select([pixels == 0, pixels == 254], [100, 0], -1))
+    assert int((data == 100).sum()) == metrics["map"]["cells_occupied"] > 0
+    table = pq.read_table(out / "features.parquet")
+    markers = msgs["/sonar_features"].markers
+    assert [m.id for m in markers] == table.column("id").to_pylist()
+    sigma = table.column("sigma_major").to_numpy()
+    assert np.allclose([m.scale.x for m in markers], np.maximum(4 * sigma, 1e-3))
+    poses = msgs["/trajectory"].poses
+    assert len(poses) == metrics["counts"]["poses"]
+    rows = [ln.split(" ") for ln in (out / "trajectory.csv").read_text().splitlines()[1:]]
+    assert len(rows) == metrics["counts"]["poses"]
+    assert float(rows[-1][1]) == pytest.approx(poses[-1].pose.position.x, abs=1e-9)
+
+
 def test_features_parquet_schema(runner, tmp_path):
     out = tmp_path / "o"
     assert _run(runner, ["run", str(SAMPLES / "office" / "office.mcap"), "-o", str(out), "-q"]).exit_code == 0
@@ -132,7 +169,7 @@ def test_existing_output_is_refused_and_force_replaces(runner, tmp_path):
     ("content", "message"),
     [
         (b"", "empty file"),
-        (b"\x00\x01garbage\xff" * 10, "unknown log format"),
+        (b"\x00\x01garbage\xff" * 10, "not a recognised log format"),
         (b"#ROSBAG V2.0\n" + b"\x00" * 5, ""),
         (b"\x89MCAP0\r\n\x01\x02", ""),
     ],
@@ -149,6 +186,48 @@ def test_bad_input_exits_1_with_one_line_and_no_output(runner, tmp_path, content
     assert "bad.log" in lines[0] and message in lines[0]
     assert "Traceback" not in result.output
     assert not out.exists() and list(tmp_path.iterdir()) == [bad]
+
+
+def test_a_text_file_is_not_a_recognised_log_format(runner, tmp_path):
+    out = tmp_path / "o"
+    result = _run(runner, ["run", str(ROOT / "README.md"), "-o", str(out), "-q"])
+    assert result.exit_code == 1
+    line = result.output.strip()
+    assert line.startswith(f"sonarmap: error: {ROOT / 'README.md'}: not a recognised log format")
+    for tried in ("ROS 1 bag", "MCAP", "ROS 2 bag", "CSV (a header of column names"):
+        assert tried in line
+    assert "column" not in line.split("CSV")[0] and "\n" not in line and not out.exists()
+
+
+def test_run_json_is_one_machine_readable_summary(runner, tmp_path):
+    out = tmp_path / "o"
+    result = runner.invoke(app, ["run", str(SAMPLES / "office" / "office.mcap"), "-o", str(out),
+                                 "--json"])
+    assert result.exit_code == 0, result.output
+    doc = json.loads(result.stdout)  # stdout is the JSON alone
+    assert doc["out_dir"] == str(out)
+    assert set(doc["outputs"]) == OUTPUTS - {".sonarmap-output"}  # the outputs, not the marker
+    assert doc["outputs"]["map.mcap"] == str(out / "map.mcap")
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert doc["counts"]["readings"] == metrics["counts"]["readings"] == 8469
+    assert doc["counts"]["readings_used"] == metrics["counts"]["readings_used"]
+    assert doc["paper_metric"] == metrics["paper_metric"]
+    assert doc["dropped"] == {"max_range": metrics["dropped"]["max_range"]}  # non-zero only
+    assert doc["warnings"] == metrics["warnings"] == []
+
+
+def test_warnings_reach_metrics_and_the_report(runner, tmp_path):
+    out = tmp_path / "o"
+    cfg = tmp_path / "gap.toml"
+    cfg.write_text("[pose_sync]\ntime_offset_s = -5.0\n")  # the first 5 s of readings: no pose
+    result = _run(runner, ["run", str(SAMPLES / "office" / "office.mcap"), "-o", str(out), "-c", str(cfg)])
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert result.exit_code == 0, result.output
+    assert metrics["dropped"]["before_first_pose"] > 0.01 * metrics["counts"]["readings"]
+    assert metrics["warnings"][0].startswith("readings dropped: ")
+    assert "before first pose" in metrics["warnings"][0]
+    assert f"warning: {metrics['warnings'][0]}" in result.output
+    assert metrics["warnings"][0] in (out / "report.md").read_text()
 
 
 def test_compare_correction_reports_both(runner, tmp_path):
@@ -194,3 +273,52 @@ def test_a_real_subprocess_maps_and_fails_cleanly(tmp_path):
     )
     assert fail.returncode == 1
     assert fail.stderr.strip().splitlines() == [f"sonarmap: error: {bad}: empty file (0 bytes)"]
+
+
+def test_evaluate_adds_its_results_to_the_run_report(runner, tmp_path):
+    from pipeline.run_report import write_run_reports
+
+    out = tmp_path / "o"
+    assert _run(runner, ["run", str(SAMPLES / "office" / "office.mcap"), "-o", str(out), "-q"]).exit_code == 0
+    html0, md0 = (out / "report.html").read_bytes(), (out / "report.md").read_bytes()
+    # The run's report is exactly what the run directory's files render to.
+    copy = tmp_path / "copy"
+    copy.mkdir()
+    for p in out.iterdir():
+        (copy / p.name).write_bytes(p.read_bytes())
+    write_run_reports(copy)
+    assert (copy / "report.html").read_bytes() == html0 and (copy / "report.md").read_bytes() == md0
+    data = {p.name: p.read_bytes() for p in out.iterdir() if not p.name.startswith("report.")}
+    truth = SAMPLES / "office" / "office.truth.yaml"
+    args = ["evaluate", str(out), "--truth", str(truth)]
+    assert _run(runner, [*args, "--no-report"]).exit_code == 0
+    assert (out / "report.md").read_bytes() == md0
+    result = _run(runner, args)
+    assert result.exit_code == 0, result.output
+    md = (out / "report.md").read_text()
+    assert "## Evaluation" in md and md.index("## Map") < md.index("## Evaluation")
+    assert re.search(r"\| Quality \| F1 0\.\d{3} \(precision \d+\.\d %, recall \d+\.\d %\) against ", md)
+    assert "<h2>Evaluation</h2>" in (out / "report.html").read_text()
+    # Nothing else in the run directory changed.
+    assert {p.name: p.read_bytes() for p in out.iterdir() if not p.name.startswith("report.")} == data
+
+
+def test_progress_has_the_real_total_from_the_first_pass(tmp_path):
+    from pipeline.config import Config
+    from pipeline.run import run
+
+    calls = []
+    result = run(SAMPLES / "office" / "office.mcap", tmp_path / "o", Config(),
+                 progress=lambda stage, done, total: calls.append((stage, done, total)))
+    readings = result.metrics.counts["readings"]
+    stages = [c[0] for c in calls]
+    first_mapping = stages.index("mapping")
+    assert first_mapping > 0 and set(stages[:first_mapping]) == {"reading"}
+    assert set(stages[first_mapping:]) == {"mapping"}  # pass 1 then pass 2, never back
+    reading = [c for c in calls if c[0] == "reading"]
+    assert all(total is None for _s, _d, total in reading)
+    assert reading[-1][1] == readings  # pass 1 counted every reading
+    mapping = [c for c in calls if c[0] == "mapping"]
+    assert {total for _s, _d, total in mapping} == {readings}  # the real total from the start
+    done = [d for _s, d, _t in mapping]
+    assert done == sorted(done) and done[-1] == readings

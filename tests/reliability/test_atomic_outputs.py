@@ -19,8 +19,8 @@ from formats.writers.atomic import OutputDir, clean_stale_siblings
 from fuzz.harness import ROOT
 
 LOG = ROOT / "sample_logs" / "office" / "office.mcap"
-FILES = {"map.pgm", "map.yaml", "map.png", "features.parquet", "metrics.json", "config.toml",
-         "report.html", "report.md", ".sonarmap-output"}
+FILES = {"map.pgm", "map.yaml", "map.png", "map.mcap", "trajectory.csv", "features.parquet",
+         "metrics.json", "config.toml", "report.html", "report.md", ".sonarmap-output"}
 
 
 def _start(out: Path) -> subprocess.Popen[bytes]:

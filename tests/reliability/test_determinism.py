@@ -1,6 +1,6 @@
-"""Same log and configuration → byte-identical map.pgm, map.yaml, features.parquet,
-config.toml and equal deterministic metrics: across processes (other hash seeds) and
-when a batch maps the logs on one worker or on two."""
+"""Same log and configuration → every output byte-identical except metrics.json, whose
+only difference is its ``timing`` section: across processes (other hash seeds) and when a
+batch maps the logs on one worker or on two."""
 
 from __future__ import annotations
 
@@ -16,7 +16,8 @@ from pipeline.batch import run_batch
 from pipeline.config import Config
 from pipeline.run import run
 
-SAME_BYTES = ("map.pgm", "map.yaml", "features.parquet", "config.toml")
+SAME_BYTES = ("map.pgm", "map.yaml", "features.parquet", "config.toml", "map.png", "map.mcap",
+              "trajectory.csv", "report.html", "report.md")
 
 
 def _deterministic_metrics(run_dir: Path) -> dict[str, Any]:
@@ -27,6 +28,10 @@ def _deterministic_metrics(run_dir: Path) -> dict[str, Any]:
 
 
 def _assert_same_run(a: Path, b: Path) -> None:
+    # Every output but metrics.json (batch's own marker, dot-named, is not an output).
+    outputs = {p.name for p in a.iterdir() if not p.name.startswith(".")}
+    assert outputs == {p.name for p in b.iterdir() if not p.name.startswith(".")}
+    assert outputs == {*SAME_BYTES, "metrics.json"}
     for name in SAME_BYTES:
         assert (a / name).read_bytes() == (b / name).read_bytes(), name
     assert _deterministic_metrics(a) == _deterministic_metrics(b)

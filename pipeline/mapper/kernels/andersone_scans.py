@@ -17,7 +17,7 @@ from pipeline.mapper.kernels.feature_index import (
     compact_if_half_dead,
     merge_readings,
 )
-from pipeline.mapper.kernels.free_space import add_window, free_window
+from pipeline.mapper.kernels.free_space import add_free_rows, free_rows
 
 
 @njit(cache=True)
@@ -36,14 +36,14 @@ def integrate_scans(fa: FeatureArrays, feat_mean: np.ndarray, feat_cov: np.ndarr
                                          feat_cut[k + 1], match_distance)
         counters[CREATED] += created
         counters[MERGED] += merged
-        row0, col0, mask, count = free_window(cones, up_down, cone_cut[k], cone_cut[k + 1],
-                                              gx, gy, res, width, height)
+        row0, col0, col1, starts, c0s, c1s, count = free_rows(
+            cones, up_down, cone_cut[k], cone_cut[k + 1], gx, gy, res, width, height)
         if count == 0:
             continue
         if correction:
-            correct_features(fa, row0, col0, mask, gx, gy, res, width, height, rng,
-                             n_particles, keep_n, protect_times, floor2, split_guard,
+            correct_features(fa, row0, col0, col1, starts, c0s, c1s, gx, gy, res, width, height,
+                             rng, n_particles, keep_n, protect_times, floor2, split_guard,
                              refit_cells, counters)
             compact_if_half_dead(fa)
-        add_window(free_counts, row0, col0, mask)
+        add_free_rows(free_counts, row0, starts, c0s, c1s)
         counters[CELLS_FREED] += count

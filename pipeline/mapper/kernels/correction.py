@@ -24,6 +24,7 @@ from pipeline.mapper.kernels.feature_index import (
     delete_feature,
     move_feature,
 )
+from pipeline.mapper.kernels.free_space import any_free, is_free
 
 # As correction._SINGULAR: relative determinant below which a refit counts as singular.
 SINGULAR = 1e-12
@@ -106,10 +107,14 @@ def pairwise_sum(a: np.ndarray, lo: int, n: int) -> float:
 
 
 @njit(cache=True)
-def touched_slots(fa: FeatureArrays, row0: int, col0: int, mask: np.ndarray, gx: float,
-                  gy: float, res: float, width: int, height: int) -> np.ndarray:
-    """Slots of live features whose 3σ ellipse holds a free cell centre, ascending."""
-    h, w = mask.shape
+def touched_slots(fa: FeatureArrays, row0: int, col0: int, col1: int, starts: np.ndarray,
+                  c0s: np.ndarray, c1s: np.ndarray, gx: float, gy: float, res: float,
+                  width: int, height: int) -> np.ndarray:
+    """Slots of live features whose 3σ ellipse holds a free cell centre of the union
+    (:mod:`.free_space`), ascending: their 3σ box meets the union's box, then some row span
+    of the ellipse meets a free interval."""
+    h = starts.shape[0] - 1
+    w = col1 - col0 + 1
     x_lo = gx + (col0 + 0.5) * res
     x_hi = gx + ((col0 + w) - 0.5) * res
     y_lo = gy + (row0 + 0.5) * res
@@ -125,40 +130,47 @@ def touched_slots(fa: FeatureArrays, row0: int, col0: int, mask: np.ndarray, gx:
         mx, my = fa.mean[s, 0], fa.mean[s, 1]
         cxx, cxy, cyy = fa.cov[s, 0], fa.cov[s, 1], fa.cov[s, 2]
         r0, r1 = ellipse_rows(my, cyy, 3.0, gy, res, height)
-        hit = False
-        for row in range(max(r0, row0), min(r1, row0 + h - 1) + 1):
-            c0, c1 = ellipse_row_span(mx, my, cxx, cxy, cyy, 3.0, row, gx, gy, res, width)
-            a = max(c0 - col0, 0)
-            b = min(c1 - col0, w - 1)
-            r = row - row0
-            for c in range(a, b + 1):
-                if mask[r, c]:
-                    hit = True
-                    break
-            if hit:
+        r0 = max(r0, row0)
+        r1 = min(r1, row0 + h - 1)
+        # Prefilter: a free cell in the ellipse's rows within its 3σ x-extent (one cell
+        # wider: rounding never puts an ellipse cell outside). Most box candidates fail it.
+        hx = 3.0 * math.sqrt(cxx)
+        ca = int(np.ceil(((mx - hx) - gx) / res - 0.5)) - 1
+        cb = int(np.floor(((mx + hx) - gx) / res - 0.5)) + 1
+        near = False
+        for row in range(r0, r1 + 1):
+            if any_free(starts, c0s, c1s, row - row0, ca, cb):
+                near = True
                 break
-        if hit:
-            out[m] = s
-            m += 1
+        if not near:
+            continue
+        for row in range(r0, r1 + 1):
+            a, b = ellipse_row_span(mx, my, cxx, cxy, cyy, 3.0, row, gx, gy, res, width)
+            if any_free(starts, c0s, c1s, row - row0, a, b):
+                out[m] = s
+                m += 1
+                break
     return out[:m]
 
 
 @njit(cache=True)
-def _free_at(mask: np.ndarray, cx: float, cy: float) -> bool:
-    """Whether the cell (window column cx − 1, row cy − 1; integer-valued floats) is free."""
-    h, w = mask.shape
-    if cx >= 1.0 and cx <= w and cy >= 1.0 and cy <= h:
-        return mask[int(cy) - 1, int(cx) - 1]
+def _free_at(row0: int, col0: int, col1: int, starts: np.ndarray, c0s: np.ndarray,
+             c1s: np.ndarray, cx: float, cy: float) -> bool:
+    """Whether the cell of window column cx − 1, row cy − 1 (integer-valued floats, the
+    reference's window-relative + 1 coordinates) is free."""
+    if cx >= 1.0 and cx <= col1 - col0 + 1 and cy >= 1.0 and cy <= starts.shape[0] - 1:
+        return is_free(starts, c0s, c1s, int(cy) - 1, int(cx) - 1 + col0)
     return False
 
 
 @njit(cache=True)
-def correct_features(fa: FeatureArrays, row0: int, col0: int, mask: np.ndarray, gx: float,
-                     gy: float, res: float, width: int, height: int, rng: np.random.Generator,
+def correct_features(fa: FeatureArrays, row0: int, col0: int, col1: int, starts: np.ndarray,
+                     c0s: np.ndarray, c1s: np.ndarray, gx: float, gy: float, res: float,
+                     width: int, height: int, rng: np.random.Generator,
                      n_particles: int, keep_n: float, protect_times: int, floor2: float,
                      split_guard: bool, refit_cells: bool, counters: np.ndarray) -> None:
-    """Apply §4 to every feature touched by the free window; counts into ``counters``."""
-    slots = touched_slots(fa, row0, col0, mask, gx, gy, res, width, height)
+    """Apply §4 to every feature touched by the union; counts into ``counters``."""
+    slots = touched_slots(fa, row0, col0, col1, starts, c0s, c1s, gx, gy, res, width, height)
     f = slots.shape[0]
     if f == 0:
         return
@@ -195,7 +207,7 @@ def correct_features(fa: FeatureArrays, row0: int, col0: int, mask: np.ndarray, 
             q = (z[1, j, i] * sy + ay) + cr * z0
             cx = np.floor(p)
             cy = np.floor(q)
-            alive = not _free_at(mask, cx, cy)
+            alive = not _free_at(row0, col0, col1, starts, c0s, c1s, cx, cy)
             if refit_cells:
                 p = cx + 0.5
                 q = cy + 0.5
@@ -230,7 +242,8 @@ def correct_features(fa: FeatureArrays, row0: int, col0: int, mask: np.ndarray, 
             if mr < 3 or cxx <= 0 or cyy <= 0 or det <= SINGULAR * tr * tr:
                 cxx = cxx + floor2
                 cyy = cyy + floor2
-            if split_guard and _free_at(mask, np.floor(g0), np.floor(g1)):
+            if split_guard and _free_at(row0, col0, col1, starts, c0s, c1s, np.floor(g0),
+                                        np.floor(g1)):
                 counters[SPLIT] += 1
                 refit = False
             if refit:

@@ -200,3 +200,19 @@ def test_closed_reader_refuses_to_read(tmp_path: Path) -> None:
 def test_errors_are_one_line(tmp_path: Path) -> None:
     msg = _fails(tmp_path, HEAD + "1,0,0,0,s,1\n2,\n")
     assert "\n" not in msg and msg.startswith(str(tmp_path / "file.csv"))
+
+
+def test_prose_and_markup_are_not_taken_for_csv(tmp_path: Path) -> None:
+    from formats import detect_format
+    from formats.csv_log import looks_like_csv
+
+    readme = tmp_path / "README.md"
+    readme.write_text("# title\n\n**Bold prose** with words, and a comma.\n")
+    assert not looks_like_csv(readme)
+    with pytest.raises(FormatError, match=r"not a recognised log format.*tried ROS 1 bag"):
+        detect_format(readme)
+    for text in ("t,x,y,yaw,sensor,range\n1,2,3,4,s,5\n", "t_ms z1 z2\n0 100 200\n",
+                 '"t","sonar_1"\n1.5,2\n', "# comment\n1700000000.5,1.0\n"):
+        good = tmp_path / "log.csv"
+        good.write_text(text)
+        assert looks_like_csv(good), text

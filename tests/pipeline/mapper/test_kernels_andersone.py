@@ -10,12 +10,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from pipeline.config import Config, MapperConfig
+from pipeline.config import MapperConfig
 from pipeline.mapper.andersone import AndersoneMapper
 from pipeline.mapper.feature_set import FeatureSet
 from pipeline.mapper.feature_store import FeatureStore
@@ -26,8 +25,6 @@ from pipeline.mapper.kernels.feature_index import (
 )
 from pipeline.mapper.synthetic import ring_scans, room_grid
 from pipeline.mapper.types import GridSpec, Scan
-
-ROOT = Path(__file__).resolve().parents[3]
 
 
 def _pairs(scans: list[Scan], k: int = 2) -> list[Scan]:
@@ -132,21 +129,9 @@ def test_kernel_merge_equals_reference_through_compaction() -> None:
     np.testing.assert_array_equal(ker.table().x, ref.table().x)
 
 
-def test_kernel_equals_reference_on_a_real_log(monkeypatch: pytest.MonkeyPatch,
-                                               tmp_path: Path) -> None:
+def test_kernel_equals_reference_on_a_real_log(intel_scans) -> None:  # type: ignore[no-untyped-def]
     """The Intel lab log (real trajectory, emulated ring) as the pipeline scans it."""
-    import pipeline.run as run_mod
-
-    captured: list[Scan] = []
-    original = run_mod._integrate
-
-    def capture(mappers, scans):  # type: ignore[no-untyped-def]
-        captured.extend(scans)
-        original(mappers, scans)
-
-    monkeypatch.setattr(run_mod, "_integrate", capture)
-    result = run_mod.run(ROOT / "sample_logs" / "intel-lab" / "intel.mcap", tmp_path / "out",
-                         Config())
-    assert len(captured) > 500
-    ker = _assert_same_maps(MapperConfig(), result.snapshot.grid, captured)
-    np.testing.assert_array_equal(ker.feature_table().x, result.snapshot.features.x)
+    snapshot, scans = intel_scans
+    assert len(scans) > 500
+    ker = _assert_same_maps(MapperConfig(), snapshot.grid, scans)
+    np.testing.assert_array_equal(ker.feature_table().x, snapshot.features.x)
