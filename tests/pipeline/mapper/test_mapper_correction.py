@@ -155,3 +155,66 @@ def test_split_guard_on_deletes_or_protects(grid) -> None:  # type: ignore[no-un
     assert (c.features_split, c.features_protected, c.features_deleted) == (1, 1, 0)
     assert t.measured_times.tolist() == [2]
     assert (t.x[0], t.y[0], t.cov_yy[0]) == (0.0, 0.0, 0.6**2)  # unchanged
+
+
+def _cone_free(grid):  # type: ignore[no-untyped-def]
+    scan = build_scan([5.0], ox=-3.0, oy=0.0, max_range=6.0)
+    return free_space_scan(scan, classify_scan(scan, CFG), CFG, grid)
+
+
+def _free_cell_centre(grid, free, column):  # type: ignore[no-untyped-def]
+    """Centre (x, y) of a free cell in window column ``column`` (0 = the first)."""
+    rows = np.flatnonzero(free.mask[:, column])
+    r = int(rows[len(rows) // 2])
+    return (
+        grid.origin_x + (free.col0 + column + 0.5) * grid.resolution,
+        grid.origin_y + (free.row0 + r + 0.5) * grid.resolution,
+    )
+
+
+def test_touched_through_the_first_or_last_window_column_only(grid) -> None:  # type: ignore[no-untyped-def]
+    """3σ = 0.105 m reaches a free cell centre 0.1 m away in the window's first (last)
+    column, and no cell centre of the next column in (0.15 m)."""
+    free = _cone_free(grid)
+    w = free.mask.shape[1]
+    for column, side in ((0, -1.0), (w - 1, 1.0)):
+        x, y = _free_cell_centre(grid, free, column)
+        for gap, touched in ((0.1, [0]), (0.12, [])):
+            fs = FeatureSet(grid, CFG.match_distance)
+            fs.add(np.array([[x + side * gap, y]]), np.array([[0.035**2, 0.0, 0.035**2]]),
+                   np.zeros(1, dtype=np.int64))
+            assert touched_features(fs, free, grid).tolist() == touched, (column, gap)
+
+
+def test_bounding_box_overlap_without_ellipse_overlap_is_not_touched(grid) -> None:  # type: ignore[no-untyped-def]
+    """Inside the free window's box, beside the narrow apex of the cone: the 3σ box meets
+    the window, the ellipse meets no free cell."""
+    free = _cone_free(grid)
+    fs = FeatureSet(grid, CFG.match_distance)
+    fs.add(np.array([[-2.5, 1.0]]), np.array([[0.05**2, 0.0, 0.05**2]]), np.zeros(1, dtype=np.int64))
+    x_hi = grid.origin_x + (free.col0 + free.mask.shape[1]) * grid.resolution
+    y_hi = grid.origin_y + (free.row0 + free.mask.shape[0]) * grid.resolution
+    assert grid.origin_x + free.col0 * grid.resolution < -2.5 < x_hi and y_hi > 1.0  # in the box
+    assert touched_features(fs, free, grid).size == 0
+
+
+def test_keep_fraction_is_the_refit_threshold_itself(grid) -> None:  # type: ignore[no-untyped-def]
+    """With M of N = 256 particles surviving (M/N exact in binary), keep_fraction = M/N
+    refits and the next representable fraction above deletes."""
+    centre, sigma, seed, n = np.array([1.2, 0.95]), 0.12, 7, 256
+    free = _cone_free(grid)
+    z = np.random.Generator(np.random.PCG64(seed)).standard_normal((2, 1, n))
+    col = np.floor((centre[0] + sigma * z[0, 0] - grid.origin_x) / grid.resolution).astype(np.int64)
+    row = np.floor((centre[1] + sigma * z[1, 0] - grid.origin_y) / grid.resolution).astype(np.int64)
+    m = int((~free.contains(row, col)).sum())
+    assert 10 < m < n - 10
+    outcomes = {}
+    for kf in (m / n, np.nextafter(m / n, 1.0)):
+        cfg = MapperConfig(n_particles=n, keep_fraction=float(kf), split_guard=False)
+        fs = FeatureSet(grid, cfg.match_distance)
+        fs.add(centre[None, :], np.array([[sigma**2, 0.0, sigma**2]]), np.zeros(1, dtype=np.int64))
+        fs.measured[:1] = 1
+        counters = MapperCounters()
+        correct_features(fs, free, cfg, grid, np.random.Generator(np.random.PCG64(seed)), counters)
+        outcomes[kf] = (counters.features_corrected, counters.features_deleted, len(fs))
+    assert list(outcomes.values()) == [(1, 0, 1), (0, 1, 0)]
