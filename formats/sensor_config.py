@@ -91,6 +91,7 @@ class SensorSetup:
     defaults: BeamLimits
     ring_entries: tuple[ConfiguredSensor, ...]
     ring_origin: str
+    ring_mounts: tuple[MountConfig, ...]  # the ring's entries as configured (0 = unset)
 
     def entry(self, name: str) -> ConfiguredSensor | None:
         """The configured entry of ``name``: explicit, else the preset's, else None."""
@@ -125,8 +126,10 @@ def sensor_setup(sensors: SensorsConfig) -> SensorSetup:
     preset = {m.name: _configured(m, f"preset:{sensors.preset}") for m in preset_mounts}
     if sensors.mounts:
         ring, origin = tuple(explicit[m.name] for m in sensors.mounts), "sensors.mounts"
+        ring_mounts = tuple(sensors.mounts)
     else:
         ring, origin = tuple(preset.values()), f"preset '{sensors.preset}'"
+        ring_mounts = tuple(preset_mounts)
     return SensorSetup(
         explicit=explicit,
         preset=preset,
@@ -136,6 +139,7 @@ def sensor_setup(sensors: SensorsConfig) -> SensorSetup:
         ),
         ring_entries=ring,
         ring_origin=origin,
+        ring_mounts=ring_mounts,
     )
 
 

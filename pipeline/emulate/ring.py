@@ -15,6 +15,7 @@ from formats.errors import ConfigError, InputError
 from formats.laser_log import LaserLog
 from formats.options import MountConfig
 from formats.presets import PRESETS
+from formats.sensor_config import sensor_setup
 from pipeline.config import Config
 
 DEFAULT_FOV_DEG = 30.0  # Polaroid 600-series beam, full width
@@ -92,10 +93,7 @@ def mounts_from_config(cfg: Config, preset: str | None = None) -> tuple[MountCon
         if preset not in PRESETS:
             raise ConfigError(f"unknown preset '{preset}' (known: {', '.join(sorted(PRESETS))})")
         return PRESETS[preset]
-    sc = cfg.sensors
-    if sc.mounts:
-        return sc.mounts
-    return PRESETS[sc.preset or "pioneer-p3dx"]
+    return sensor_setup(cfg.sensors).ring_mounts or PRESETS["pioneer-p3dx"]
 
 
 def laser_view(log: LaserLog) -> tuple[float, float]:

@@ -72,3 +72,11 @@ def test_ring_is_the_explicit_mounts_in_file_order_else_the_preset() -> None:
     assert preset.names == tuple(m.name for m in PRESETS["pioneer-p3dx"])
     assert np.allclose(preset.y, [m.y for m in PRESETS["pioneer-p3dx"]])
     assert np.allclose(preset.min_range, 0.1) and np.allclose(preset.fov, math.radians(30.0))
+
+
+def test_ring_mounts_are_the_configured_entries_as_written() -> None:
+    mounts = (MountConfig(name="a", x=0.2), MountConfig(name="b", yaw_deg=45.0))
+    assert sensor_setup(SensorsConfig(preset="udacity-8sonar", mounts=mounts)).ring_mounts == mounts
+    preset = sensor_setup(SensorsConfig(preset="udacity-8sonar")).ring_mounts
+    assert preset == PRESETS["udacity-8sonar"]
+    assert sensor_setup(SensorsConfig()).ring_mounts == ()
