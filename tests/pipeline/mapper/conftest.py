@@ -37,7 +37,7 @@ def intel_scans(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[MapS
         captured.extend(scans)
         original(mappers, scans)
 
-    log = Path(__file__).resolve().parents[2] / "sample_logs" / "intel-lab" / "intel.mcap"
+    log = Path(__file__).resolve().parents[3] / "sample_logs" / "intel-lab" / "intel.mcap"
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(run_mod, "_integrate", capture)
         result = run_mod.run(log, tmp_path_factory.mktemp("intel") / "out", Config())
