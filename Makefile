@@ -67,13 +67,26 @@ goldens: $(STAMP)
 samples: $(STAMP)
 	SONARMAP=$(BIN)/sonarmap sample_logs/regenerate.sh
 
-# The method comparison on every sample log with a ground truth (README "Results").
-compare: $(STAMP)
-	$(BIN)/python benchmarks/compare_methods.py --figure docs/comparison.png --logs \
+# The method comparison on every log with a ground truth, OctoMap beside (README "Results"):
+# the simulated office, corridor and orchard, and four real buildings (the Intel lab and the
+# three Radish logs, sonar emulated from their laser scans into build/compare/).
+COMPARE_DIR := build/compare
+RADISH := freiburg-101 orebro fhw
+RADISH_LOGS := $(RADISH:%=$(COMPARE_DIR)/%.mcap)
+
+$(COMPARE_DIR)/%.mcap: sample_logs/radish/%-corrected.log.gz | $(STAMP)
+	mkdir -p $(COMPARE_DIR)
+	rm -f $(COMPARE_DIR)/$*.mcap $(COMPARE_DIR)/$*.laser.* $(COMPARE_DIR)/$*.truth.*
+	$(BIN)/sonarmap emulate $< -o $@ --compression zstd
+
+compare: $(STAMP) $(RADISH_LOGS)
+	$(BIN)/python -m benchmarks.compare_methods --figure docs/comparison.png \
+	  --summary benchmarks/compare_summary.md --logs \
 	  sample_logs/office/office.mcap sample_logs/office/office.truth.yaml \
 	  sample_logs/corridor/corridor.mcap sample_logs/corridor/corridor.truth.yaml \
 	  sample_logs/orchard/orchard.mcap sample_logs/orchard/orchard.truth.yaml \
-	  sample_logs/intel-lab/intel.mcap sample_logs/intel-lab/intel.laser.yaml
+	  sample_logs/intel-lab/intel.mcap sample_logs/intel-lab/intel.laser.yaml \
+	  $(foreach b,$(RADISH),$(COMPARE_DIR)/$(b).mcap $(COMPARE_DIR)/$(b).laser.yaml)
 
 clean:
 	rm -rf $(VENV) demo_out build *.egg-info .pytest_cache .mypy_cache .ruff_cache

@@ -1,18 +1,23 @@
-"""The method comparison: one log mapped three ways, each scored against the ground truth.
+"""The method comparison: every log mapped by every method and by OctoMap, side by side.
 
 Usage::
 
     python benchmarks/compare_methods.py [--logs LOG TRUTH [LOG TRUTH ...]]
         [--figure compare.png] [--tolerance 0.10] [--reach M] [--config TOML] [--keep DIR]
+        [--summary FILE.md]
 
-Each log is mapped with ``pipeline.run.run`` by (1) the paper's method with feature
-correction, (2) the paper's method without it (the paper's ablation) and (3) the classic
-log-odds baseline, into a temporary directory (``--keep DIR`` keeps the runs). Each run is
-evaluated with :func:`pipeline.evaluate.evaluate_run` against the truth map, with recall
-restricted to walls within sensor reach of the true trajectory (``<stem>.truth.csv`` beside
-the truth, when present). Prints one Markdown table per log: F1, precision, recall, mean
-feature variance (m²), features, readings/s. ``--figure`` writes the three ``map.png``
-images side by side (one row per log) with labels.
+Each log is mapped with ``pipeline.run.run`` by (1) the default method (echo attribution,
+ALGORITHM.md §9), (2) the paper's method with feature correction, (3) the paper's method
+without it (the paper's ablation), (4) the classic log-odds grid, into a temporary
+directory (``--keep DIR`` keeps the runs), and (5) by OctoMap from the same readings
+(:mod:`benchmarks.octomap_baseline`; skipped without the ``bench`` extra). Every map is
+scored by the same code as ``sonarmap evaluate`` (:func:`pipeline.evaluate.evaluate_maps`)
+against the truth map, with recall restricted to walls within sensor reach of the true
+trajectory (``<stem>.truth.csv`` beside the truth, when present). Prints one Markdown
+table per log (F1, precision, recall, mean feature variance (m²), features, readings/s)
+and, at the end, one summary table of F1 for every log and method with the default's
+margin over OctoMap (``--summary`` also writes it to a file). ``--figure`` writes the
+maps side by side (one row per log) with labels.
 
 Defaults: every simulated log under ``sample_logs/`` with a ``<stem>.truth.yaml`` beside
 it (one format per simulation: .mcap first); the configuration is ``--config``, else ``sonarmap.toml`` beside the log, else the
@@ -32,21 +37,28 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
+import numpy as np
+
 from pipeline.config import Config, load_config
 
 REPO = Path(__file__).resolve().parents[1]
 LOG_SUFFIXES = {".mcap", ".bag", ".db3", ".csv", ".txt", ".zst"}
 
-METHODS: tuple[tuple[str, Literal["andersone", "classic"], bool], ...] = (
+METHODS: tuple[tuple[str, Literal["attribution", "andersone", "classic"], bool], ...] = (
+    ("attribution", "attribution", True),
     ("with_correction", "andersone", True),
     ("without_correction", "andersone", False),
     ("classic", "classic", True),
 )
 LABELS = {
+    "attribution": "sonarmap default (echo attribution)",
     "with_correction": "Andersone, with feature correction",
     "without_correction": "Andersone, without correction",
-    "classic": "classic log-odds baseline",
+    "classic": "classic log-odds grid",
+    "octomap": "OctoMap",
 }
+# Shown in the figure (the ablation without correction is in the tables only).
+FIGURE_KEYS = ("attribution", "with_correction", "classic", "octomap")
 
 
 @dataclass
@@ -140,13 +152,63 @@ def compare_log(
             float(result.metrics.timing.get("readings_per_s", float("nan"))),
             out / "map.png",
         ))
+    octo = octomap_row(log, cfg, truth, trajectory, reach, work / log.name, args.tolerance)
+    if octo is not None:
+        rows.append(octo)
     caption = f"{log.name} vs {truth.name}: tolerance {args.tolerance:g} m, {scope}"
     return rows, caption
+
+
+def octomap_row(
+    log: Path, cfg: Config, truth: Path, trajectory: Path | None, reach: float | None,
+    work: Path, tolerance: float,
+) -> Row | None:
+    """OctoMap's map of the same readings, scored like the others (the better of its two
+    classifications, see :mod:`benchmarks.octomap_baseline`); None without octomap."""
+    from benchmarks import octomap_baseline as ob
+    from formats.writers.nav2_map import load_nav2_map
+    from pipeline.evaluate import evaluate_maps, load_trajectory_xy
+
+    if not ob.available():
+        print(f"{log.name}: OctoMap row skipped (pip install -e '.[bench]')", file=sys.stderr)
+        return None
+    prob, grid = ob.octomap_probability(log, cfg)
+    ref = load_nav2_map(truth)
+    poses = None if trajectory is None else load_trajectory_xy(trajectory)
+    best: tuple[dict[str, float], np.ndarray] | None = None
+    for occupied_above, free_below in ob.THRESHOLDS.values():
+        cls = ob.classes(prob, occupied_above, free_below)
+        values, _ = evaluate_maps(cls, grid, ref.classes, ref.grid, tolerance_m=tolerance,
+                                  poses_xy=poses, reach_m=reach, feature_xy=np.zeros((0, 2)))
+        if best is None or values["f1"] > best[0]["f1"]:
+            best = (values, cls)
+    assert best is not None
+    values, cls = best
+    png = work / "octomap.png"
+    classes_png(cls, png)
+    return Row("octomap", values["f1"], values["precision"], values["recall"], None, 0,
+               float("nan"), png)
+
+
+def classes_png(cls: np.ndarray, path: Path) -> None:
+    """A trinary map as a grey PNG (black occupied, white free, grey unknown; north up)."""
+    from PIL import Image
+
+    from pipeline.evaluate import FREE, OCCUPIED
+
+    grey = np.full(cls.shape, 205, dtype=np.uint8)
+    grey[cls == FREE] = 254
+    grey[cls == OCCUPIED] = 0
+    path.parent.mkdir(parents=True, exist_ok=True)
+    Image.fromarray(grey[::-1]).save(path)
 
 
 def markdown(rows: list[Row], caption: str) -> str:
     def var(v: float | None) -> str:
         return "n/a" if v is None else f"{v:.3e}"
+
+    def rate(v: float) -> str:
+        return "–" if math.isnan(v) else f"{v:,.0f}"
 
     lines = [
         f"### {caption}",
@@ -155,11 +217,34 @@ def markdown(rows: list[Row], caption: str) -> str:
         "|---|---:|---:|---:|---:|---:|---:|",
     ]
     for r in rows:
-        feats = str(r.features) if r.key != "classic" else f"{r.features} (none)"
+        feats = str(r.features) if r.key not in ("classic", "octomap") else "(none)"
         lines.append(
             f"| {LABELS[r.key]} | {r.f1:.3f} | {r.precision:.3f} | {r.recall:.3f} | "
-            f"{var(r.mean_variance)} | {feats} | {r.readings_per_s:,.0f} |"
+            f"{var(r.mean_variance)} | {feats} | {rate(r.readings_per_s)} |"
         )
+    return "\n".join(lines)
+
+
+def summary(results: list[tuple[list[Row], str]]) -> str:
+    """One table: F1 (precision / recall) of every method on every log, the paper's metric
+    with and without correction, and the default's F1 margin over OctoMap."""
+    keys = ["attribution", "with_correction", "without_correction", "classic", "octomap"]
+    head = ["log", *(LABELS[k] for k in keys), "default − OctoMap",
+            "mean feature variance with / without correction (m²)"]
+    lines = ["| " + " | ".join(head) + " |", "|---" + "|---:" * (len(head) - 1) + "|"]
+    for rows, caption in results:
+        by = {r.key: r for r in rows}
+        cells = [caption.split(" vs ")[0]]
+        for k in keys:
+            r = by.get(k)
+            cells.append("–" if r is None else
+                         f"**{r.f1:.3f}** ({r.precision:.2f} / {r.recall:.2f})"
+                         if k == "attribution" else f"{r.f1:.3f} ({r.precision:.2f} / {r.recall:.2f})")
+        margin = (by["attribution"].f1 - by["octomap"].f1) if "octomap" in by else None
+        cells.append("–" if margin is None else f"{margin:+.3f}")
+        on, off = by["with_correction"].mean_variance, by["without_correction"].mean_variance
+        cells.append("–" if on is None or off is None else f"{on:.2e} / {off:.2e}")
+        lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
@@ -174,7 +259,7 @@ def figure(results: list[tuple[list[Row], str]], path: Path, height: int = 360) 
     rows_img = []
     for rows, caption in results:
         tiles = []
-        for r in rows:
+        for r in (r for r in rows if r.key in FIGURE_KEYS):
             with Image.open(r.map_png) as src:
                 rgb = src.convert("RGB")
             w = max(1, round(rgb.width * height / rgb.height))
@@ -209,6 +294,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--reach", type=float, help="sensor reach for recall, m")
     ap.add_argument("--config", type=Path, help="configuration TOML for every log")
     ap.add_argument("--keep", type=Path, help="keep the run directories under this directory")
+    ap.add_argument("--summary", type=Path, help="also write the summary table to this file")
     args = ap.parse_args(argv)
 
     from formats.errors import SonarmapError
@@ -228,6 +314,10 @@ def main(argv: list[str] | None = None) -> int:
                 continue
             results.append((rows, caption))
             print(markdown(rows, caption), end="\n\n", flush=True)
+        table = summary(results)
+        print(table, flush=True)
+        if args.summary is not None:
+            args.summary.write_text(table + "\n", encoding="utf-8")
         if args.figure is not None and results:
             figure(results, args.figure)
             print(f"figure: {args.figure}")

@@ -66,7 +66,7 @@ def _root(
     ] = False,
     verbose: Annotated[int, typer.Option("--verbose", "-v", count=True, help="More log output.")] = 0,
 ) -> None:
-    """sonarmap: map sonar logs with Andersone's probabilistic feature method."""
+    """sonarmap: probabilistic 2-D maps from sonar logs (MCAP, ROS 1/2 bags, CSV)."""
     level = logging.WARNING if verbose == 0 else logging.INFO if verbose == 1 else logging.DEBUG
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s", stream=sys.stderr)
 
@@ -113,8 +113,12 @@ def run(
     pose_topic: PoseTopicOpt = None,
     method: Annotated[
         str | None,
-        typer.Option("--method", "-m", help="andersone (the paper's method) or classic.",
-                     show_default="[mapper] method, andersone"),
+        typer.Option(
+            "--method", "-m", metavar="METHOD",
+            help="attribution (echo attribution, the best maps), andersone (the paper's "
+            "method as published) or classic (log-odds grid).",
+            show_default="[mapper] method, attribution",
+        ),
     ] = None,
     resolution: Annotated[
         float | None, typer.Option("--resolution", "-r", help="Grid cell size, m.",
@@ -145,8 +149,10 @@ def run(
     """
     from pipeline.run import run as run_pipeline
 
-    if method is not None and method not in ("andersone", "classic"):
-        raise typer.BadParameter("must be 'andersone' or 'classic'", param_hint="--method")
+    if method is not None and method not in ("attribution", "andersone", "classic"):
+        raise typer.BadParameter(
+            "must be 'attribution', 'andersone' or 'classic'", param_hint="--method"
+        )
     cfg = _load(config, format=format, range_topics=range_topic, pose_topic=pose_topic,
                 method=method, resolution=resolution)
     if quiet or json_out:

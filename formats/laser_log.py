@@ -70,6 +70,10 @@ class LaserLog:
             return np.isfinite(r) & (r >= self.range_min[:, None]) & (r < self.range_max[:, None])
 
 
+# Scan period given to a CARMEN log whose stamps are all equal (it has no time), ns.
+UNSTAMPED_SCAN_PERIOD_NS = 1_000_000_000
+
+
 def sorted_by_time(log: LaserLog) -> LaserLog:
     """The scans in stamp order (stable), with a note when they were not."""
     order = np.argsort(log.t_ns, kind="stable")
@@ -120,8 +124,17 @@ def read_carmen_laser_log(
     if log.skipped:
         skipped = ", ".join(f"{k} {v}" for k, v in sorted(log.skipped.items()))
         notes.append(f"CARMEN lines not used: {skipped}")
+    t_ns = las.t_ns
+    if s_n > 1 and np.all(t_ns == t_ns[0]):
+        # Some Radish logs (Örebro) carry no time at all: every stamp is the same. The
+        # scans are in log order; stamping them a fixed period apart keeps that order.
+        t_ns = t_ns[0] + np.arange(s_n, dtype=np.int64) * UNSTAMPED_SCAN_PERIOD_NS
+        notes.append(
+            f"every FLASER stamp is {t_ns[0] / 1e9:g} s: scans stamped "
+            f"{UNSTAMPED_SCAN_PERIOD_NS / 1e9:g} s apart in log order"
+        )
     return LaserLog(
-        t_ns=las.t_ns,
+        t_ns=t_ns,
         ranges=las.ranges,
         angles=np.broadcast_to(las.angles, las.ranges.shape).copy(),
         range_min=np.zeros(s_n),

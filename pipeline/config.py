@@ -31,9 +31,10 @@ from formats.toml_file import read_toml
 class MapperConfig:
     """Parameters of the mapping method (ALGORITHM.md), with its documented defaults."""
 
-    method: Literal["andersone", "classic"] = doc_field(
-        "mapping method: 'andersone' (the paper's) or 'classic' (log-odds baseline, §8)",
-        default="andersone",
+    method: Literal["attribution", "andersone", "classic"] = doc_field(
+        "mapping method: 'attribution' (echo attribution, §9; the default), 'andersone' "
+        "(the paper's, §1-5) or 'classic' (log-odds baseline, §8)",
+        default="attribution",
     )
     sigma_d0: float = doc_field("σ_d0, distance uncertainty at zero range, m (eq. 2)", default=0.01)
     k_d: float = doc_field("k_d, growth of distance uncertainty with range (eq. 2)", default=0.01)
@@ -88,6 +89,30 @@ class MapperConfig:
     )
     classic_thickness_cells: float = doc_field(
         "classic baseline: obstacle thickness w, in cells (§8)", default=2.0
+    )
+    attr_band_sigmas: float = doc_field(
+        "attribution (§9): an echo's arc is d ± this many σ_d(d) (at least half a cell)",
+        default=4.0,
+    )
+    attr_candidate_ratio: float = doc_field(
+        "attribution (§9): an arc cell cannot have produced an echo when the log saw it "
+        "free more than this many times as often as echo arcs cover it",
+        default=2.0,
+    )
+    attr_dilution: float = doc_field(
+        "attribution (§9): each of an echo's n candidate cells gets 1/n**attr_dilution "
+        "(0 = a full hit each, 1 = an even split)",
+        default=0.5,
+    )
+    attr_free_weight: float = doc_field(
+        "attribution (§9): occupied when attributed weight > attr_free_weight·free count "
+        "+ attr_threshold·median attributed weight",
+        default=0.25,
+    )
+    attr_threshold: float = doc_field(
+        "attribution (§9): the evidence floor, as a fraction of the log's median "
+        "attributed weight per cell",
+        default=0.35,
     )
     seed: int = doc_field("seed of the particle generator (runs are reproducible)", default=0)
 

@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -109,6 +109,9 @@ class Evaluation:
     feature_distance_median_m: float | None
     mean_feature_variance_m2: float | None  # the paper's metric, from metrics.json
     notes: tuple[str, ...] = ()
+    # Why the map is wrong (cell counts; see :func:`error_breakdown`).
+    false_occupied: dict[str, int] = field(default_factory=dict)
+    missed: dict[str, int] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: floats rounded to 12 significant digits, notes as a list."""
@@ -130,11 +133,17 @@ class Evaluation:
         if not isinstance(data, dict):
             raise FormatError("evaluation is not a JSON object", source)
         names = [f.name for f in fields(cls)]
-        missing = [n for n in names if n not in data and n != "notes"]
+        optional = ("notes", "false_occupied", "missed")
+        missing = [n for n in names if n not in data and n not in optional]
         if missing:
             raise FormatError(f"evaluation has no {', '.join(missing)}", source)
         kwargs = {n: data[n] for n in names if n in data}
         kwargs["notes"] = tuple(str(n) for n in data.get("notes", ()))
+        for n in ("false_occupied", "missed"):
+            part = data.get(n, {})
+            if not isinstance(part, dict) or not all(isinstance(v, int) for v in part.values()):
+                raise FormatError(f"evaluation '{n}' is not a table of cell counts", source)
+            kwargs[n] = {str(k): int(v) for k, v in part.items()}
         for n in ("precision", "recall", "f1", "tolerance_m"):
             v = kwargs[n]
             if isinstance(v, bool) or not isinstance(v, int | float):
@@ -176,6 +185,12 @@ class Evaluation:
                                  f"median {num(self.feature_distance_median_m, 'm')}"),
             ("mean feature variance", num(self.mean_feature_variance_m2, "m²")),
         ]
+        for title, part in (("false occupied", self.false_occupied), ("missed walls", self.missed)):
+            if part:
+                total = sum(part.values())
+                rows.append((title, ", ".join(
+                    f"{k.replace('_', ' ')} {v} ({pct(v / total) if total else 'n/a'})"
+                    for k, v in part.items())))
         lines = text_table(None, rows)
         lines += [f"note: {n}" for n in self.notes]
         return "\n".join(lines)
@@ -430,6 +445,9 @@ def evaluate_maps(
     known_in_scope = int(k_scope.sum())
     unknown_in_scope = int((k_scope & (run == UNKNOWN)).sum())
 
+    false_occupied, missed = error_breakdown(
+        r_occ, run, t_occ & scope, truth_classes, dist_truth, dist_run, tolerance_m
+    )
     mean_d: float | None = None
     median_d: float | None = None
     if feature_xy.shape[0] and t_occ.any():
@@ -467,8 +485,47 @@ def evaluate_maps(
         "features": int(feature_xy.shape[0]),
         "feature_distance_mean_m": mean_d,
         "feature_distance_median_m": median_d,
+        "false_occupied": false_occupied,
+        "missed": missed,
     }
     return values, tuple(notes)
+
+
+# A false cell this close to a true wall (or a missed wall cell this close to a predicted
+# one) is a placement error, not a phantom or a hole, m.
+NEAR_M = 0.25
+
+
+def error_breakdown(
+    run_occupied: B, run_classes: I8, truth_in_scope: B, truth_classes: I8,
+    dist_truth: F64, dist_run: F64, tolerance_m: float,
+) -> tuple[dict[str, int], dict[str, int]]:
+    """Why a map is wrong, in truth-grid cells.
+
+    False occupied cells (farther than ``tolerance_m`` from every true wall) are
+    ``near_wall`` (within ``NEAR_M``: a wall drawn in the wrong place), ``in_free_space``
+    (farther, where the truth is free: a phantom inside the rooms, which the run should
+    have seen free) or ``unobserved`` (farther, where the truth is unknown: behind walls or
+    outside the building). Missed wall cells (in scope, no run occupied cell within
+    ``tolerance_m``) are ``near_prediction`` (a run occupied cell within ``NEAR_M``),
+    ``seen_free`` (the run calls the cell free: free-space evidence overrode the wall) or
+    ``unobserved`` (the run left it unknown).
+    """
+    false = run_occupied & ~_within(dist_truth, tolerance_m)
+    near = _within(dist_truth, NEAR_M)
+    miss = truth_in_scope & ~_within(dist_run, tolerance_m)
+    near_pred = _within(dist_run, NEAR_M)
+    false_occupied = {
+        "near_wall": int((false & near).sum()),
+        "in_free_space": int((false & ~near & (truth_classes == FREE)).sum()),
+        "unobserved": int((false & ~near & (truth_classes == UNKNOWN)).sum()),
+    }
+    missed = {
+        "near_prediction": int((miss & near_pred).sum()),
+        "seen_free": int((miss & ~near_pred & (run_classes == FREE)).sum()),
+        "unobserved": int((miss & ~near_pred & (run_classes == UNKNOWN)).sum()),
+    }
+    return false_occupied, missed
 
 
 def evaluate_run(

@@ -56,7 +56,8 @@ from pipeline.sensors import SensorTable, resolve_sensors
 log = logging.getLogger("sonarmap")
 
 #: ``(stage, readings done, readings total)``: stage "reading" (pass 1, the total is not
-#: known yet: None) then "mapping" (pass 2, the total counted by pass 1).
+#: known yet: None), "mapping" (pass 2, the total counted by pass 1), then "writing" (the
+#: outputs; once, with 0 and None).
 Progress = Callable[[str, int, int | None], None]
 
 
@@ -70,7 +71,9 @@ class RunResult:
 
 
 @dataclass
-class _MappingState:
+class StreamState:
+    """What streaming the readings counted: readings seen, drops by reason, per sensor."""
+
     readings_seen: int
     dropped: Counter[str]
     per_sensor: Counter[int]
@@ -96,8 +99,10 @@ def run(
     from formats.writers.atomic import OutputDir
 
     log_path = Path(log_path)
-    if compare_correction and config.mapper.method != "andersone":
-        raise ConfigError("--compare-correction needs mapper.method = 'andersone'")
+    if compare_correction and config.mapper.method == "classic":
+        raise ConfigError(
+            "--compare-correction needs features: mapper.method 'attribution' or 'andersone'"
+        )
     timer = StageTimer()
     t_start = time.perf_counter()
     with OutputDir(Path(out_dir), force=force, protect=(log_path,)) as out:
@@ -106,15 +111,8 @@ def run(
         with reader:
             with timer.stage("ingest"):
                 found = None if progress is None else (lambda n: progress("reading", n, None))
-                sv = survey(reader, found)
+                sv, sensors, grid = prepare(reader, config, found)
                 info = reader.info()
-            sensors = resolve_sensors(
-                sv.sensor_names,
-                sv.mounts,
-                config,
-                used=[sv.ranges.per_sensor.get(i, 0) > 0 for i in range(len(sv.sensor_names))],
-            )
-            grid = grid_for(sv, sensors, config)
             # Thinned now, while little else is in memory (it reads the whole track).
             drawn = _drawn_trajectory(sv.track)
             log.info(
@@ -126,15 +124,42 @@ def run(
             if compare_correction:
                 off = dataclasses.replace(config.mapper, feature_correction=False)
                 mappers["no_correction"] = make_mapper(off, grid)
-            state = _map_stream(reader, sv, sensors, mappers, config, timer, progress)
+            passes = max(m.passes for m in mappers.values())
+            for index in range(passes):
+                # Every pass streams the log again: nothing grows with the log's length.
+                active = {k: m for k, m in mappers.items() if index < m.passes}
+                for m in active.values():
+                    m.begin_pass(index)
+                if index:
+                    sv.track.release_before(None)  # the pose walk starts again
+                state = _map_stream(
+                    reader, sv, sensors, active, config, timer, _pass_progress(progress, index, passes)
+                )
         with timer.stage("mapping"):
             snapshots = {k: m.snapshot() for k, m in mappers.items()}
+        if progress is not None:
+            progress("writing", 0, None)  # the outputs: no reading count to show
         metrics = _metrics(log_path, info.format, info.duration_s, sv, sensors, mappers,
                            snapshots, state, config)
         _write_outputs(out, config, sv, drawn, snapshots, metrics, timer, t_start)
         if on_complete is not None:
             on_complete(out.tmp_dir, metrics)
     return RunResult(Path(out_dir), metrics, snapshots["main"])
+
+
+def prepare(
+    reader: LogReader, config: Config, found: Callable[[int], None] | None = None
+) -> tuple[Survey, SensorTable, GridSpec]:
+    """Pass 1 over an open log: its survey, the sensor table and the map grid (``found``
+    hears the readings counted so far)."""
+    sv = survey(reader, found)
+    sensors = resolve_sensors(
+        sv.sensor_names,
+        sv.mounts,
+        config,
+        used=[sv.ranges.per_sensor.get(i, 0) > 0 for i in range(len(sv.sensor_names))],
+    )
+    return sv, sensors, grid_for(sv, sensors, config)
 
 
 def grid_for(sv: Survey, sensors: SensorTable, config: Config) -> GridSpec:
@@ -175,13 +200,33 @@ def _map_stream(
     config: Config,
     timer: StageTimer,
     progress: Progress | None,
-) -> _MappingState:
-    """Stages 2-4 over the time-ordered reading stream."""
+) -> StreamState:
+    """Stages 2-4 over the time-ordered reading stream, into ``mappers``."""
+
+    def integrate(scans: list[Scan]) -> None:
+        with timer.stage("mapping"):
+            _integrate(mappers, scans)
+
+    return stream_scans(reader, sv, sensors, config, integrate, timer, progress)
+
+
+def stream_scans(
+    reader: LogReader,
+    sv: Survey,
+    sensors: SensorTable,
+    config: Config,
+    consume: Callable[[list[Scan]], None],
+    timer: StageTimer | None = None,
+    progress: Progress | None = None,
+) -> StreamState:
+    """Pose sync and scan building over the log's time-ordered readings: ``consume`` gets
+    the scans in order, chunk by chunk (any mapper, or a baseline such as OctoMap)."""
+    timer = timer if timer is not None else StageTimer()
     track = sv.track
     offset_ns = round(config.pose_sync.time_offset_s * 1e9)
     max_gap_ns = round(config.pose_sync.max_pose_gap_s * 1e9)
     builder = ScanBuilder(ScanKeys(config.scans, track))
-    state = _MappingState(0, Counter(), Counter(), 0)
+    state = StreamState(0, Counter(), Counter(), 0)
     total = sv.ranges.count
     stream = ordered_ranges(reader)
     while True:
@@ -201,14 +246,27 @@ def _map_stream(
             scans = list(builder.push(scan_ids, readings))
         # Later readings are newer than this chunk: the poses before it are done with.
         track.release_before(int(batch.t_ns[0]) + offset_ns)
-        with timer.stage("mapping"):
-            _integrate(mappers, scans)
+        consume(scans)
         if progress is not None:
             progress("mapping", state.readings_seen, total)
-    with timer.stage("mapping"):
-        _integrate(mappers, list(builder.flush()))
+    consume(list(builder.flush()))
     state.scans = builder.count
     return state
+
+
+def _pass_progress(progress: Progress | None, index: int, passes: int) -> Progress | None:
+    """Progress over all passes: pass ``index`` of ``passes`` covers its share of the total."""
+    if progress is None or passes == 1:
+        return progress
+    report = progress
+
+    def scaled(phase: str, done: int, total: int | None) -> None:
+        if total is None:
+            report(phase, done, None)
+        else:
+            report(phase, index * total + done, passes * total)
+
+    return scaled
 
 
 def _integrate(mappers: dict[str, Mapper], scans: list[Scan]) -> None:
@@ -223,7 +281,7 @@ def _sync(
     sensors: SensorTable,
     offset_ns: int,
     max_gap_ns: int,
-    state: _MappingState,
+    state: StreamState,
 ) -> tuple[np.ndarray, Scan]:
     """Pose sync of one chunk: drop readings without a pose, resolve world geometry."""
     look = interpolate_poses(track, batch.t_ns + offset_ns, max_gap_ns)
@@ -262,7 +320,7 @@ def _metrics(
     sensors: SensorTable,
     mappers: dict[str, Mapper],
     snapshots: dict[str, MapSnapshot],
-    state: _MappingState,
+    state: StreamState,
     config: Config,
 ) -> RunMetrics:
     main = mappers["main"]

@@ -250,7 +250,7 @@ def _tick_step(span_m: float, target: int = 6) -> float:
 def _tick_label(v: float, step: float) -> str:
     decimals = max(0, -math.floor(math.log10(step) + 1e-9))
     text = f"{v:.{decimals}f}"
-    return "0" if float(text) == 0 else text.replace("-", "−")
+    return "0" if float(text) == 0 else text  # ASCII minus: the default font has no U+2212
 
 
 def _draw_axes(canvas: Image.Image, frame: MapFrame, map_w: int, map_h: int) -> None:

@@ -78,9 +78,16 @@ def format_number(v: float | int, digits: int = 4) -> str:
     return f"{f:.{digits}g}" if abs(f) < 10 ** digits else f"{f:,.0f}"
 
 
+#: Stamps before 2000-01-01 are a log's own clock (time since start-up), not a date.
+_EPOCH_2000_S = 946_684_800
+
+
 def format_stamp(ns: int) -> str:
-    """An int ns stamp as UTC date and time to the millisecond."""
+    """An int ns stamp as UTC date and time to the millisecond; a stamp before 2000 (a
+    log clock counting from start-up, not the wall clock) as seconds on that clock."""
     sec, frac = divmod(int(ns), _NS)
+    if sec < _EPOCH_2000_S:
+        return f"{sec}.{frac // 1_000_000:03d} s on the log's clock"
     t = dt.datetime.fromtimestamp(sec, tz=dt.UTC)
     return f"{t:%Y-%m-%d %H:%M:%S}.{frac // 1_000_000:03d} UTC"
 

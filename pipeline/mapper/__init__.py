@@ -1,7 +1,9 @@
-"""The mapping method (ALGORITHM.md §1-5) and the classic baseline (§8); no I/O.
+"""The mapping methods: echo attribution (the default, ALGORITHM.md §9), the paper's
+method (§1-5) and the classic baseline (§8). No I/O.
 
-``make_mapper(config, grid)`` picks :class:`AndersoneMapper` or :class:`ClassicMapper` by
-``config.method``; both follow the :class:`Mapper` protocol. Module map:
+``make_mapper(config, grid)`` picks :class:`AttributionMapper`, :class:`AndersoneMapper`
+or :class:`ClassicMapper` by ``config.method``; all follow the :class:`Mapper` protocol.
+Module map: ``attribution`` (§9) with ``cone_kernels`` (its compiled cone loops),
 ``reading_features`` (eqs. 1-4), ``feature_set`` (eqs. 5-8 + spatial index),
 ``free_space`` (§3), ``correction`` (§4), ``occupancy`` (§5), ``grid_raster`` (shapes →
 cells), ``andersone`` / ``classic`` (the mappers); ``kernels`` (the compiled per-scan loops, numba,
@@ -14,17 +16,22 @@ from __future__ import annotations
 from formats.errors import ConfigError
 from pipeline.config import MapperConfig
 from pipeline.mapper.andersone import AndersoneMapper
+from pipeline.mapper.attribution import AttributionMapper
 from pipeline.mapper.classic import ClassicMapper
 from pipeline.mapper.protocol import Mapper
 from pipeline.mapper.types import GridSpec
 
-__all__ = ["AndersoneMapper", "ClassicMapper", "Mapper", "make_mapper"]
+__all__ = ["AndersoneMapper", "AttributionMapper", "ClassicMapper", "Mapper", "make_mapper"]
 
 
 def make_mapper(config: MapperConfig, grid: GridSpec) -> Mapper:
-    """The mapper named by ``config.method`` ('andersone' or 'classic')."""
+    """The mapper named by ``config.method`` ('attribution', 'andersone' or 'classic')."""
+    if config.method == "attribution":
+        return AttributionMapper(config, grid)
     if config.method == "classic":
         return ClassicMapper(config, grid)
     if config.method == "andersone":
         return AndersoneMapper(config, grid)
-    raise ConfigError(f"'mapper.method' must be 'andersone' or 'classic', got {config.method!r}")
+    raise ConfigError(
+        f"'mapper.method' must be 'attribution', 'andersone' or 'classic', got {config.method!r}"
+    )

@@ -71,6 +71,11 @@ class AndersoneMapper:
     ``reference=True`` runs the numpy reference instead of the compiled kernels (tests).
     """
 
+    passes = 1
+
+    def begin_pass(self, index: int) -> None:
+        """One pass only: nothing to prepare."""
+
     def __init__(self, config: MapperConfig, grid: GridSpec, reference: bool = False) -> None:
         self.config = config
         self.grid = grid

@@ -41,6 +41,11 @@ _GROUP = 64
 class ClassicMapper:
     """Occupancy grid with an inverse sonar model; no features."""
 
+    passes = 1
+
+    def begin_pass(self, index: int) -> None:
+        """One pass only: nothing to prepare."""
+
     def __init__(self, config: MapperConfig, grid: GridSpec, reference: bool = False) -> None:
         self.config = config
         self.grid = grid

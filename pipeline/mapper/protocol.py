@@ -1,4 +1,4 @@
-"""What every mapper offers the pipeline (the andersone method and the classic baseline)."""
+"""What every mapper offers the pipeline (attribution, the andersone method, the classic grid)."""
 
 from __future__ import annotations
 
@@ -10,11 +10,20 @@ from pipeline.mapper.types import FeatureTable, GridSpec, MapperCounters, MapSna
 
 
 class Mapper(Protocol):
-    """A mapper fed scan by scan; no I/O."""
+    """A mapper fed scan by scan, no I/O.
+
+    A mapper reads the log's scans ``passes`` times, in the same order each time;
+    ``begin_pass(k)`` announces pass ``k`` (0 first). One-pass mappers ignore it.
+    """
 
     config: MapperConfig
     grid: GridSpec
     counters: MapperCounters
+    passes: int
+
+    def begin_pass(self, index: int) -> None:
+        """Start pass ``index`` over the scans."""
+        ...
 
     def integrate(self, scan: Scan) -> None:
         """Add one scan."""

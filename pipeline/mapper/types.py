@@ -71,6 +71,7 @@ class MapperCounters:
     features_protected: int = 0  # >95 % particles deleted but measured_times >= protect_times
     features_split: int = 0  # split_guard: survivors' mean in a free cell (also deleted/protected)
     cells_freed: int = 0  # sum over scans of the free-space scan's cell count
+    echoes_unattributed: int = 0  # attribution: echoes whose whole arc was seen free
 
     def as_dict(self) -> dict[str, int]:
         return {f.name: int(getattr(self, f.name)) for f in fields(self)}

@@ -30,7 +30,7 @@ def test_dump_round_trips_through_toml(tmp_path):
     p.write_text(text)
     again = load_config(p)
     assert again == cfg and again.hash() == cfg.hash()
-    assert tomllib.loads(dump_config(Config()))["mapper"]["method"] == "andersone"
+    assert tomllib.loads(dump_config(Config()))["mapper"]["method"] == "attribution"
 
 
 @pytest.mark.parametrize(

@@ -170,3 +170,10 @@ def test_bytes_deterministic_and_no_time_chunks(tmp_path: Path, features: Featur
 def test_bad_trajectory_shape_refused(features: FeatureTable) -> None:
     with pytest.raises(ValueError, match=r"trajectory_xy must have shape \(N, 2\)"):
         render_map(make_snapshot(GRID, _prob(), features), trajectory_xy=np.zeros(5), features=None)
+
+
+def test_tick_labels_are_plain_text_the_default_font_has() -> None:
+    from formats.writers.map_png import _tick_label
+
+    assert [_tick_label(v, 5.0) for v in (-10.0, -0.0, 5.0)] == ["-10", "0", "5"]
+    assert [_tick_label(v, 0.5) for v in (-0.5, 1.0)] == ["-0.5", "1.0"]

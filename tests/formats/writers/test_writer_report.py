@@ -55,6 +55,7 @@ def test_readable_values() -> None:
     assert format_number(0.123456789) == "0.1235"
     assert format_number(0.00868) == "0.00868" and format_number(2.5e-5) == "2.500e-05"
     assert format_value("start_ns", 1_700_000_000_250_000_000) == "2023-11-14 22:13:20.250 UTC"
+    assert format_value("end_ns", 32_906_000_123) == "32.906 s on the log's clock"  # not 1970
     assert format_duration(45.94) == "45.9 s"
     assert format_duration(125.5) == "2 min 5.5 s"
     assert format_duration(7384) == "2 h 03 min 04 s"

@@ -25,10 +25,10 @@ def grid() -> GridSpec:
 
 @pytest.fixture(scope="session")
 def intel_scans(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[MapSnapshot, list[Scan]]]:
-    """The Intel lab log (real trajectory, emulated ring) mapped by ``run`` with the default
-    configuration: its final map and the scans the pipeline fed the mapper."""
+    """The Intel lab log (real trajectory, emulated ring) mapped by ``run`` with the paper's
+    method (one pass): its final map and the scans the pipeline fed the mapper."""
     import pipeline.run as run_mod
-    from pipeline.config import Config
+    from pipeline.config import Config, MapperConfig
 
     captured: list[Scan] = []
     original = run_mod._integrate
@@ -40,5 +40,6 @@ def intel_scans(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[MapS
     log = Path(__file__).resolve().parents[3] / "sample_logs" / "intel-lab" / "intel.mcap"
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(run_mod, "_integrate", capture)
-        result = run_mod.run(log, tmp_path_factory.mktemp("intel") / "out", Config())
+        paper = Config().replace(mapper=MapperConfig(method="andersone"))
+        result = run_mod.run(log, tmp_path_factory.mktemp("intel") / "out", paper)
     yield result.snapshot, captured

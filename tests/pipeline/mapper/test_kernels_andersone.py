@@ -133,5 +133,5 @@ def test_kernel_equals_reference_on_a_real_log(intel_scans) -> None:  # type: ig
     """The Intel lab log (real trajectory, emulated ring) as the pipeline scans it."""
     snapshot, scans = intel_scans
     assert len(scans) > 500
-    ker = _assert_same_maps(MapperConfig(), snapshot.grid, scans)
+    ker = _assert_same_maps(MapperConfig(method="andersone"), snapshot.grid, scans)
     np.testing.assert_array_equal(ker.feature_table().x, snapshot.features.x)

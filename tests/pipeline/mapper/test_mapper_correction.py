@@ -14,7 +14,7 @@ from pipeline.mapper.free_space import free_space_scan
 from pipeline.mapper.reading_features import classify_scan
 from pipeline.mapper.types import MapperCounters
 
-CFG = MapperConfig()
+CFG = MapperConfig(method="andersone")
 
 
 def _setup(grid, means, sigma, measured):  # type: ignore[no-untyped-def]
@@ -112,7 +112,7 @@ def test_refit_from_cell_centres_when_configured(grid) -> None:  # type: ignore[
     """refit_positions = 'cell': eqs. 9-10 on the survivors' cell centres."""
     centre, sigma = np.array([1.2, 0.95]), 0.12
     fs, free = _setup(grid, [centre], sigma, [1])
-    cfg = MapperConfig(refit_positions="cell")
+    cfg = MapperConfig(method="andersone", refit_positions="cell")
     correct_features(fs, free, cfg, grid, np.random.Generator(np.random.PCG64(7)), MapperCounters())
     _, _, col, row, keep = _survivors(grid, free, centre, sigma, 7)
     cx = grid.origin_x + (col[keep] + 0.5) * grid.resolution
@@ -128,7 +128,7 @@ def test_refit_from_cell_centres_when_configured(grid) -> None:  # type: ignore[
 def _wide_feature(grid, measured, split_guard):  # type: ignore[no-untyped-def]
     """A feature 1.2 m wide (σ_y = 0.6 m) across the cone at x = 0 (cone half-width 0.8 m):
     survivors on both sides, their mean in the cone."""
-    cfg = MapperConfig(split_guard=split_guard)
+    cfg = MapperConfig(method="andersone", split_guard=split_guard)
     fs = FeatureSet(grid, cfg.match_distance)
     fs.add(np.array([[0.0, 0.0]]), np.array([[0.1**2, 0.0, 0.6**2]]), np.zeros(1, dtype=np.int64))
     fs.measured[0] = measured

@@ -21,7 +21,7 @@ from pipeline.mapper.reading_features import (
     reading_features,
 )
 
-CFG = MapperConfig()
+CFG = MapperConfig(method="andersone")
 BETA = math.radians(30.0)
 
 
@@ -55,7 +55,7 @@ def test_feature_mean_on_beam_axis(make_scan) -> None:  # type: ignore[no-untype
 def test_skipped_readings_counted_by_reason(make_scan, grid) -> None:  # type: ignore[no-untyped-def]
     ranges = [np.nan, np.inf, -np.inf, -1.0, 0.05, 4.995, 5.0, 2.0]
     # Without correction the one feature stays where eq. 1 put it.
-    m = AndersoneMapper(MapperConfig(feature_correction=False), grid)
+    m = AndersoneMapper(MapperConfig(method="andersone", feature_correction=False), grid)
     m.integrate(make_scan(ranges, min_range=0.1, max_range=5.0))
     c = m.counters
     assert (c.readings, c.readings_used, c.features_created) == (8, 1, 1)

@@ -15,7 +15,7 @@ from pipeline.mapper.grid_raster import ellipse_spans, span_cells
 from pipeline.mapper.reading_features import classify_scan
 from pipeline.mapper.types import Scan
 
-CFG = MapperConfig()
+CFG = MapperConfig(method="andersone")
 HB = math.radians(15.0)
 
 
@@ -66,7 +66,7 @@ def test_max_range_clears_nothing_by_default(grid) -> None:  # type: ignore[no-u
 
 
 def test_clear_on_max_range_clears_up_to_r_max(grid) -> None:  # type: ignore[no-untyped-def]
-    cfg = MapperConfig(clear_on_max_range=True)
+    cfg = MapperConfig(method="andersone", clear_on_max_range=True)
     for r in (5.0, np.inf):
         free = _free(build_scan([r], max_range=4.0, ox=-4.5, oy=0.0), grid, cfg)
         dist, _off, truth = _cone_truth(grid, -4.5, 0.0, 0.0, 4.0)
@@ -81,7 +81,7 @@ def test_clear_on_max_range_clears_up_to_r_max(grid) -> None:  # type: ignore[no
 
 
 def test_cone_leaving_grid_is_clipped(grid) -> None:  # type: ignore[no-untyped-def]
-    cfg = MapperConfig(feature_correction=False)
+    cfg = MapperConfig(method="andersone", feature_correction=False)
     m = AndersoneMapper(cfg, grid)
     m.integrate(build_scan([4.0, 4.0], alpha=[0.0, math.pi], ox=4.8, oy=4.8))
     snap = m.snapshot()

@@ -14,11 +14,11 @@ from mapper_helpers import build_scan, cell_centres
 from formats.errors import ConfigError
 from formats.map_types import GridSpec
 from pipeline.config import MapperConfig
-from pipeline.mapper import AndersoneMapper, ClassicMapper, make_mapper
+from pipeline.mapper import AndersoneMapper, AttributionMapper, ClassicMapper, make_mapper
 from pipeline.mapper.occupancy import FreeLayer, logit, occupied_layer
 from pipeline.mapper.synthetic import ring_scans, room_grid
 
-CFG = MapperConfig()
+CFG = MapperConfig(method="andersone")
 ROOT = Path(__file__).resolve().parents[3]
 
 
@@ -36,7 +36,7 @@ def test_free_layer_update_and_clamp() -> None:
 
 
 def test_unknown_is_nan_and_free_probability(grid) -> None:  # type: ignore[no-untyped-def]
-    m = AndersoneMapper(MapperConfig(feature_correction=False), grid)
+    m = AndersoneMapper(MapperConfig(method="andersone", feature_correction=False), grid)
     snap = m.snapshot()
     assert np.isnan(snap.probability).all() and not snap.observed.any()
     assert snap.probability.dtype == np.float32 and snap.probability.shape == grid.shape
@@ -53,7 +53,7 @@ def test_unknown_is_nan_and_free_probability(grid) -> None:  # type: ignore[no-u
 
 
 def test_feature_ellipse_overrides_free_log_odds(grid) -> None:  # type: ignore[no-untyped-def]
-    m = AndersoneMapper(MapperConfig(feature_correction=False), grid)
+    m = AndersoneMapper(MapperConfig(method="andersone", feature_correction=False), grid)
     for _ in range(10):  # drive the cells in front of the origin to the lower clamp
         m.integrate(build_scan([4.0], ox=-2.0))
     # A feature right inside that free region (as if put there by another sensor).
@@ -82,7 +82,7 @@ def _run(cfg: MapperConfig, n: int = 60):  # type: ignore[no-untyped-def]
 
 
 def test_same_seed_same_state_other_seed_differs() -> None:
-    a, b, c = _run(CFG), _run(CFG), _run(MapperConfig(seed=1))
+    a, b, c = _run(CFG), _run(CFG), _run(MapperConfig(method="andersone", seed=1))
     ta, tb, tc = a.feature_table(), b.feature_table(), c.feature_table()
     for col in ("id", "x", "y", "cov_xx", "cov_xy", "cov_yy", "measured_times"):
         np.testing.assert_array_equal(getattr(ta, col), getattr(tb, col))
@@ -113,6 +113,7 @@ def test_classic_marks_obstacle_occupied_and_cone_free(grid) -> None:  # type: i
 
 def test_make_mapper_rejects_unknown_method(grid) -> None:  # type: ignore[no-untyped-def]
     assert isinstance(make_mapper(CFG, grid), AndersoneMapper)
+    assert isinstance(make_mapper(MapperConfig(), grid), AttributionMapper)
     with pytest.raises(ConfigError, match=r"mapper\.method"):
         make_mapper(MapperConfig(method="nope"), grid)  # type: ignore[arg-type]
 
@@ -120,7 +121,7 @@ def test_make_mapper_rejects_unknown_method(grid) -> None:  # type: ignore[no-un
 def _room_variance(scans, **kw):  # type: ignore[no-untyped-def]
     var = {}
     for on in (True, False):
-        m = make_mapper(MapperConfig(feature_correction=on, **kw), room_grid())
+        m = make_mapper(MapperConfig(method="andersone", feature_correction=on, **kw), room_grid())
         for s in scans:
             m.integrate(s)
         var[on] = m.feature_variance()

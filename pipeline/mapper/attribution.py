@@ -1,0 +1,138 @@
+"""The default method: echo attribution against the whole log's free-space evidence.
+
+Offline, in two passes over the log's scans (docs/ALGORITHM.md §9):
+
+1. **Evidence.** Every reading with an echo at range ``d`` counts one free observation in
+   each cell of its cone closer than ``d − κ_free·σ_d(d)`` (per reading, not per scan), and
+   one *arc* observation in each cell of its cone within ``d ± band`` (the range arc where
+   the echo may have come from; ``band = max(attr_band_sigmas·σ_d(d), res/2)``). The same
+   pass feeds the paper's mapper (:class:`~pipeline.mapper.andersone.AndersoneMapper`), so
+   ``features.parquet`` and the paper's metric stay the paper's Gaussian features.
+2. **Attribution.** An echo came from the *nearest* surface in its cone, somewhere on its
+   arc. Arc cells that the whole log has seen free more than ``attr_candidate_ratio``
+   times as often as arcs cover them cannot have produced it; the echo is spread over the
+   ``n`` remaining candidates, ``1/n**attr_dilution`` each.
+
+A cell is occupied when its attributed weight ``H`` beats its free count ``F`` in a linear
+test, ``H > attr_free_weight·F + attr_threshold·median(H > 0)``: the second term puts the
+threshold on the log's own evidence scale (a dense log attributes more weight to every
+cell than a sparse one), so no threshold is tuned to one log's reading density. Cells not
+occupied take the free layer's probability from their free count (eq. 11 per reading, with
+its clamps); cells with no free observation are unknown.
+
+Memory is the three float32 evidence grids and the paper's feature set: nothing grows with
+the log's length (the pipeline streams the log once per pass).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from pipeline import reading_quality as rq
+from pipeline.config import MapperConfig
+from pipeline.mapper.andersone import AndersoneMapper, concat_scans
+from pipeline.mapper.cone_kernels import attribute_echoes, count_arcs, count_free, empty_grid
+from pipeline.mapper.free_space import free_radius
+from pipeline.mapper.occupancy import logit
+from pipeline.mapper.reading_features import classify_scan, distance_sigma
+from pipeline.mapper.types import (
+    F32,
+    F64,
+    B,
+    FeatureTable,
+    GridSpec,
+    MapperCounters,
+    MapSnapshot,
+    Scan,
+)
+
+
+class AttributionMapper:
+    """Two-pass echo attribution; feed every scan in pass 0, then again in pass 1."""
+
+    passes = 2
+
+    def __init__(self, config: MapperConfig, grid: GridSpec) -> None:
+        self.config = config
+        self.grid = grid
+        self.paper = AndersoneMapper(config, grid)
+        self.counters: MapperCounters = self.paper.counters
+        self.free: F32 = empty_grid(grid.shape)
+        self.arcs: F32 = empty_grid(grid.shape)
+        self.hits: F32 = empty_grid(grid.shape)
+        self.pass_index = 0
+
+    def begin_pass(self, index: int) -> None:
+        """Start pass ``index`` (0: evidence, 1: attribution) over the same scans."""
+        if index not in (0, 1):
+            raise ValueError(f"the attribution method has passes 0 and 1, not {index}")
+        self.pass_index = index
+
+    def integrate(self, scan: Scan) -> None:
+        """Add one scan to the current pass."""
+        self.integrate_many([scan])
+
+    def integrate_many(self, scans: Sequence[Scan]) -> None:
+        """Add scans in order to the current pass."""
+        if not scans:
+            return
+        if self.pass_index == 0:
+            self.paper.integrate_many(scans)
+        cat, _ = concat_scans(scans)
+        codes = classify_scan(cat, self.config)
+        echo = codes == rq.OK
+        d: F64 = np.where(echo, cat.range_m, 0.0)
+        band = np.maximum(
+            self.config.attr_band_sigmas * distance_sigma(d, self.config),
+            0.5 * self.grid.resolution,
+        )
+        g = self.grid
+        geometry = (cat.origin_x, cat.origin_y, cat.alpha, 0.5 * cat.fov)
+        if self.pass_index == 0:
+            radius = free_radius(cat, codes, self.config)
+            count_free(*geometry, radius, g.origin_x, g.origin_y, g.resolution, self.free)
+            count_arcs(*geometry, d, band, g.origin_x, g.origin_y, g.resolution, self.arcs)
+        else:
+            self.counters.echoes_unattributed += int(attribute_echoes(
+                *geometry, d, band, g.origin_x, g.origin_y, g.resolution, self.free,
+                self.arcs, self.config.attr_candidate_ratio, self.config.attr_dilution,
+                self.hits,
+            ))
+
+    def occupied(self) -> B:
+        """Cells whose attributed echo weight beats their free count (the linear test)."""
+        hits = self.hits
+        positive = hits[hits > 0]
+        scale = float(np.median(positive)) if positive.size else 0.0
+        threshold = self.config.attr_free_weight * self.free + self.config.attr_threshold * scale
+        out: B = hits > threshold
+        return out
+
+    def snapshot(self) -> MapSnapshot:
+        """Occupied cells at ``p_occ``; other observed cells from their free count."""
+        cfg = self.config
+        occupied = self.occupied()
+        lo, hi = logit(cfg.p_clamp_min), logit(cfg.p_clamp_max)
+        free_logodds = np.clip(self.free * np.float32(logit(cfg.p_free)), lo, hi).astype(np.float32)
+        seen_free = self.free > 0
+        p = np.where(seen_free, 1.0 - 1.0 / (1.0 + np.exp(free_logodds.astype(np.float64))), np.nan)
+        p[occupied] = cfg.p_occ
+        return MapSnapshot(
+            grid=self.grid,
+            probability=p.astype(np.float32),
+            free_logodds=free_logodds,
+            occupied=occupied,
+            observed=occupied | seen_free,
+            features=self.paper.feature_table(),
+            counters=self.counters.as_dict(),
+        )
+
+    def feature_table(self) -> FeatureTable:
+        """The paper's features (pass 0), sorted by id."""
+        return self.paper.feature_table()
+
+    def feature_variance(self) -> tuple[float, float]:
+        """The paper's metric of the features (§7)."""
+        return self.paper.feature_variance()

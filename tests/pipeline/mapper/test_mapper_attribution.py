@@ -1,0 +1,157 @@
+"""§9 echo attribution: the cone kernels' cells, the attribution rule, the two-pass mapper."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from mapper_helpers import build_scan, cell_centres
+
+from pipeline.config import MapperConfig
+from pipeline.mapper import AttributionMapper, make_mapper
+from pipeline.mapper.cone_kernels import attribute_echoes, count_arcs, count_free, empty_grid
+from pipeline.mapper.grid_raster import sector_spans, span_cells
+from pipeline.mapper.synthetic import ring_scans, room_grid, room_segments
+from pipeline.mapper.types import GridSpec
+
+GRID = GridSpec(-5.0, -5.0, 0.05, 200, 200)
+CFG = MapperConfig()  # the default method is attribution
+
+
+def _in_cone(grid: GridSpec, ox: float, oy: float, a: float, hf: float) -> tuple:
+    x, y = cell_centres(grid)
+    dx, dy = x - ox, y - oy
+    dist = np.hypot(dx, dy)
+    inside = dx * np.cos(a) + dy * np.sin(a) >= dist * np.cos(hf)
+    return dist, inside
+
+
+def test_free_cone_cells_match_the_span_rasteriser() -> None:
+    rng = np.random.default_rng(3)
+    n = 40
+    ox, oy = rng.uniform(-3, 3, n), rng.uniform(-3, 3, n)
+    alpha, hf = rng.uniform(-np.pi, np.pi, n), rng.uniform(0.05, 0.6, n)
+    radius = rng.uniform(0.2, 4.0, n)
+    counts = empty_grid(GRID.shape)
+    added = count_free(ox, oy, alpha, hf, radius, GRID.origin_x, GRID.origin_y, 0.05, counts)
+    ref = np.zeros(GRID.shape, dtype=np.float32)
+    _, row, col = span_cells(sector_spans(ox, oy, alpha, hf, radius, GRID))
+    np.add.at(ref, (row, col), 1.0)
+    # The same cell rule (centre inside, strict radius); ties on a cone edge may differ.
+    assert added == int(ref.sum())
+    assert np.count_nonzero(counts != ref) <= 0.001 * added
+
+
+def test_arc_cells_are_the_band_around_the_echo_inside_the_cone() -> None:
+    counts = empty_grid(GRID.shape)
+    one = np.array([1.0])
+    count_arcs(0.1 * one, 0.2 * one, 0.3 * one, 0.25 * one, 2.0 * one, 0.1 * one,
+               GRID.origin_x, GRID.origin_y, 0.05, counts)
+    dist, inside = _in_cone(GRID, 0.1, 0.2, 0.3, 0.25)
+    expected = inside & (np.abs(dist - 2.0) <= 0.1 + 1e-12)
+    assert np.array_equal(counts > 0, expected)
+    assert counts.max() == 1.0 and expected.sum() > 20
+
+
+def _arc_of(d: float) -> tuple:
+    geometry = (np.array([0.0]), np.array([0.0]), np.array([0.0]), np.array([0.2]))
+    return geometry, np.array([d]), np.array([0.05])
+
+
+def test_an_echo_is_spread_over_its_candidates_by_the_dilution_law() -> None:
+    geometry, d, band = _arc_of(2.0)
+    free, arcs, hits = empty_grid(GRID.shape), empty_grid(GRID.shape), empty_grid(GRID.shape)
+    count_arcs(*geometry, d, band, GRID.origin_x, GRID.origin_y, 0.05, arcs)
+    n = int(np.count_nonzero(arcs))
+    lost = attribute_echoes(*geometry, d, band, GRID.origin_x, GRID.origin_y, 0.05,
+                            free, arcs, 2.0, 0.5, hits)
+    assert lost == 0
+    assert np.allclose(hits[arcs > 0], 1.0 / np.sqrt(n))
+    assert np.count_nonzero(hits) == n
+    even = empty_grid(GRID.shape)
+    attribute_echoes(*geometry, d, band, GRID.origin_x, GRID.origin_y, 0.05,
+                     free, arcs, 2.0, 1.0, even)
+    assert even.sum() == pytest.approx(1.0, rel=1e-5)  # dilution 1: an even split
+
+
+def test_arc_cells_seen_free_cannot_have_produced_the_echo() -> None:
+    geometry, d, band = _arc_of(2.0)
+    free, arcs, hits = empty_grid(GRID.shape), empty_grid(GRID.shape), empty_grid(GRID.shape)
+    count_arcs(*geometry, d, band, GRID.origin_x, GRID.origin_y, 0.05, arcs)
+    rows, cols = np.nonzero(arcs)
+    # Every arc cell but one was seen free 3 times, more than 2 × its one arc.
+    free[rows[1:], cols[1:]] = 3.0
+    lost = attribute_echoes(*geometry, d, band, GRID.origin_x, GRID.origin_y, 0.05,
+                            free, arcs, 2.0, 0.5, hits)
+    assert lost == 0 and hits[rows[0], cols[0]] == 1.0 and np.count_nonzero(hits) == 1
+    free[rows[0], cols[0]] = 3.0  # now the whole arc is known free: the echo is unexplained
+    hits[:] = 0
+    lost = attribute_echoes(*geometry, d, band, GRID.origin_x, GRID.origin_y, 0.05,
+                            free, arcs, 2.0, 0.5, hits)
+    assert lost == 1 and not hits.any()
+
+
+def _room_map(cfg: MapperConfig, n_scans: int = 400):  # type: ignore[no-untyped-def]
+    scans = ring_scans(n_scans, seed=2)
+    m = make_mapper(cfg, room_grid())
+    for index in range(m.passes):
+        m.begin_pass(index)
+        m.integrate_many(scans)
+    return m, m.snapshot()
+
+
+def _wall_distance(grid: GridSpec) -> np.ndarray:
+    """Distance of every cell centre to the room's nearest wall segment, m."""
+    x, y = cell_centres(grid)
+    best = np.full(grid.shape, np.inf)
+    for x0, y0, x1, y1 in room_segments():
+        ex, ey = x1 - x0, y1 - y0
+        t = np.clip(((x - x0) * ex + (y - y0) * ey) / (ex * ex + ey * ey), 0.0, 1.0)
+        best = np.minimum(best, np.hypot(x - (x0 + t * ex), y - (y0 + t * ey)))
+    return best
+
+
+def test_the_room_map_puts_occupied_cells_on_the_walls() -> None:
+    m, snap = _room_map(CFG)
+    assert isinstance(m, AttributionMapper)
+    near = _wall_distance(snap.grid)
+    occupied = snap.occupied
+    precision = float((near[occupied] <= 0.10).mean())
+    assert occupied.sum() > 1000 and precision > 0.85
+    # The paper's features ride along for features.parquet and its metric.
+    assert len(snap.features) > 50 and np.isfinite(m.feature_variance()[0])
+    # Free cells are free (far from walls) and carry the free layer's probability.
+    free = snap.probability < 0.196
+    assert free.sum() > 5000 and float((near[free] > 0.10).mean()) > 0.99
+    assert np.all(snap.probability[occupied] == np.float32(CFG.p_occ))
+
+
+def test_the_attribution_map_beats_the_classic_grid_on_the_room() -> None:
+    _, ours = _room_map(CFG)
+    _, classic = _room_map(MapperConfig(method="classic"))
+    near = _wall_distance(ours.grid)
+
+    def precision(occ: np.ndarray) -> float:
+        return float((near[occ] <= 0.10).mean())
+
+    assert precision(ours.occupied) > precision(classic.occupied) + 0.3
+
+
+def test_two_runs_give_the_same_map_and_passes_are_checked() -> None:
+    _, a = _room_map(CFG, 40)
+    _, b = _room_map(CFG, 40)
+    assert np.array_equal(a.probability, b.probability, equal_nan=True)
+    with pytest.raises(ValueError, match="passes 0 and 1"):
+        AttributionMapper(CFG, room_grid()).begin_pass(2)
+
+
+def test_counters_count_readings_once_and_unexplained_echoes() -> None:
+    m = make_mapper(CFG, GRID)
+    scan = build_scan([2.0, 5.0, np.nan])
+    for index in range(m.passes):
+        m.begin_pass(index)
+        m.integrate(scan)
+    c = m.counters
+    assert (c.readings, c.readings_used, c.skipped_max_range, c.skipped_nan) == (3, 1, 1, 1)
+    assert c.echoes_unattributed == 0
+    snap = m.snapshot()
+    assert snap.occupied.any()  # one echo, nothing contradicts it: its arc is occupied
