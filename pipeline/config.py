@@ -87,8 +87,13 @@ class MapperConfig:
     classic_p_occ: float = doc_field(
         "classic baseline: inverse sensor model value at the echo (§8)", default=0.7
     )
+    classic_per_reading: bool = doc_field(
+        "classic baseline: every reading updates the cells of its cone once (as OctoMap "
+        "inserts each reading), instead of one update per cell per scan (§8)",
+        default=True,
+    )
     classic_thickness_cells: float = doc_field(
-        "classic baseline: obstacle thickness w, in cells (§8)", default=2.0
+        "classic baseline: obstacle thickness w, in cells (§8)", default=1.0
     )
     attr_band_sigmas: float = doc_field(
         "attribution (§9): an echo's arc is d ± this many σ_d(d) (at least half a cell)",

@@ -14,6 +14,10 @@ rosbags. One message per topic, all stamped at ``stamp_ns`` (the end of the log)
   once) to yellow (the most measured feature); marker id = feature id.
 * ``/trajectory`` — ``nav_msgs/msg/Path``, the poses with their own stamps.
 
+The marker array and the path are serialised in bulk (:mod:`formats.writers.cdr_sequence`:
+rosbags' own bytes for a few elements, repeated with the fields patched in), byte for byte
+what rosbags writes for the whole message, ~1000× faster for thousands of markers.
+
 Every message's ``frame_id`` is the frame the log's poses are in. The file's bytes depend
 only on the inputs (no wall-clock time anywhere).
 """
@@ -21,6 +25,7 @@ only on the inputs (no wall-clock time anywhere).
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
@@ -31,6 +36,7 @@ import numpy.typing as npt
 
 from formats.map_types import FeatureTable, GridSpec
 from formats.writers.atomic import atomic_open
+from formats.writers.cdr_sequence import sequence_cdr
 from formats.writers.ellipse import covariance_axes
 from formats.writers.nav2_map import FREE, OCCUPIED, trinary_classes
 from formats.writers.trajectory_tum import Trajectory
@@ -129,10 +135,6 @@ def _stamp(m: _Msgs, t_ns: int) -> Any:
     return m.Time(sec=sec, nanosec=nsec)
 
 
-def _yaw_quaternion(m: _Msgs, yaw: float) -> Any:
-    return m.Quaternion(x=0.0, y=0.0, z=math.sin(0.5 * yaw), w=math.cos(0.5 * yaw))
-
-
 def occupancy_data(probability: np.ndarray) -> npt.NDArray[np.int8]:
     """OccupancyGrid ``data`` of a probability map (row 0 = min y, row-major): 100, 0, −1."""
     classes = trinary_classes(probability)
@@ -160,53 +162,84 @@ def _grid_msg(m: _Msgs, probability: np.ndarray, grid: GridSpec, frame: str, t_n
     )
 
 
-def _markers_msg(m: _Msgs, features: FeatureTable, frame: str, t_ns: int) -> Any:
+def _marker_columns(features: FeatureTable) -> dict[str, npt.NDArray[Any]]:
+    """The per-feature fields of the markers, as arrays of their message field types."""
     major, minor, theta = covariance_axes(features.cov_xx, features.cov_xy, features.cov_yy)
-    rgb = measured_colours(features.measured_times)
+    rgb = measured_colours(features.measured_times).astype(np.float32)
+    return {
+        "id": (np.asarray(features.id, dtype=np.int64) % 2**31).astype(np.int32),  # int32 field
+        "x": np.asarray(features.x, dtype=np.float64),
+        "y": np.asarray(features.y, dtype=np.float64),
+        "qz": np.sin(0.5 * theta),
+        "qw": np.cos(0.5 * theta),
+        # Diameters of the 2σ ellipse; never zero (RViz drops zero-scale markers).
+        "sx": np.maximum(4.0 * major, 1e-3),
+        "sy": np.maximum(4.0 * minor, 1e-3),
+        "r": rgb[:, 0], "g": rgb[:, 1], "b": rgb[:, 2],
+    }
+
+
+def _marker(m: _Msgs, header: Any, v: Mapping[str, Any]) -> Any:
+    """One feature's marker from its field values ``v`` (see :func:`_marker_columns`)."""
+    empty = np.zeros(0, dtype=np.uint8)
+    return m.Marker(
+        header=header,
+        ns=MARKER_NAMESPACE,
+        id=int(v["id"]),
+        type=m.Marker.CYLINDER,
+        action=m.Marker.ADD,
+        pose=m.Pose(position=m.Point(x=float(v["x"]), y=float(v["y"]), z=0.0),
+                    orientation=m.Quaternion(x=0.0, y=0.0, z=float(v["qz"]), w=float(v["qw"]))),
+        scale=m.Vector3(x=float(v["sx"]), y=float(v["sy"]), z=MARKER_HEIGHT_M),
+        color=m.ColorRGBA(r=float(v["r"]), g=float(v["g"]), b=float(v["b"]), a=MARKER_ALPHA),
+        lifetime=m.Duration(sec=0, nanosec=0),
+        frame_locked=False,
+        points=[],
+        colors=[],
+        texture_resource="",
+        texture=m.CompressedImage(header=m.Header(stamp=m.Time(sec=0, nanosec=0), frame_id=""),
+                                  format="", data=empty),
+        uv_coordinates=[],
+        text="",
+        mesh_resource="",
+        mesh_file=m.MeshFile(filename="", data=empty),
+        mesh_use_embedded_materials=False,
+    )
+
+
+def _markers_cdr(m: _Msgs, features: FeatureTable, frame: str, t_ns: int) -> bytes:
     header = m.Header(stamp=_stamp(m, t_ns), frame_id=frame)
-    empty_image = m.CompressedImage(header=m.Header(stamp=m.Time(sec=0, nanosec=0), frame_id=""),
-                                    format="", data=np.zeros(0, dtype=np.uint8))
-    markers = []
-    rows = zip(features.id.tolist(), features.x.tolist(), features.y.tolist(), major.tolist(),
-               minor.tolist(), theta.tolist(), rgb.tolist(), strict=True)
-    for fid, x, y, a, b, th, (r, g, bl) in rows:
-        markers.append(
-            m.Marker(
-                header=header,
-                ns=MARKER_NAMESPACE,
-                id=int(fid) % 2**31,  # int32 field
-                type=m.Marker.CYLINDER,
-                action=m.Marker.ADD,
-                pose=m.Pose(position=m.Point(x=x, y=y, z=0.0), orientation=_yaw_quaternion(m, th)),
-                # Diameters of the 2σ ellipse; never zero (RViz drops zero-scale markers).
-                scale=m.Vector3(x=max(4.0 * a, 1e-3), y=max(4.0 * b, 1e-3), z=MARKER_HEIGHT_M),
-                color=m.ColorRGBA(r=r, g=g, b=bl, a=MARKER_ALPHA),
-                lifetime=m.Duration(sec=0, nanosec=0),
-                frame_locked=False,
-                points=[],
-                colors=[],
-                texture_resource="",
-                texture=empty_image,
-                uv_coordinates=[],
-                text="",
-                mesh_resource="",
-                mesh_file=m.MeshFile(filename="", data=np.zeros(0, dtype=np.uint8)),
-                mesh_use_embedded_materials=False,
-            )
-        )
-    return m.MarkerArray(markers=markers)
+    return sequence_cdr(
+        m.ts, MARKERS_TYPE, lambda items: m.MarkerArray(markers=items),
+        lambda v: _marker(m, header, v), _marker_columns(features),
+    )
 
 
-def _path_msg(m: _Msgs, trajectory: Trajectory, frame: str, t_ns: int) -> Any:
-    poses = [
-        m.PoseStamped(
-            header=m.Header(stamp=_stamp(m, t), frame_id=frame),
-            pose=m.Pose(position=m.Point(x=x, y=y, z=0.0), orientation=_yaw_quaternion(m, yaw)),
-        )
-        for t, x, y, yaw in zip(trajectory.t_ns.tolist(), trajectory.x.tolist(),
-                                trajectory.y.tolist(), trajectory.yaw.tolist(), strict=True)
-    ]
-    return m.Path(header=m.Header(stamp=_stamp(m, t_ns), frame_id=frame), poses=poses)
+def _pose_columns(trajectory: Trajectory) -> dict[str, npt.NDArray[Any]]:
+    sec, nsec = np.divmod(np.asarray(trajectory.t_ns, dtype=np.int64), 1_000_000_000)
+    yaw = np.asarray(trajectory.yaw, dtype=np.float64)
+    return {
+        "sec": sec.astype(np.int32), "nanosec": nsec.astype(np.uint32),
+        "x": np.asarray(trajectory.x, dtype=np.float64),
+        "y": np.asarray(trajectory.y, dtype=np.float64),
+        "qz": np.sin(0.5 * yaw), "qw": np.cos(0.5 * yaw),
+    }
+
+
+def _pose(m: _Msgs, frame: str, v: Mapping[str, Any]) -> Any:
+    return m.PoseStamped(
+        header=m.Header(stamp=m.Time(sec=int(v["sec"]), nanosec=int(v["nanosec"])), frame_id=frame),
+        pose=m.Pose(position=m.Point(x=float(v["x"]), y=float(v["y"]), z=0.0),
+                    orientation=m.Quaternion(x=0.0, y=0.0, z=float(v["qz"]), w=float(v["qw"]))),
+    )
+
+
+def _path_cdr(m: _Msgs, trajectory: Trajectory, frame: str, t_ns: int) -> bytes:
+    header = m.Header(stamp=_stamp(m, t_ns), frame_id=frame)
+    return sequence_cdr(
+        m.ts, PATH_TYPE, lambda items: m.Path(header=header, poses=items),
+        lambda v: _pose(m, frame, v), _pose_columns(trajectory),
+    )
 
 
 def write_map_mcap(
@@ -236,19 +269,19 @@ def write_map_mcap(
     ts = _typestore()
     m = _Msgs(ts)
     messages = (
-        (MAP_TOPIC, GRID_TYPE, _LATCHED, _grid_msg(m, prob, grid, frame, stamp_ns)),
-        (FEATURES_TOPIC, MARKERS_TYPE, _LATCHED, _markers_msg(m, features, frame, stamp_ns)),
-        (TRAJECTORY_TOPIC, PATH_TYPE, _LATCHED, _path_msg(m, trajectory, frame, stamp_ns)),
+        (MAP_TOPIC, GRID_TYPE, bytes(ts.serialize_cdr(_grid_msg(m, prob, grid, frame, stamp_ns),
+                                                      GRID_TYPE))),
+        (FEATURES_TOPIC, MARKERS_TYPE, _markers_cdr(m, features, frame, stamp_ns)),
+        (TRAJECTORY_TOPIC, PATH_TYPE, _path_cdr(m, trajectory, frame, stamp_ns)),
     )
     with atomic_open(Path(path)) as f:
         writer = Writer(f, compression=CompressionType.ZSTD)
         writer.start(profile="ros2", library=library)
-        for topic, msgtype, qos, msg in messages:
+        for topic, msgtype, data in messages:
             msgdef, _ = ts.generate_msgdef(msgtype, ros_version=2)
             schema = writer.register_schema(msgtype, "ros2msg", msgdef.encode("utf-8"))
             channel = writer.register_channel(
-                topic, "cdr", schema, {"offered_qos_profiles": qos}
+                topic, "cdr", schema, {"offered_qos_profiles": _LATCHED}
             )
-            data = bytes(ts.serialize_cdr(msg, msgtype))
             writer.add_message(channel, stamp_ns, data, stamp_ns, 0)
         writer.finish()

@@ -61,16 +61,18 @@ class ClassicMapper:
 
     def integrate(self, scan: Scan) -> None:
         """Add one scan: free and occupied cells of every cone, one update per cell."""
-        if self.reference:
-            self._integrate_reference(scan)
-        else:
-            self.integrate_many([scan])
+        self.integrate_many([scan])
 
     def integrate_many(self, scans: Sequence[Scan]) -> None:
         """Add scans in order (as :meth:`integrate` on each)."""
         if self.reference:
             for scan in scans:
-                self._integrate_reference(scan)
+                if self.config.classic_per_reading:
+                    for k in range(len(scan)):
+                        self._integrate_reference(scan.take(slice(k, k + 1)))
+                    self.counters.scans -= len(scan) - 1  # still one scan
+                else:
+                    self._integrate_reference(scan)
             return
         for g in range(0, len(scans), _GROUP):
             group = scans[g : g + _GROUP]
@@ -86,6 +88,8 @@ class ClassicMapper:
         half_w = 0.5 * self.thickness
         outer = free_radius(cat, codes, self.config, margin=np.full(len(cat), -half_w))
         rows, cones, up_down = cone_table(cat, outer)
+        if self.config.classic_per_reading:
+            bounds = np.arange(len(cat) + 1, dtype=np.int64)  # every reading its own update
         g = self.grid
         self.counters.cells_freed += classic_scans(
             cones, up_down, cat.range_m[rows], codes[rows] == rq.OK,

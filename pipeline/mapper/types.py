@@ -50,6 +50,10 @@ class Scan:
     def __len__(self) -> int:
         return int(self.t_ns.shape[0])
 
+    def take(self, rows: slice) -> Scan:
+        """The readings ``rows`` as a scan of their own."""
+        return Scan(*(getattr(self, f.name)[rows] for f in fields(Scan)))
+
 
 @dataclass
 class MapperCounters:

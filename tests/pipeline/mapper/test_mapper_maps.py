@@ -93,7 +93,8 @@ def test_same_seed_same_state_other_seed_differs() -> None:
 
 
 def test_classic_marks_obstacle_occupied_and_cone_free(grid) -> None:  # type: ignore[no-untyped-def]
-    m = make_mapper(MapperConfig(method="classic"), grid)
+    literal = MapperConfig(method="classic", classic_per_reading=False, classic_thickness_cells=2)
+    m = make_mapper(literal, grid)
     assert isinstance(m, ClassicMapper)
     for _ in range(3):
         m.integrate(build_scan([2.0, 5.0], alpha=[0.0, math.pi / 2]))
@@ -220,3 +221,20 @@ def test_occupied_layer_matches_mahalanobis_over_several_raster_blocks() -> None
             want[row, col] = True
     assert 200 < want.sum() < want.size  # a meaningful, not saturated, layer
     assert np.array_equal(got[~unsure], want[~unsure])
+
+
+@pytest.mark.parametrize("reference", [False, True], ids=["kernel", "reference"])
+def test_classic_per_reading_updates_a_cell_once_per_reading(grid, reference) -> None:  # type: ignore[no-untyped-def]
+    x, y = cell_centres(grid)
+    free_cell = (np.abs(x - 1.025) < 1e-9) & (np.abs(y - 0.025) < 1e-9)
+    echo_cell = (np.abs(x - 2.025) < 1e-9) & (np.abs(y - 0.025) < 1e-9)
+    values = {}
+    for per_reading in (True, False):
+        cfg = MapperConfig(method="classic", classic_per_reading=per_reading)
+        m = ClassicMapper(cfg, grid, reference=reference)
+        m.integrate(build_scan([2.025, 2.025, 2.025]))  # three readings of one cone, one scan
+        values[per_reading] = (m.logodds[free_cell][0], m.logodds[echo_cell][0], m.counters.scans)
+    assert values[True][0] == pytest.approx(3 * logit(0.35), abs=1e-5)  # three free updates
+    assert values[True][1] == pytest.approx(min(3 * logit(0.7), logit(0.97)), abs=1e-5)
+    assert values[False][0] == pytest.approx(logit(0.35), abs=1e-6)  # one per scan
+    assert values[True][2] == values[False][2] == 1
