@@ -38,10 +38,11 @@ def test_runner_smoke_prints_every_section(tmp_path: Path) -> None:
     assert "ros1 lz4: 1260 msgs, sonarmap" in by_case
     assert "ros2 mcap: 5100 msgs, sonarmap" in by_case
     assert by_case["ros1 lz4: 1260 msgs, sonarmap"][4].endswith("x rosbags")
-    # Mapper: the three methods against OctoMap (when octomap-python is installed, an
+    # Mapper: the four methods against OctoMap (when octomap-python is installed, an
     # optional benchmark extra), on the same 320 readings.
     has_octomap = importlib.util.find_spec("octomap") is not None
-    for label in ("full method (correction on)", "without correction", "classic log-odds baseline"):
+    for label in ("default method (echo attribution, 2 passes)", "paper's method (correction on)",
+                  "without correction", "classic log-odds baseline"):
         row = by_case[f"320 readings, {label}"]
         assert float(row[2].replace(",", "")) > 0
         assert row[4].endswith("x octomap") == has_octomap
@@ -57,7 +58,7 @@ def test_runner_smoke_prints_every_section(tmp_path: Path) -> None:
     assert by_case["2 workers"][4].endswith("x of 1 worker")
     text = results.read_text(encoding="utf-8")
     assert text.startswith("# Benchmark results") and "Machine: " in text
-    assert "| mapper | 320 readings, full method (correction on) |" in text
+    assert "| mapper | 320 readings, paper's method (correction on) |" in text
 
 
 def test_benchmark_log_is_deterministic_and_cached(
