@@ -48,7 +48,7 @@ def run_warnings(metrics: Mapping[str, Any]) -> list[str]:
         out.append("empty map: no reading was mapped")
     elif int(grid.get("cells_occupied", 0)) == 0:
         out.append("empty map: no occupied cell")
-    elif metrics.get("run", {}).get("method") == "andersone" and int(counts.get("features", 0)) == 0:
+    elif metrics.get("run", {}).get("method") != "classic" and int(counts.get("features", 0)) == 0:
         out.append("empty map: no features")
     if used and int(grid.get("cells_free", 0)) == 0:
         out.append("no free space: no cell was observed free")
