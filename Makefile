@@ -50,7 +50,7 @@ bench: $(STAMP)
 
 # Thousands of mutated logs per format through every reader (about 12 minutes).
 fuzz: $(STAMP)
-	$(BIN)/python -m fuzz.run_fuzz --examples 1000
+	$(BIN)/python -m fuzz.run_fuzz --examples 1000 --values 300
 
 # Mutation testing of the mapper and the stages (mutmut; long: hours on 2 cores). Prints
 # the score; `mutmut results` lists the survivors, `mutmut show NAME` one of them.
@@ -87,6 +87,7 @@ compare: $(STAMP) $(RADISH_LOGS)
 	  sample_logs/orchard/orchard.mcap sample_logs/orchard/orchard.truth.yaml \
 	  sample_logs/intel-lab/intel.mcap sample_logs/intel-lab/intel.laser.yaml \
 	  $(foreach b,$(RADISH),$(COMPARE_DIR)/$(b).mcap $(COMPARE_DIR)/$(b).laser.yaml)
+	$(BIN)/python -m benchmarks.compare_methods --drifted
 
 clean:
 	rm -rf $(VENV) demo_out build *.egg-info .pytest_cache .mypy_cache .ruff_cache

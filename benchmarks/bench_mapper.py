@@ -12,12 +12,12 @@ cone as a fan of rays one cell apart at the echo distance with ``insertPointClou
 to OctoMap, and the §7 mean feature variance with/without correction and split guard.
 
 Figures: see ``benchmarks/RESULTS.md`` (``python -m benchmarks`` runs this at 32/scan
-beside the other benchmarks). Last full run, 100k readings at 32/scan, 2-core machine
-shared with other jobs: OctoMap 8.0k readings/s; full method 17.7k (2.2× OctoMap; 6.4k
-before ``integrate_many`` and the call-count work); without correction 53.9k (6.7×);
-classic 26.6k (3.3×). The 10× OctoMap target is not reached by the full method: its cost
-is numpy call overhead per scan (merge rounds, correction of ~27 touched features), see
-RESULTS.md.
+beside the other benchmarks). Timed runs follow a warm-up, so they load the compiled
+kernels as every run but a machine's first does; the one-off compile and the per-process
+load are measured apart, in fresh processes with an empty numba cache directory. Wall and
+CPU-time ratios are both printed: on a shared machine wall time also measures the other
+jobs. 2026-11-29 (load average ~15): full method 19.8x OctoMap in wall time, ~17x per CPU
+second; classic ~30x per CPU second.
 """
 
 from __future__ import annotations
@@ -28,6 +28,7 @@ import dataclasses
 import math
 import os
 import pstats
+import resource
 import subprocess
 import sys
 import tempfile
@@ -59,12 +60,22 @@ def compile_seconds() -> dict[str, float]:
     with tempfile.TemporaryDirectory(prefix="bench_numba_cache_") as cache:
         env = {**os.environ, "NUMBA_CACHE_DIR": cache}
         for label in ("cold", "cached"):
+            before = resource.getrusage(resource.RUSAGE_CHILDREN)
             res = subprocess.run([sys.executable, "-c", _COMPILE_CHILD], env=env, check=True,
                                  capture_output=True, text=True)
+            after = resource.getrusage(resource.RUSAGE_CHILDREN)
+            # CPU seconds too: on a shared machine the wall time mostly measures the others.
+            out[f"process cpu {label} s"] = (after.ru_utime - before.ru_utime
+                                             + after.ru_stime - before.ru_stime)
             words = res.stdout.split()
             out[f"import {label} s"] = float(words[words.index("IMPORT_S") + 1])
             out[f"warm {label} s"] = float(words[words.index("WARM_S") + 1])
     return out
+
+
+# CPU seconds of the last timed run (run_mapper, run_octomap): on a shared machine wall
+# time also measures the other jobs; CPU time measures the work.
+LAST_CPU = [0.0]
 
 
 def run_mapper(cfg: MapperConfig, grid: GridSpec, scans: list[Scan]) -> tuple[float, Mapper]:
@@ -72,10 +83,12 @@ def run_mapper(cfg: MapperConfig, grid: GridSpec, scans: list[Scan]) -> tuple[fl
     one snapshot, and the mapper."""
     mapper = make_mapper(cfg, grid)
     t0 = time.perf_counter()
+    c0 = time.process_time()
     for index in range(mapper.passes):  # the default method reads the scans twice
         mapper.begin_pass(index)
         mapper.integrate_many(scans)
     mapper.snapshot()
+    LAST_CPU[0] = time.process_time() - c0
     return time.perf_counter() - t0, mapper
 
 
@@ -113,8 +126,10 @@ def run_octomap(scans: list[Scan], resolution: float) -> float | None:
             clouds.append((pts, origin, r_max))
     tree = octomap.OcTree(resolution)
     t0 = time.perf_counter()
+    c0 = time.process_time()
     for pts, origin, r_max in clouds:
         tree.insertPointCloud(pts, origin, maxrange=r_max)
+    LAST_CPU[0] = time.process_time() - c0
     return time.perf_counter() - t0
 
 
@@ -150,23 +165,34 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
         c = compile_seconds()
         figures.update(c)
         print(f"kernels: compile {c['warm cold s']:.1f} s on a machine's first run, load "
-              f"{c['warm cached s']:.2f} s per process after (imports {c['import cached s']:.2f} s)")
+              f"{c['warm cached s']:.2f} s per process after (imports {c['import cached s']:.2f} s); "
+              f"CPU of the whole process {c['process cpu cold s']:.1f} s cold, "
+              f"{c['process cpu cached s']:.1f} s cached")
     warm()  # timed runs below load compiled kernels, as every run but a machine's first
     octo = run_octomap(firings, 0.05)
     if octo is not None:
         figures["octomap"] = total / octo
-        print(f"{'octomap':<34} {total / octo:10.0f} readings/s")
+        figures["octomap cpu"] = total / LAST_CPU[0]
+        print(f"{'octomap':<34} {total / octo:10.0f} readings/s "
+              f"({figures['octomap cpu']:.0f} per CPU s)")
     variances: dict[str, tuple[int, tuple[float, float]]] = {}
     headline = ""
     for per_scan in args.readings_per_scan:
         scans = group_scans(firings, max(1, per_scan // 16))
         print(f"-- {per_scan} readings per scan ({len(scans)} scans)")
         for name, cfg in METHODS:
-            runs = [run_mapper(cfg, grid, scans) for _ in range(max(1, args.repeat))]
-            seconds, mapper = min(runs, key=lambda r: r[0])
+            runs = []
+            for _ in range(max(1, args.repeat)):
+                seconds, mapper = run_mapper(cfg, grid, scans)
+                runs.append((seconds, LAST_CPU[0], mapper))
+            seconds, _cpu, mapper = min(runs, key=lambda r: r[0])
             rate = total / seconds
             figures[f"{name} {per_scan}/scan"] = rate
+            figures[f"{name} {per_scan}/scan cpu"] = total / min(r[1] for r in runs)
             ratio = f"  {octo * rate / total:6.2f}x octomap" if octo else ""
+            if octo:
+                ratio += (f" ({figures[f'{name} {per_scan}/scan cpu'] / figures['octomap cpu']:.2f}x"
+                          " per CPU s)")
             print(f"{name:<34} {rate:10.0f} readings/s{ratio}")
             if per_scan == args.readings_per_scan[0] and cfg.method == "andersone":
                 variances[name] = (len(mapper.feature_table()), mapper.feature_variance())

@@ -286,6 +286,99 @@ def figure(results: list[tuple[list[Row], str]], path: Path, height: int = 360) 
     atomic_write_bytes(path, buf.getvalue())
 
 
+# ------------------------------------------------------------------ drifted odometry (issue 17)
+# Separate from the method comparison above: each drifted case is mapped with the default
+# method three ways — true poses, drifted odometry, drifted odometry + --refine-poses — and
+# scored by F1 and, against the true trajectory, ATE (pipeline.trajectory_error).
+
+DRIFT_SCALE = 0.03
+DRIFT_BIAS_DEG_PER_M = 0.8
+
+
+@dataclass
+class DriftRow:
+    """One drifted case: F1 with true / drifted / refined poses, ATE, seconds."""
+
+    name: str
+    f1_true: float
+    f1_drifted: float
+    f1_refined: float
+    f1_true_refined: float
+    ate_drifted: float
+    ate_refined: float
+    seconds_unrefined: float
+    seconds_refined: float
+
+
+def _drift_cases(work: Path) -> list[tuple[str, Path, Path, Path, Path]]:
+    """(name, true-pose log, drifted log, truth map, truth trajectory) per case."""
+    from pipeline.drift import DriftModel
+    from pipeline.emulate import EmulateOptions, run_emulation
+    from pipeline.simulate import SimOptions, run_simulation
+
+    cases = []
+    for world in ("office", "corridor"):
+        clean = REPO / "sample_logs" / world / f"{world}.mcap"
+        drifted = work / f"{world}_drifted.mcap"
+        if not drifted.exists():
+            run_simulation(REPO / "sample_logs" / "worlds" / f"{world}.toml", drifted, "mcap",
+                           options=SimOptions(seed=1, speed=0.5, ring_rate_hz=5.0,
+                                              drift_scale=DRIFT_SCALE,
+                                              drift_heading_bias_deg_per_m=DRIFT_BIAS_DEG_PER_M))
+        cases.append((world, clean, drifted, clean.with_name(f"{world}.truth.yaml"),
+                      clean.with_name(f"{world}.truth.csv")))
+    intel = REPO / "sample_logs" / "intel-lab"
+    drifted = work / "intel_drifted.mcap"
+    if not drifted.exists():
+        run_emulation(intel / "intel-corrected.log.gz", drifted, "mcap", options=EmulateOptions(
+            drift=DriftModel(DRIFT_SCALE, DRIFT_BIAS_DEG_PER_M)))
+    cases.append(("intel-lab", intel / "intel.mcap", drifted, intel / "intel.laser.yaml",
+                  intel / "intel.truth.csv"))
+    return cases
+
+
+def drifted_comparison(work: Path, tolerance: float) -> list[DriftRow]:
+    """Map and score every drifted case (see the section comment)."""
+    from pipeline.config import Config, PoseRefinementConfig
+    from pipeline.evaluate import evaluate_run
+    from pipeline.run import run
+
+    rows = []
+    refine = Config(pose_refinement=PoseRefinementConfig(enabled=True))
+    for name, clean, drifted, truth, traj in _drift_cases(work):
+        f1, ate, secs = {}, {}, {}
+        for key, log, cfg in (("true", clean, Config()), ("drifted", drifted, Config()),
+                              ("refined", drifted, refine), ("true_refined", clean, refine)):
+            out = work / name / key
+            result = run(log, out, cfg, force=True)
+            ev = evaluate_run(out, truth, trajectory=traj, tolerance_m=tolerance,
+                              truth_trajectory=traj)
+            f1[key] = ev.f1
+            ate[key] = float(ev.trajectory_error["ate_rmse_m"]) if ev.trajectory_error else math.nan
+            secs[key] = float(result.metrics.timing["stage_seconds"]["total"])
+        rows.append(DriftRow(name, f1["true"], f1["drifted"], f1["refined"], f1["true_refined"],
+                             ate["drifted"], ate["refined"], secs["drifted"], secs["refined"]))
+        print(f"{name}: done", file=sys.stderr, flush=True)
+    return rows
+
+
+def drift_markdown(rows: list[DriftRow]) -> str:
+    lines = [
+        f"| drifted case ({DRIFT_SCALE:.0%} scale, {DRIFT_BIAS_DEG_PER_M:g}°/m) | F1 true poses "
+        "| F1 drifted | F1 refined | refined/true | F1 true poses refined | ATE drifted (m) "
+        "| ATE refined (m) | ATE ratio | s unrefined | s refined |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r.name} | {r.f1_true:.3f} | {r.f1_drifted:.3f} | {r.f1_refined:.3f} | "
+            f"{r.f1_refined / r.f1_true:.2f} | {r.f1_true_refined:.3f} | {r.ate_drifted:.3f} | "
+            f"{r.ate_refined:.3f} | {r.ate_drifted / max(r.ate_refined, 1e-9):.1f}× | "
+            f"{r.seconds_unrefined:.1f} | {r.seconds_refined:.1f} |"
+        )
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--logs", nargs="+", metavar="PATH", help="LOG TRUTH pairs")
@@ -295,7 +388,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--config", type=Path, help="configuration TOML for every log")
     ap.add_argument("--keep", type=Path, help="keep the run directories under this directory")
     ap.add_argument("--summary", type=Path, help="also write the summary table to this file")
+    ap.add_argument("--drifted", action="store_true",
+                    help="only the drifted-odometry rows (true / drifted / refined poses)")
     args = ap.parse_args(argv)
+    if args.drifted:
+        with tempfile.TemporaryDirectory(prefix="sonarmap-drift-") as tmp:
+            rows = drifted_comparison(args.keep if args.keep is not None else Path(tmp),
+                                      args.tolerance)
+        print(drift_markdown(rows))
+        return 0
 
     from formats.errors import SonarmapError
 

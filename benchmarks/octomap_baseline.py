@@ -67,7 +67,7 @@ def octomap_probability(log: Path, config: Config) -> tuple[F64, GridSpec]:
                         origin = np.array([scan.origin_x[k], scan.origin_y[k], 0.0])
                         tree.insertPointCloud(fan, origin, maxrange=float(scan.max_range[k]))
 
-        stream_scans(reader, sv, sensors, config, insert)
+        stream_scans(reader, sv, sensors, grid, config, insert)
     return leaves_on_grid(tree, grid), grid
 
 

@@ -79,6 +79,7 @@ def _load(
     pose_topic: str | None = None,
     method: str | None = None,
     resolution: float | None = None,
+    refine_poses: bool = False,
 ) -> Config:
     """The configuration file plus command-line overrides, validated."""
     import dataclasses
@@ -99,7 +100,10 @@ def _load(
     grid = cfg.grid
     if resolution is not None:
         grid = dataclasses.replace(grid, resolution=resolution)
-    return cfg.replace(input=inp, mapper=mapper, grid=grid).validate()
+    refine = cfg.pose_refinement
+    if refine_poses:
+        refine = dataclasses.replace(refine, enabled=True)
+    return cfg.replace(input=inp, mapper=mapper, grid=grid, pose_refinement=refine).validate()
 
 
 @app.command()
@@ -128,6 +132,11 @@ def run(
         bool,
         typer.Option("--compare-correction", help="Also map without feature correction; report both."),
     ] = False,
+    refine_poses: Annotated[
+        bool,
+        typer.Option("--refine-poses", help="Correct the odometry from the sonar data before "
+                     "mapping ([pose_refinement] in the config)."),
+    ] = False,
     force: Annotated[bool, typer.Option("--force", help="Replace an existing output directory.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar or summary.")] = False,
     json_out: Annotated[
@@ -137,7 +146,9 @@ def run(
 ) -> None:
     """Map a log: writes map.pgm/map.yaml (nav2), map.png, map.mcap (Foxglove, RViz),
     trajectory.csv (TUM), features.parquet, metrics.json, config.toml and
-    report.html/report.md into OUT.
+    report.html/report.md into OUT. With --refine-poses the poses are first corrected from
+    the sonar data (trajectory.csv: the refined poses, odometry.csv: the odometry they
+    started from, trajectory.png: both).
 
     Examples:
 
@@ -146,6 +157,8 @@ def run(
       sonarmap run robot.bag -o out/robot --range-topic /sonar --pose-topic /odom
 
       sonarmap run log.csv -o out/log --config sonarmap.toml --method classic --force
+
+      sonarmap run drifted.mcap -o out/drifted --refine-poses
     """
     from pipeline.run import run as run_pipeline
 
@@ -154,7 +167,7 @@ def run(
             "must be 'attribution', 'andersone' or 'classic'", param_hint="--method"
         )
     cfg = _load(config, format=format, range_topics=range_topic, pose_topic=pose_topic,
-                method=method, resolution=resolution)
+                method=method, resolution=resolution, refine_poses=refine_poses)
     if quiet or json_out:
         result = run_pipeline(log, output, cfg, force=force, compare_correction=compare_correction)
     else:
@@ -169,9 +182,9 @@ def run(
     elif not quiet:
         pm = m.paper_metric
         typer.echo(
-            f"mapped {m.counts['readings_used']} of {m.counts['readings']} readings into "
-            f"{m.counts['features']} features; mean feature variance "
-            f"{_fmt(pm['mean_feature_variance_m2'])} m²; "
+            f"used {m.counts['readings_mapped']} of {m.counts['readings']} readings; "
+            f"{m.counts['features']} features; "
+            f"mean feature variance {_fmt(pm['mean_feature_variance_m2'])} m²; "
             f"{m.map['cells_occupied']} occupied / {m.map['cells_free']} free cells"
         )
         for w in m.warnings:

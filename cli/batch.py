@@ -16,8 +16,16 @@ from cli.errors import EXIT_FAILURE, handle_errors
 
 @contextmanager
 def _log_progress() -> Iterator[Callable[[int, int], None]]:
-    """A ``(done, total)`` callback driving a rich progress bar over logs on stderr."""
+    """A ``(done, total)`` callback driving a rich progress bar over logs on stderr; on a
+    non-terminal (CI, cron) a plain line per finished log instead."""
     from rich.console import Console
+
+    from cli.progress import plain_progress
+
+    if not Console(stderr=True).is_terminal:
+        with plain_progress("logs", sys.stderr, every_s=0.0) as plain:
+            yield lambda done, total: plain("batch", done, total)
+        return
     from rich.progress import (
         BarColumn,
         MofNCompleteColumn,
@@ -95,6 +103,12 @@ def register(app: typer.Typer) -> None:
             typer.Option("--scheduler", help="Use an existing Dask cluster, e.g. "
                          "tcp://10.0.0.5:8786 (then --workers is ignored)."),
         ] = None,
+        memory_limit: Annotated[
+            str,
+            typer.Option("--memory-limit", help="Memory per local worker, e.g. 4GB "
+                         "(default auto: the machine's memory / --workers); a log that "
+                         "needs more fails as its own row."),
+        ] = "auto",
         rerun: Annotated[
             bool, typer.Option("--rerun", help="Map every log again, even unchanged ones.")
         ] = False,
@@ -138,7 +152,8 @@ def register(app: typer.Typer) -> None:
         with contextlib.ExitStack() as stack:
             progress = None if quiet else stack.enter_context(_log_progress())
             result = run_batch(paths, output, config, workers=workers, scheduler=scheduler,
-                               rerun=rerun, progress=progress, manifests=lists)
+                               rerun=rerun, progress=progress, manifests=lists,
+                               memory_limit=memory_limit)
         for row in result.failures:
             print(f"sonarmap: failed: {row.name}: {row.error}", file=sys.stderr)
         if not quiet:

@@ -99,12 +99,27 @@ def emulate(
         str,
         typer.Option("--compression", help="Chunk compression: none; ros1 bz2/lz4; mcap lz4/zstd."),
     ] = "none",
+    drift_scale: Annotated[
+        float, typer.Option("--drift-scale", help="Odometry scale error, fraction (0.03: 3 % too long).")
+    ] = 0.0,
+    drift_heading_bias: Annotated[
+        float, typer.Option("--drift-heading-bias", help="Odometry heading bias, degrees per metre driven.")
+    ] = 0.0,
+    drift_xy: Annotated[
+        float, typer.Option("--drift-xy", help="Odometry position noise, m per √m.")
+    ] = 0.0,
+    drift_yaw: Annotated[
+        float, typer.Option("--drift-yaw", help="Odometry yaw noise, rad per √rad.")
+    ] = 0.0,
+    drift_seed: Annotated[int, typer.Option("--drift-seed", help="Seed of the drift noise.")] = 0,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary.")] = False,
 ) -> None:
     """Emulate a sonar ring from real laser scans: each virtual sonar reads the shortest
     laser return inside its cone (its max range when none). Writes the sonar log, the
     laser occupancy map <stem>.laser.yaml/.pgm (the reference) and the trajectory
     <stem>.truth.csv beside it. Sonars outside the laser's view are not emitted.
+    The --drift-* options drift the logged odometry (seeded; the truth trajectory keeps
+    the poses before drift).
 
     Examples:
 
@@ -113,8 +128,11 @@ def emulate(
       sonarmap emulate robot.bag -o sonar.bag --format ros1 --laser-topic /scan
 
       sonarmap emulate intel.log -o intel_csv --format csv-set --fov-deg 25 --max-range 4
+
+      sonarmap emulate intel.log -o drifted.mcap --drift-scale 0.03 --drift-heading-bias 0.8
     """
     from pipeline.config import load_config
+    from pipeline.drift import DriftModel
     from pipeline.emulate import EmulateOptions, run_emulation
 
     if format not in _FORMATS:
@@ -130,6 +148,8 @@ def emulate(
         laser_max_range=laser_max_range,
         map_resolution=resolution,
         compression=compression,
+        drift=DriftModel(drift_scale, drift_heading_bias, drift_xy, drift_yaw).validate(),
+        drift_seed=drift_seed,
     )
     result = run_emulation(laser_log, output, format, config=cfg, options=options)
     if quiet:

@@ -35,6 +35,18 @@ def evaluate(
         float | None,
         typer.Option("--reach", help="Sensor reach, m (default: the run's largest max range)."),
     ] = None,
+    truth_trajectory: Annotated[
+        Path | None,
+        typer.Option("--truth-trajectory", help="True trajectory CSV (t,x,y,yaw): adds the "
+                     "ATE (after SE(2) alignment) and RPE of the run's trajectory.csv.",
+                     dir_okay=False),
+    ] = None,
+    rpe_delta: Annotated[
+        float, typer.Option("--rpe-delta", help="RPE pose-pair spacing, in --rpe-unit.")
+    ] = 1.0,
+    rpe_unit: Annotated[
+        str, typer.Option("--rpe-unit", help="RPE spacing unit: m (path length) or frames.")
+    ] = "m",
     json_out: JsonOpt = False,
     output: Annotated[
         Path | None,
@@ -48,7 +60,8 @@ def evaluate(
 ) -> None:
     """Score a run's map against a ground-truth map: occupied-cell precision, recall and F1
     within a tolerance, free-space accuracy, unknown fraction, feature distance to the true
-    walls and the paper's mean feature variance. The results are added to the run's
+    walls and the paper's mean feature variance; with --truth-trajectory also the
+    trajectory errors (ATE, RPE, as evo defines them). The results are added to the run's
     report.html and report.md (unless --no-report); nothing else in the run directory is
     ever written to.
 
@@ -59,6 +72,8 @@ def evaluate(
       sonarmap evaluate out/office --truth office.truth.yaml --trajectory office.truth.csv
 
       sonarmap evaluate out/office --truth office.truth.yaml --json -o golden/evaluation.json
+
+      sonarmap evaluate out/drifted --truth office.truth.yaml --truth-trajectory office.truth.csv
     """
     from formats.errors import OutputError
     from formats.writers.atomic import atomic_write_text
@@ -71,7 +86,8 @@ def evaluate(
         if (output.exists() or output.is_symlink()) and not force:
             raise OutputError("exists already; use --force to replace", output)
     result = evaluate_run(run_dir, truth, trajectory=trajectory, tolerance_m=tolerance,
-                          sensor_reach_m=reach)
+                          sensor_reach_m=reach, truth_trajectory=truth_trajectory,
+                          rpe_delta=rpe_delta, rpe_unit=rpe_unit)
     if output is not None:
         atomic_write_text(output, result.to_json())
     if not no_report and (run_dir / "report.html").is_file():

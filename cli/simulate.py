@@ -39,16 +39,26 @@ def register(app: typer.Typer) -> None:
         p_crosstalk: Annotated[float, typer.Option(help="Fraction of crosstalk readings.")] = 0.01,
         drift_xy: Annotated[float, typer.Option(help="Odometry position drift, m per √m.")] = 0.0,
         drift_yaw: Annotated[float, typer.Option(help="Odometry yaw drift, rad per √rad.")] = 0.0,
+        drift_scale: Annotated[
+            float, typer.Option(help="Odometry scale error, fraction (0.03: 3 % too long).")
+        ] = 0.0,
+        drift_heading_bias: Annotated[
+            float, typer.Option(help="Odometry heading bias, degrees per metre driven.")
+        ] = 0.0,
         compression: Annotated[str, typer.Option(help="ros1: none/bz2/lz4; mcap: none/lz4/zstd.")] = "none",
     ) -> None:
         """Simulate a sonar ring on a robot driving through WORLD; write the log plus its
         ground truth (<stem>.truth.yaml/.pgm nav2 map, <stem>.truth.csv trajectory).
+        The --drift-* options give the logged odometry a seeded error (scale, heading
+        bias per metre, noise per step); the truth trajectory stays the true one.
 
         Examples:
 
           sonarmap simulate sample_logs/worlds/office.toml -o office.mcap
 
           sonarmap simulate sample_logs/worlds/orchard.toml -o orchard.bag -f ros1 --drift-xy 0.02
+
+          sonarmap simulate sample_logs/worlds/office.toml -o drifted.mcap --drift-scale 0.03 --drift-heading-bias 0.8
         """
         from formats.presets import PRESETS
         from pipeline.config import load_config
@@ -59,7 +69,8 @@ def register(app: typer.Typer) -> None:
         opts = SimOptions(
             seed=seed, speed=speed, pose_rate_hz=pose_rate, ring_rate_hz=ring_rate,
             specular_cutoff_deg=specular_cutoff, p_miss=p_miss, p_crosstalk=p_crosstalk,
-            drift_xy=drift_xy, drift_yaw=drift_yaw, mounts=mounts,
+            drift_xy=drift_xy, drift_yaw=drift_yaw, drift_scale=drift_scale,
+            drift_heading_bias_deg_per_m=drift_heading_bias, mounts=mounts,
         ).validate()
         paths = run_simulation(world, output, format, waypoints_path=waypoints, options=opts,
                                compression=compression)

@@ -54,11 +54,32 @@ FORMATS: dict[str, Callable[[Path, ReaderSettings], LogReader]] = {
 }
 
 
+def check_log_path(p: Path) -> None:
+    """Refuse what is not a log file or directory, with the reason: a missing path, a
+    symlink loop, a FIFO, socket or device (reading one would hang or never end), a
+    rosbag2 ``metadata.yaml`` given instead of its bag directory."""
+    try:
+        st = p.stat()
+    except FileNotFoundError as err:
+        if p.is_symlink():
+            raise FormatError("is a symlink to a missing file", p) from err
+        raise FormatError("no such file or directory", p) from err
+    except OSError as err:  # ELOOP: a symlink loop; EACCES ...
+        raise FormatError(f"cannot open: {err.strerror or err}", p) from err
+    import stat
+
+    if not (stat.S_ISREG(st.st_mode) or stat.S_ISDIR(st.st_mode)):
+        raise FormatError("is not a regular file or directory (a FIFO, socket or device); "
+                          "give a log file or a bag directory", p)
+    if p.name == "metadata.yaml" and stat.S_ISREG(st.st_mode):
+        raise FormatError(f"is a rosbag2 bag's metadata file; pass the bag directory "
+                          f"{p.parent} instead", p)
+
+
 def detect_format(path: str | Path) -> str:
     """The format name of a log, from its content. Raises FormatError when unknown."""
     p = Path(path)
-    if not p.exists():
-        raise FormatError("no such file or directory", p)
+    check_log_path(p)
     if p.is_dir():
         if (p / "metadata.yaml").is_file():
             return "ros2"
@@ -106,6 +127,5 @@ def open_log(path: str | Path, config: ReaderSettings | None = None) -> LogReade
     name = cfg.input.format or detect_format(p)
     if name not in FORMATS:
         raise FormatError(f"unknown format '{name}' (known: {', '.join(sorted(FORMATS))})", p)
-    if not p.exists():
-        raise FormatError("no such file or directory", p)
+    check_log_path(p)
     return FORMATS[name](p, cfg)

@@ -192,6 +192,10 @@ class LogInfo:
     range_topics: list[str] = field(default_factory=list)
     pose_topic: str | None = None
     notes: list[str] = field(default_factory=list)
+    # What could not be read of a damaged log (truncated, cut by power loss, corrupt
+    # chunks): one line per loss, and the bytes lost; the rest is read and mapped.
+    losses: list[str] = field(default_factory=list)
+    bytes_lost: int = 0
 
     @property
     def duration_s(self) -> float:

@@ -58,6 +58,12 @@ class InputConfig:
     csv: CsvConfig = field(default_factory=CsvConfig)
 
 
+# Beam widths sonarmap maps with, wherever they come from (config, preset, log): narrower
+# beams are no sonar (and leave no cell to free), 180° and wider have no cone.
+FOV_MIN_DEG = 0.5
+FOV_MAX_DEG = 180.0  # exclusive
+
+
 @dataclass(frozen=True)
 class MountConfig:
     """One sonar: mount in the base frame and beam limits."""

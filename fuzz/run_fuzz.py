@@ -34,6 +34,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--target", default="", help="only targets whose name contains this")
     ap.add_argument("--keep", type=Path, default=None, help="save defect inputs here")
+    ap.add_argument("--values", type=int, default=0,
+                    help="also this many hostile-value logs (fuzz.values) plus every "
+                         "numeric config key with every hostile number")
     args = ap.parse_args(argv)
 
     import warnings
@@ -44,7 +47,36 @@ def main(argv: list[str] | None = None) -> int:
         targets = [t for t in build_targets(Path(tmp) / "fixtures") if args.target in t.name]
         work = Path(tmp) / "work"
         work.mkdir()
-        return _run(targets, args.examples, args.seed, work, args.keep)
+        status = _run(targets, args.examples, args.seed, work, args.keep)
+        if args.values:
+            status |= _run_values(args.values, args.seed, work)
+        return status
+
+
+def _run_values(examples: int, seed: int, work: Path) -> int:
+    """Hostile numbers: every numeric config key × every HOSTILE value, then ``examples``
+    small logs with hostile beam widths, limits, pose glitches and no-echo readings."""
+    from fuzz.values import HOSTILE, check_config, check_log, numeric_keys
+
+    tally: Counter[str] = Counter()
+    defects: list[str] = []
+    for section, key in numeric_keys():
+        for value in HOSTILE:
+            outcome = check_config(section, key, value)
+            tally[f"config {outcome.status}"] += 1
+            if outcome.status == "defect":
+                defects.append(outcome.detail)
+    rnd = random.Random(f"{seed}:values")
+    for i in range(examples):
+        outcome = check_log(work, rnd, i)
+        tally[f"log {outcome.status}"] += 1
+        if outcome.status == "defect":
+            defects.append(outcome.detail)
+    print()
+    print("hostile values: " + ", ".join(f"{k} {v}" for k, v in sorted(tally.items())))
+    for d in sorted(set(defects)):
+        print(f"DEFECT: {d}")
+    return 1 if defects else 0
 
 
 def _run(targets: list[Target], examples: int, seed: int, work: Path, keep: Path | None) -> int:

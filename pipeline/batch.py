@@ -49,7 +49,9 @@ SUMMARY_PARQUET = "summary.parquet"
 SUMMARY_MD = "summary.md"
 MARKER_VERSION = 1
 MAX_NAME_BYTES = 200  # an output name, so that OutputDir's temporary sibling fits 255
-SCHEDULER_TIMEOUT_S = 10.0  # connecting to an existing scheduler (--scheduler)
+SCHEDULER_TIMEOUT_S = 10.0
+# Memory per local worker process: Dask's "auto" is the machine's memory / the workers.
+MEMORY_LIMIT = "auto"  # connecting to an existing scheduler (--scheduler)
 
 BatchProgress = Callable[[int, int], None]  # (logs finished, logs total)
 
@@ -59,6 +61,7 @@ _NOT_LOG_SUFFIXES = frozenset(
     {".md", ".rst", ".toml", ".yaml", ".yml", ".json", ".html", ".htm", ".py", ".cfg",
      ".ini", ".xml", ".pgm", ".sh", ".in"}
 )
+_LOG_SUFFIXES = frozenset({".bag", ".mcap", ".db3"})
 _HEADERLESS_SUFFIXES = frozenset({".csv", ".tsv", ".txt", ".dat", ".log"})
 _SINGLE_COLUMNS = frozenset({"t", "x", "y", "yaw", "sensor", "range"})
 _RESERVED_NAMES = frozenset({SUMMARY_PARQUET, SUMMARY_MD})
@@ -85,6 +88,7 @@ class LogOutcome:
     mean_feature_variance_m2: float | None = None
     mapped_area_m2: float | None = None
     seconds: float = 0.0
+    warnings: str | None = None  # the run's warnings (data lost, readings dropped), "; "
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> LogOutcome:
@@ -121,7 +125,7 @@ def read_manifest(path: Path) -> list[Path]:
     """The paths a manifest lists: one per line, ``#`` comments and blank lines ignored,
     relative paths taken relative to the manifest's directory."""
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        text = Path(path).read_text(encoding="utf-8-sig")  # a byte-order mark is not a path
     except FileNotFoundError as err:
         raise InputError("manifest not found", path) from err
     except (OSError, UnicodeDecodeError) as err:
@@ -164,7 +168,8 @@ def _is_log_file(f: Path, config: Config) -> bool:
     try:
         fmt = detect_format(f)
     except FormatError:
-        return False
+        # A file named like a log (an empty or cut .bag) is a log that fails, not noise.
+        return f.suffix.lower() in _LOG_SUFFIXES
     if fmt != "csv":
         return True
     csv = config.input.csv
@@ -327,6 +332,7 @@ def _map_one_checked(
             features=int(m.counts["features"]),
             mean_feature_variance_m2=_num(m.paper_metric.get("mean_feature_variance_m2")),
             mapped_area_m2=_num(m.map.get("mapped_area_m2")),
+            warnings="; ".join(m.warnings) or None,
         )
         marker_data = {
             "marker_version": MARKER_VERSION,
@@ -366,10 +372,12 @@ def read_marker(run_dir: Path) -> dict[str, Any] | None:
 
 
 @contextlib.contextmanager
-def _client(workers: int | None, scheduler: str | None) -> Iterator[Any]:
+def _client(
+    workers: int | None, scheduler: str | None, memory_limit: str | int = MEMORY_LIMIT
+) -> Iterator[Any]:
     """A Dask client: to ``scheduler`` if given, else to a new local process cluster."""
     with _quiet_dask():
-        yield from _client_inner(workers, scheduler)
+        yield from _client_inner(workers, scheduler, memory_limit)
 
 
 @contextlib.contextmanager
@@ -386,7 +394,9 @@ def _quiet_dask() -> Iterator[None]:
         dlog.setLevel(old)
 
 
-def _client_inner(workers: int | None, scheduler: str | None) -> Iterator[Any]:
+def _client_inner(
+    workers: int | None, scheduler: str | None, memory_limit: str | int = MEMORY_LIMIT
+) -> Iterator[Any]:
     from distributed import Client, LocalCluster
 
     if scheduler:
@@ -402,6 +412,15 @@ def _client_inner(workers: int | None, scheduler: str | None) -> Iterator[Any]:
     n = workers if workers is not None else (os.cpu_count() or 1)
     if n < 1:
         raise ConfigError(f"--workers must be >= 1, got {n}")
+    if memory_limit != "auto":
+        from dask.utils import parse_bytes
+
+        try:
+            memory_limit = parse_bytes(memory_limit)
+        except (ValueError, TypeError) as err:
+            raise ConfigError(
+                f"--memory-limit must be 'auto' or a size like 4GB, got {memory_limit!r}"
+            ) from err
     with (
         LocalCluster(
             n_workers=n,
@@ -410,9 +429,10 @@ def _client_inner(workers: int | None, scheduler: str | None) -> Iterator[Any]:
             host="127.0.0.1",
             dashboard_address=None,
             silence_logs=logging.ERROR,
-            # No per-worker memory cap: the nanny would kill a worker mapping a big log at
-            # 95 % of total/N; the operating system is the judge instead.
-            memory_limit=0,
+            # Each worker's share of the machine: a log whose map outgrows it (an odometry
+            # glitch, an absurd grid) has its worker restarted and fails as a row, instead
+            # of the operating system killing whatever process it picks.
+            memory_limit=memory_limit,
         ) as cluster,
         Client(cluster, set_as_default=False) as client,
     ):
@@ -426,6 +446,7 @@ def run_batch(
     *,
     workers: int | None = None,
     scheduler: str | None = None,
+    memory_limit: str | int = MEMORY_LIMIT,
     rerun: bool = False,
     progress: BatchProgress | None = None,
     manifests: Sequence[Path] = (),
@@ -461,7 +482,7 @@ def run_batch(
     rows: list[LogOutcome] = []
     if progress is not None:
         progress(0, total)
-    with _client(workers, scheduler) as client:
+    with _client(workers, scheduler, memory_limit) as client:
         futures = {
             client.submit(_map_one, str(p), str(out_dir), names[p], cfg_dict, rerun,
                           pure=False, key=f"sonarmap-{names[p]}-{secrets.token_hex(4)}"): p
@@ -513,6 +534,7 @@ def summary_table(rows: Sequence[LogOutcome]) -> Any:
         pa.field("mean_feature_variance_m2", pa.float64(), metadata={"unit": "m^2"}),
         pa.field("mapped_area_m2", pa.float64(), metadata={"unit": "m^2"}),
         pa.field("seconds", pa.float64(), nullable=False, metadata={"unit": "s"}),
+        pa.field("warnings", pa.string()),
     ])
     cols = {f.name: [getattr(r, f.name) for r in rows] for f in schema}
     return pa.table(cols, schema=schema)
@@ -543,12 +565,14 @@ def summary_markdown(rows: Sequence[LogOutcome]) -> str:
         "",
     ]
     header = ["log", "status", "duration (s)", "readings", "features",
-              "mean feature variance (m²)", "mapped area (m²)", "wall (s)", "path", "error"]
+              "mean feature variance (m²)", "mapped area (m²)", "wall (s)", "path", "error",
+              "warnings"]
     cells = [
         [
             r.name, r.status, _fmt(r.duration_s, ".1f"), _fmt(r.readings, "d"),
             _fmt(r.features, "d"), _fmt(r.mean_feature_variance_m2, ".4g"),
             _fmt(r.mapped_area_m2, ".2f"), _fmt(r.seconds, ".2f"), r.path, r.error or "",
+            r.warnings or "",
         ]
         for r in rows
     ]

@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from formats.errors import ConfigError
-from formats.options import InputConfig, SensorsConfig, doc_field
+from formats.options import FOV_MAX_DEG, FOV_MIN_DEG, InputConfig, SensorsConfig, doc_field
 from formats.presets import PRESETS
 from formats.toml_file import read_toml
 
@@ -136,7 +136,11 @@ class GridConfig:
         default=(),
     )
     margin: float = doc_field("extra border around an automatic extent, m", default=0.5)
-    max_cells: int = doc_field("refuse grids larger than this many cells", default=200_000_000)
+    max_cells: int = doc_field(
+        "refuse grids larger than this many cells (~32 bytes each while mapping: the "
+        "default keeps a run under ~1.5 GB)",
+        default=40_000_000,
+    )
 
 
 @dataclass(frozen=True)
@@ -157,11 +161,64 @@ class PoseSyncConfig:
     """Interpolating the robot pose at each reading's stamp."""
 
     max_pose_gap_s: float = doc_field(
-        "readings inside a pose gap longer than this are dropped, s", default=0.5
+        "readings inside a pose gap longer than this are dropped, s; 0 = automatic: 3 x "
+        "the log's median pose interval, within [0.5, 5] s (1 Hz odometry gets 2.7 s)",
+        default=0.0,
     )
     time_offset_s: float = doc_field(
         "added to range stamps before lookup (sensor clock offset), s", default=0.0
     )
+
+
+@dataclass(frozen=True)
+class PoseRefinementConfig:
+    """Correcting the odometry from the sonar data before mapping (``run --refine-poses``;
+    pipeline/refine/)."""
+
+    enabled: bool = doc_field("refine the poses before mapping (also: run --refine-poses)",
+                         default=False)
+    match_submaps: bool = doc_field("after the calibration, match submaps and solve the pose "
+                               "graph (off: measured worse on sonar, see RESULTS.md)",
+                               default=False)
+    submap_travel_m: float = doc_field("echoes are pooled into a submap per this much travel, m",
+                                  default=1.5)
+    submap_min_echoes: int = doc_field("a shorter stretch joins the next submap", default=60)
+    submap_max_points: int = doc_field("points kept per submap (evenly thinned)", default=400)
+    max_echo_range_m: float = doc_field("echoes farther than this are not matched, m", default=3.0)
+    arc_fraction: float = doc_field("an echo is matched along ± this fraction of its half beam",
+                               default=0.8)
+    local_map_submaps: int = doc_field("a submap is matched against this many previous ones",
+                                  default=3)
+    field_resolution_m: float = doc_field("cell of the matching likelihood field, m", default=0.05)
+    field_sigma_m: float = doc_field("σ of the likelihood field around each point, m", default=0.1)
+    search_xy_m: float = doc_field("consecutive matches: search ± this around odometry, m",
+                              default=0.3)
+    search_yaw_deg: float = doc_field("consecutive matches: search ± this yaw, degrees", default=6.0)
+    min_score: float = doc_field("a match is kept when its mean field value reaches this",
+                            default=0.3)
+    max_ambiguity: float = doc_field("loop closures: a distinct pose scoring this fraction of the "
+                                "best rejects the match", default=0.9)
+    loop_radius_m: float = doc_field("loop closure candidates: anchors this close (estimate), m",
+                                default=2.5)
+    loop_min_path_m: float = doc_field("... and at least this much travel apart, m", default=6.0)
+    loop_search_xy_m: float = doc_field("loop closures: search ± this, m", default=1.0)
+    loop_search_yaw_deg: float = doc_field("loop closures: search ± this yaw, degrees", default=12.0)
+    loop_max_per_submap: int = doc_field("loop closures tried per submap (nearest first)", default=2)
+    odometry_sigma_xy: float = doc_field("odometry translation σ, m per √m", default=0.02)
+    odometry_sigma_yaw_deg: float = doc_field("odometry rotation σ, degrees per √m", default=0.5)
+    calibration_search: bool = doc_field("search the odometry calibration that makes the echoes "
+                                    "sharpest before matching", default=True)
+    calibration_max_scale: float = doc_field(
+        "... scale error searched in ± this; 0 (default): the heading bias only — the "
+        "sharpness leans to a too-short scale on sonar (RESULTS.md)", default=0.0)
+    calibration_max_bias_deg_per_m: float = doc_field("... heading bias searched in ± this, deg/m",
+                                                 default=3.0)
+    calibrate: bool = doc_field("estimate the odometry's scale error and heading bias", default=True)
+    prior_scale: float = doc_field("σ of the scale error's prior (fraction)", default=0.1)
+    prior_bias_deg_per_m: float = doc_field("σ of the heading bias's prior, deg/m", default=2.0)
+    robust_scale: float = doc_field("Cauchy loss scale on whitened residuals", default=3.0)
+    reject_chi2: float = doc_field("a match whose χ² after solving exceeds this is dropped",
+                              default=16.0)
 
 
 @dataclass(frozen=True)
@@ -172,6 +229,7 @@ class Config:
     grid: GridConfig = field(default_factory=GridConfig)
     scans: ScanConfig = field(default_factory=ScanConfig)
     pose_sync: PoseSyncConfig = field(default_factory=PoseSyncConfig)
+    pose_refinement: PoseRefinementConfig = field(default_factory=PoseRefinementConfig)
     input: InputConfig = field(default_factory=InputConfig)
     sensors: SensorsConfig = field(default_factory=SensorsConfig)
 
@@ -266,7 +324,22 @@ def _coerce(tp: Any, value: Any, key: str) -> Any:
     raise ConfigError(f"'{key}': unsupported type {tp}")  # pragma: no cover
 
 
+def _check_finite(obj: Any, where: str) -> None:
+    """Every number of the configuration is finite: the range checks below compare with
+    < and >, which inf passes and NaN makes meaningless (no key means inf or NaN)."""
+    for f in dataclasses.fields(obj):
+        v, key = getattr(obj, f.name), _join(where, f.name)
+        items = v if isinstance(v, tuple) else (v,)
+        for i, item in enumerate(items):
+            k = f"{key}[{i}]" if isinstance(v, tuple) else key
+            if dataclasses.is_dataclass(item) and not isinstance(item, type):
+                _check_finite(item, k)
+            elif isinstance(item, float) and not math.isfinite(item):
+                raise ConfigError(f"'{k}' must be a finite number, got {item!r}")
+
+
 def _check_ranges(cfg: Config) -> None:
+    _check_finite(cfg, "")
     m, g, s, ps = cfg.mapper, cfg.grid, cfg.scans, cfg.pose_sync
 
     def need(ok: bool, key: str, rule: str, value: Any) -> None:
@@ -286,6 +359,7 @@ def _check_ranges(cfg: Config) -> None:
     need(0 < m.keep_fraction < 1, "mapper.keep_fraction", "must be in (0, 1)", m.keep_fraction)
     need(m.protect_times >= 1, "mapper.protect_times", "must be >= 1", m.protect_times)
     need(m.sigma_min >= 0, "mapper.sigma_min", "must be >= 0", m.sigma_min)
+    need(0 <= m.seed < 2**63, "mapper.seed", "must be in [0, 2**63)", m.seed)
     for key in ("p_free", "p_clamp_min", "p_clamp_max", "p_occ", "classic_p_occ"):
         prob(f"mapper.{key}", getattr(m, key))
     need(m.p_free < 0.5, "mapper.p_free", "must be < 0.5 (a free observation)", m.p_free)
@@ -313,15 +387,45 @@ def _check_ranges(cfg: Config) -> None:
     need(s.window_s > 0, "scans.window_s", "must be > 0", s.window_s)
     need(s.max_travel_m > 0, "scans.max_travel_m", "must be > 0", s.max_travel_m)
     need(s.max_turn_deg > 0, "scans.max_turn_deg", "must be > 0", s.max_turn_deg)
-    need(ps.max_pose_gap_s > 0, "pose_sync.max_pose_gap_s", "must be > 0", ps.max_pose_gap_s)
+    need(ps.max_pose_gap_s >= 0, "pose_sync.max_pose_gap_s", "must be >= 0 (0 = automatic)",
+         ps.max_pose_gap_s)
     need(math.isfinite(ps.time_offset_s), "pose_sync.time_offset_s", "must be finite", ps.time_offset_s)
+    pr = cfg.pose_refinement
+    for key in ("submap_travel_m", "max_echo_range_m", "field_resolution_m", "field_sigma_m",
+                "search_xy_m", "search_yaw_deg", "loop_radius_m", "loop_search_xy_m",
+                "loop_search_yaw_deg", "odometry_sigma_xy", "odometry_sigma_yaw_deg",
+                "prior_scale", "prior_bias_deg_per_m", "robust_scale", "reject_chi2"):
+        v = getattr(pr, key)
+        need(math.isfinite(v) and v > 0, f"pose_refinement.{key}", "must be > 0", v)
+    for key in ("submap_min_echoes", "submap_max_points", "local_map_submaps"):
+        v = getattr(pr, key)
+        need(v >= 1, f"pose_refinement.{key}", "must be >= 1", v)
+    need(0 <= pr.calibration_max_scale < 0.5, "pose_refinement.calibration_max_scale",
+         "must be in [0, 0.5)", pr.calibration_max_scale)
+    need(0 < pr.calibration_max_bias_deg_per_m <= 45,
+         "pose_refinement.calibration_max_bias_deg_per_m", "must be in (0, 45]",
+         pr.calibration_max_bias_deg_per_m)
+    need(pr.loop_min_path_m >= 0, "pose_refinement.loop_min_path_m", "must be >= 0",
+         pr.loop_min_path_m)
+    need(pr.loop_max_per_submap >= 0, "pose_refinement.loop_max_per_submap", "must be >= 0",
+         pr.loop_max_per_submap)
+    need(0 <= pr.arc_fraction <= 1, "pose_refinement.arc_fraction", "must be in [0, 1]",
+         pr.arc_fraction)
+    need(0 < pr.min_score < 1, "pose_refinement.min_score", "must be in (0, 1)", pr.min_score)
+    need(0 < pr.max_ambiguity <= 1, "pose_refinement.max_ambiguity", "must be in (0, 1]",
+         pr.max_ambiguity)
     sc = cfg.sensors
-    need(0 <= sc.fov_deg < 180, "sensors.fov_deg", "must be in [0, 180)", sc.fov_deg)
+    fov_rule = f"must be 0 (from the log) or in [{FOV_MIN_DEG:g}, {FOV_MAX_DEG:g})"
+
+    def fov_ok(v: float) -> bool:
+        return v == 0 or FOV_MIN_DEG <= v < FOV_MAX_DEG
+
+    need(fov_ok(sc.fov_deg), "sensors.fov_deg", fov_rule, sc.fov_deg)
     _check_limits("sensors", sc.min_range, sc.max_range)
     for i, mt in enumerate(sc.mounts):
         key = f"sensors.mounts[{i}]"
         need(bool(mt.name), f"{key}.name", "must be set", mt.name)
-        need(0 <= mt.fov_deg < 180, f"{key}.fov_deg", "must be in [0, 180)", mt.fov_deg)
+        need(fov_ok(mt.fov_deg), f"{key}.fov_deg", fov_rule, mt.fov_deg)
         _check_limits(key, mt.min_range, mt.max_range)
     names = [mt.name for mt in sc.mounts]
     dup = sorted({n for n in names if names.count(n) > 1})

@@ -112,6 +112,8 @@ class Evaluation:
     # Why the map is wrong (cell counts; see :func:`error_breakdown`).
     false_occupied: dict[str, int] = field(default_factory=dict)
     missed: dict[str, int] = field(default_factory=dict)
+    # ATE/RPE of the run's trajectory.csv against --truth-trajectory (pipeline.trajectory_error)
+    trajectory_error: dict[str, Any] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: floats rounded to 12 significant digits, notes as a list."""
@@ -133,7 +135,7 @@ class Evaluation:
         if not isinstance(data, dict):
             raise FormatError("evaluation is not a JSON object", source)
         names = [f.name for f in fields(cls)]
-        optional = ("notes", "false_occupied", "missed")
+        optional = ("notes", "false_occupied", "missed", "trajectory_error")
         missing = [n for n in names if n not in data and n not in optional]
         if missing:
             raise FormatError(f"evaluation has no {', '.join(missing)}", source)
@@ -191,6 +193,12 @@ class Evaluation:
                 rows.append((title, ", ".join(
                     f"{k.replace('_', ' ')} {v} ({pct(v / total) if total else 'n/a'})"
                     for k, v in part.items())))
+        if self.trajectory_error is not None:
+            from pipeline.trajectory_error import TrajectoryError
+
+            te = dict(self.trajectory_error)
+            te["alignment"] = tuple(te["alignment"])
+            rows += TrajectoryError(**te).table_rows()
         lines = text_table(None, rows)
         lines += [f"note: {n}" for n in self.notes]
         return "\n".join(lines)
@@ -535,12 +543,17 @@ def evaluate_run(
     trajectory: str | Path | None = None,
     tolerance_m: float = 0.10,
     sensor_reach_m: float | None = None,
+    truth_trajectory: str | Path | None = None,
+    rpe_delta: float = 1.0,
+    rpe_unit: str = "m",
 ) -> Evaluation:
     """Score the run in ``run_dir`` against the nav2 ground-truth map ``truth_yaml``.
 
     ``trajectory``: CSV ``t,x,y,yaw`` of the true poses (the simulator's
     ``<stem>.truth.csv``); recall counts only true occupied cells within the sensor reach
     of it. ``sensor_reach_m`` overrides the run's own largest sensor range (m).
+    ``truth_trajectory``: CSV of the true poses; adds the ATE and RPE (per ``rpe_delta``
+    ``rpe_unit``) of the run's ``trajectory.csv`` against it (:mod:`pipeline.trajectory_error`).
     InputError for a run directory missing files, FormatError for unreadable ones.
     """
     from formats.writers.features_parquet import read_features
@@ -574,6 +587,9 @@ def evaluate_run(
         tolerance_m=tolerance_m, poses_xy=poses, reach_m=reach,
         feature_xy=np.column_stack([features.x, features.y]),
     )
+    traj_err = None
+    if truth_trajectory is not None:
+        traj_err = _trajectory_error(run_dir, Path(truth_trajectory), rpe_delta, rpe_unit)
     pm = metrics.get("paper_metric")
     mean_var = _finite(pm.get("mean_feature_variance_m2")) if isinstance(pm, dict) else None
     if mean_var is None:
@@ -585,5 +601,31 @@ def evaluate_run(
         reach_source=reach_source,
         mean_feature_variance_m2=mean_var,
         notes=notes,
+        trajectory_error=traj_err,
         **values,
     )
+
+
+def _trajectory_error(
+    run_dir: Path, truth_path: Path, rpe_delta: float, rpe_unit: str
+) -> dict[str, Any]:
+    """ATE/RPE of the run's trajectory.csv against the true trajectory CSV."""
+    from formats.writers.trajectory_csv import read_trajectory
+    from pipeline.trajectory_error import Poses2D, trajectory_error
+
+    run_traj = run_dir / "trajectory.csv"
+    if not run_traj.is_file():
+        raise InputError("run directory has no trajectory.csv (written by sonarmap run)", run_dir)
+    est = read_trajectory(run_traj)
+    truth = read_trajectory(truth_path)
+    if rpe_unit not in ("m", "frames"):
+        raise ConfigError(f"RPE unit must be 'm' or 'frames', got {rpe_unit!r}")
+    try:
+        result = trajectory_error(
+            Poses2D(est.t_ns, est.x, est.y, est.yaw),
+            Poses2D(truth.t_ns, truth.x, truth.y, truth.yaw),
+            rpe_delta=rpe_delta, rpe_unit="m" if rpe_unit == "m" else "frames",
+        )
+    except InputError as err:
+        raise InputError(err.reason, truth_path) from err
+    return result.to_dict()

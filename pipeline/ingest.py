@@ -79,15 +79,21 @@ class StampOrder:
 
     def backwards(self, b: RangeBatch) -> B:
         """Mask of the batch's readings that went backwards; updates the per-sensor state."""
-        out = np.zeros(len(b), dtype=bool)
+        return self.steps_back(b) > 0
+
+    def steps_back(self, b: RangeBatch) -> I64:
+        """How far (ns) each reading's stamp lies below the largest earlier stamp of its
+        sensor (0 = not backwards); updates the per-sensor state. ``validate`` reports
+        with the same rule the pipeline drops by."""
+        out = np.zeros(len(b), dtype=np.int64)
         order = np.argsort(b.sensor_id, kind="stable")  # each sensor's readings in log order
         sid, t = b.sensor_id[order], b.t_ns[order]
         starts = np.flatnonzero(np.r_[True, sid[1:] != sid[:-1]])
         ends = np.r_[starts[1:], len(sid)]
         for s, e in zip(starts.tolist(), ends.tolist(), strict=True):
             key = int(sid[s])
-            back, _, newest = stamps_behind(t[s:e], self._last.get(key))
-            out[order[s:e]] = back
+            _, behind, newest = stamps_behind(t[s:e], self._last.get(key))
+            out[order[s:e]] = behind
             if newest is not None:
                 self._last[key] = newest
         return out

@@ -28,9 +28,16 @@ class StampedPoses(Protocol):
     def yaw(self) -> F64: ...
 
 
+_LOG_SUFFIXES = frozenset({".mcap", ".bag", ".db3", ".csv", ".txt"})
+
+
 def reference_paths(out_path: Path, kind: str) -> tuple[Path, Path, Path]:
-    """``<stem>.<kind>.yaml``, ``<stem>.<kind>.pgm`` and ``<stem>.truth.csv`` beside a log."""
-    stem = out_path.name.split(".")[0] or out_path.name
+    """``<stem>.<kind>.yaml``, ``<stem>.<kind>.pgm`` and ``<stem>.truth.csv`` beside a log;
+    the stem is the name without its log suffix only (``sim_0.02_0.0.mcap`` →
+    ``sim_0.02_0.0``), so logs whose names differ after a dot do not share truth files."""
+    name = out_path.name
+    stem = name[: -len(out_path.suffix)] if out_path.suffix.lower() in _LOG_SUFFIXES else name
+    stem = stem or name
     d = out_path.parent
     return d / f"{stem}.{kind}.yaml", d / f"{stem}.{kind}.pgm", d / f"{stem}.truth.csv"
 

@@ -90,6 +90,7 @@ class RunMetrics:
     run: dict[str, Any]
     timing: dict[str, Any] = field(default_factory=dict)
     comparison: dict[str, Any] | None = None
+    pose_refinement: dict[str, Any] | None = None  # run --refine-poses (pipeline/refine/)
     warnings: list[str] = field(default_factory=list)
 
     def deterministic(self) -> dict[str, Any]:
@@ -105,6 +106,8 @@ class RunMetrics:
         }
         if self.comparison is not None:
             out["comparison"] = self.comparison
+        if self.pose_refinement is not None:
+            out["pose_refinement"] = self.pose_refinement
         out["warnings"] = self.warnings
         return out
 

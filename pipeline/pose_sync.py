@@ -2,9 +2,15 @@
 
 Between the two poses that bracket a reading's stamp the position is interpolated
 linearly and the yaw along the shortest arc. A reading gets no pose — and is dropped and
-counted by reason — before the first pose, after the last, or inside a gap between poses
-longer than ``max_pose_gap_s``. ``time_offset_s`` is added to reading stamps first (for a
-sensor whose clock is off).
+counted by reason — before the first pose, after the last, inside a gap between poses
+longer than the pose gap limit, or between two poses the robot cannot have moved between
+(faster than MAX_POSE_SPEED_MPS: an odometry glitch). ``time_offset_s`` is added to
+reading stamps first (for a sensor whose clock is off).
+
+The pose gap limit is ``[pose_sync] max_pose_gap_s`` when set, else it adapts to the log
+(:func:`pose_gap_limit_s`): AUTO_GAP_FACTOR × the median pose interval, at least
+AUTO_GAP_MIN_S and at most AUTO_GAP_MAX_S — so 1 Hz odometry (poses 0.9 s apart) gets
+2.7 s and 10-50 Hz odometry keeps 0.5 s.
 """
 
 from __future__ import annotations
@@ -27,6 +33,16 @@ POSE_OK = 0
 BEFORE_FIRST_POSE = 1
 AFTER_LAST_POSE = 2
 IN_POSE_GAP = 3
+POSE_JUMP = 4
+# Faster than any robot that maps with sonars: a step between two poses at a higher speed
+# is an odometry glitch, not motion (m/s).
+MAX_POSE_SPEED_MPS = 10.0
+AUTO_GAP_FACTOR = 3.0  # automatic pose gap limit: this many median pose intervals ...
+AUTO_GAP_MIN_S = 0.5  # ... but at least this (s; the limit before it adapted) ...
+AUTO_GAP_MAX_S = 5.0  # ... and at most this (s): longer gaps are gaps at any pose rate
+# Pose segments (split at glitches) holding less than this share of the poses are outliers
+# when the grid extent is sized.
+OUTLIER_SHARE = 0.01
 _BLOCK = 65_536  # poses per block of PoseTrack.blocks
 _TRACK_DTYPES = (np.int64, np.float64, np.float64, np.float64)  # t_ns, x, y, yaw
 POSE_REASONS = {
@@ -34,6 +50,7 @@ POSE_REASONS = {
     BEFORE_FIRST_POSE: "before_first_pose",
     AFTER_LAST_POSE: "after_last_pose",
     IN_POSE_GAP: "in_pose_gap",
+    POSE_JUMP: "pose_jump",
 }
 
 
@@ -80,6 +97,57 @@ class PoseTrack:
                 lo[k] = min(lo[k], float(col[blk].min()))
                 hi[k] = max(hi[k], float(col[blk].max()))
         return (lo[0], lo[1], hi[0], hi[1])
+
+    def median_interval_s(self) -> float:
+        """Median time between consecutive poses, s (NaN with fewer than two poses)."""
+        if len(self) < 2:
+            return math.nan
+        steps = [np.diff(self.t_ns[blk]) for blk in self.blocks(overlap=1)]
+        return float(np.median(np.concatenate(steps))) / 1e9
+
+    def bulk_bounds(self) -> tuple[tuple[float, float, float, float], int]:
+        """``(x_min, y_min, x_max, y_max)`` of the poses without isolated outliers, and how
+        many poses were left out.
+
+        The track is cut wherever consecutive poses are further apart than the robot can
+        travel at MAX_POSE_SPEED_MPS; pieces holding less than OUTLIER_SHARE of the poses
+        (a glitch to 2 km and back, a short jump) are outliers unless they are the largest
+        piece. A track without glitches gives :meth:`bounds` and 0.
+        """
+        n = len(self)
+        if n == 0:
+            return (math.nan,) * 4, 0
+        pieces: list[list[float]] = []  # [count, x0, y0, x1, y1] per piece, in time order
+        for blk in self.blocks(overlap=1):
+            t, x, y = self.t_ns[blk], self.x[blk], self.y[blk]
+            dt = np.diff(t).astype(np.float64) / 1e9
+            jump = np.hypot(np.diff(x), np.diff(y)) > MAX_POSE_SPEED_MPS * np.maximum(dt, 1e-9)
+            # Start of each piece in this block (the block's first pose continues the
+            # previous block's last piece: it was that block's overlap pose).
+            cuts = np.flatnonzero(jump) + 1
+            starts = np.r_[0, cuts]
+            ends = np.r_[cuts, len(t)]
+            first = blk.start == 0
+            for k, (a, b) in enumerate(zip(starts.tolist(), ends.tolist(), strict=True)):
+                if not first and k == 0:
+                    a += 1  # the overlap pose was counted in the previous block
+                    if a >= b:
+                        continue
+                    piece = pieces[-1]
+                else:
+                    piece = [0, math.inf, math.inf, -math.inf, -math.inf]
+                    pieces.append(piece)
+                piece[0] += b - a
+                piece[1] = min(piece[1], float(x[a:b].min()))
+                piece[2] = min(piece[2], float(y[a:b].min()))
+                piece[3] = max(piece[3], float(x[a:b].max()))
+                piece[4] = max(piece[4], float(y[a:b].max()))
+        largest = max(range(len(pieces)), key=lambda i: pieces[i][0])
+        keep = [p for i, p in enumerate(pieces) if i == largest or p[0] >= OUTLIER_SHARE * n]
+        left_out = n - int(sum(p[0] for p in keep))
+        box = (min(p[1] for p in keep), min(p[2] for p in keep),
+               max(p[3] for p in keep), max(p[4] for p in keep))
+        return box, left_out
 
     def blocks(self, overlap: int = 0) -> Iterator[slice]:
         """The track in order as slices of ``_BLOCK`` poses, each reaching ``overlap`` poses
@@ -219,8 +287,21 @@ class PoseLookup:
     reason: npt.NDArray[np.int8]
 
 
-def interpolate_poses(track: PoseTrack, t_ns: I64, max_gap_ns: int) -> PoseLookup:
-    """The robot pose at each stamp in ``t_ns`` (any order), vectorised."""
+def pose_gap_limit_s(configured_s: float, median_interval_s: float) -> float:
+    """The pose gap limit in effect: ``configured_s`` when > 0, else AUTO_GAP_FACTOR ×
+    the median pose interval within [AUTO_GAP_MIN_S, AUTO_GAP_MAX_S]."""
+    if configured_s > 0:
+        return configured_s
+    if not math.isfinite(median_interval_s):
+        return AUTO_GAP_MIN_S
+    return min(max(AUTO_GAP_FACTOR * median_interval_s, AUTO_GAP_MIN_S), AUTO_GAP_MAX_S)
+
+
+def interpolate_poses(
+    track: PoseTrack, t_ns: I64, max_gap_ns: int, max_speed: float = MAX_POSE_SPEED_MPS
+) -> PoseLookup:
+    """The robot pose at each stamp in ``t_ns`` (any order), vectorised; readings between
+    poses further apart than ``max_speed`` (m/s) allows get POSE_JUMP."""
     n = t_ns.shape[0]
     reason = np.zeros(n, np.int8)
     out_x = np.full(n, np.nan)
@@ -241,6 +322,12 @@ def interpolate_poses(track: PoseTrack, t_ns: I64, max_gap_ns: int) -> PoseLooku
     i0 = np.where(exact, hi, i1 - 1)
     gap = tt[i1] - tt[i0]
     reason[inside & ~exact & (gap > max_gap_ns)] = IN_POSE_GAP
+    cand = np.flatnonzero((reason == POSE_OK) & ~exact)
+    if cand.size:
+        a, b = i0[cand], i1[cand]
+        step = np.hypot(track.x[b] - track.x[a], track.y[b] - track.y[a])
+        dt = (tt[b] - tt[a]).astype(np.float64) / 1e9
+        reason[cand[step > max_speed * dt]] = POSE_JUMP
     ok = reason == POSE_OK
     i0, i1 = i0[ok], i1[ok]
     span = (tt[i1] - tt[i0]).astype(np.float64)

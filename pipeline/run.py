@@ -25,13 +25,14 @@ from typing import Any
 import numpy as np
 
 from formats import open_log
-from formats.contract import LogReader, RangeBatch
+from formats.contract import LogInfo, LogReader, RangeBatch
 from formats.errors import ConfigError, InputError
 from formats.map_types import GridSpec
 from formats.writers.trajectory_tum import Trajectory
 from pipeline import __version__
 from pipeline.config import Config, dump_config
 from pipeline.ingest import Survey, ordered_ranges, survey
+from pipeline.mapped_share import check_mapped_share, mapped_readings
 from pipeline.mapper import Mapper, make_mapper
 from pipeline.mapper.types import MapSnapshot, Scan
 from pipeline.metrics import (
@@ -46,12 +47,13 @@ from pipeline.pose_sync import (
     POSE_REASONS,
     PoseTrack,
     interpolate_poses,
+    pose_gap_limit_s,
     sonar_geometry,
 )
 from pipeline.reading_quality import REASONS
 from pipeline.run_warnings import run_warnings
 from pipeline.scans import ScanBuilder, ScanKeys
-from pipeline.sensors import SensorTable, resolve_sensors
+from pipeline.sensors import SensorTable, beam_problem, resolve_sensors
 
 log = logging.getLogger("sonarmap")
 
@@ -78,6 +80,8 @@ class StreamState:
     dropped: Counter[str]
     per_sensor: Counter[int]
     scans: int
+    max_pose_gap_s: float
+    median_pose_interval_s: float
 
 
 def run(
@@ -113,6 +117,13 @@ def run(
                 found = None if progress is None else (lambda n: progress("reading", n, None))
                 sv, sensors, grid = prepare(reader, config, found)
                 info = reader.info()
+            odometry: PoseTrack | None = None
+            refinement: dict[str, Any] | None = None
+            if config.pose_refinement.enabled:
+                with timer.stage("pose_refinement"):
+                    odometry = sv.track
+                    sv, refinement = _refine_poses(reader, sv, sensors, config)
+                    grid = grid_for(sv, sensors, config)  # the refined poses' box
             # Thinned now, while little else is in memory (it reads the whole track).
             drawn = _drawn_trajectory(sv.track)
             log.info(
@@ -125,26 +136,62 @@ def run(
                 off = dataclasses.replace(config.mapper, feature_correction=False)
                 mappers["no_correction"] = make_mapper(off, grid)
             passes = max(m.passes for m in mappers.values())
-            for index in range(passes):
-                # Every pass streams the log again: nothing grows with the log's length.
-                active = {k: m for k, m in mappers.items() if index < m.passes}
-                for m in active.values():
-                    m.begin_pass(index)
-                if index:
-                    sv.track.release_before(None)  # the pose walk starts again
-                state = _map_stream(
-                    reader, sv, sensors, active, config, timer, _pass_progress(progress, index, passes)
-                )
+            try:
+                for index in range(passes):
+                    # Every pass streams the log again: nothing grows with the log's length.
+                    active = {k: m for k, m in mappers.items() if index < m.passes}
+                    for m in active.values():
+                        m.begin_pass(index)
+                    if index:
+                        sv.track.release_before(None)  # the pose walk starts again
+                    state = _map_stream(
+                        reader, sv, sensors, grid, active, config, timer,
+                        _pass_progress(progress, index, passes),
+                    )
+            except InputError as err:
+                if err.path is not None:
+                    raise
+                raise InputError(err.reason, log_path) from err
         with timer.stage("mapping"):
             snapshots = {k: m.snapshot() for k, m in mappers.items()}
         if progress is not None:
             progress("writing", 0, None)  # the outputs: no reading count to show
-        metrics = _metrics(log_path, info.format, info.duration_s, sv, sensors, mappers,
-                           snapshots, state, config)
-        _write_outputs(out, config, sv, drawn, snapshots, metrics, timer, t_start)
+        metrics = _metrics(log_path, info, sv, sensors, mappers, snapshots, state, config)
+        metrics.pose_refinement = refinement
+        # A map of (almost) nothing is an error, not an empty result with exit 0.
+        check_mapped_share(log_path, metrics.counts, metrics.dropped, state.max_pose_gap_s,
+                           state.median_pose_interval_s, config)
+        _write_outputs(out, config, sv, drawn, snapshots, metrics, timer, t_start,
+                       odometry=odometry)
         if on_complete is not None:
             on_complete(out.tmp_dir, metrics)
     return RunResult(Path(out_dir), metrics, snapshots["main"])
+
+
+def _refine_poses(
+    reader: LogReader, sv: Survey, sensors: SensorTable, config: Config
+) -> tuple[Survey, dict[str, Any]]:
+    """Pose refinement (pipeline/refine/): one more pass over the readings for the echoes,
+    then the refined track replaces the odometry for the grid and the mapping pass."""
+    from pipeline.refine import collect_echoes, refine_track
+
+    echoes = collect_echoes(
+        reader, sv.track, sensors,
+        eps_max=config.mapper.eps_max,
+        max_echo_range_m=config.pose_refinement.max_echo_range_m,
+        arc_fraction=config.pose_refinement.arc_fraction,
+        time_offset_ns=round(config.pose_sync.time_offset_s * 1e9),
+        max_gap_ns=round(pose_gap_limit_s(config.pose_sync.max_pose_gap_s,
+                                          sv.track.median_interval_s()) * 1e9),
+    )
+    refined = refine_track(sv.track, echoes, config.pose_refinement)
+    old = sv.track
+    track = PoseTrack(refined.t_ns, refined.x, refined.y, refined.yaw, old.parent_frame,
+                      old.child_frame, backwards=old.backwards, duplicates=old.duplicates)
+    log.info("pose refinement: %d submaps, %d matches, %d loop closures; poses moved %.3f m "
+             "on average", refined.metrics["submaps"], refined.metrics.get("matches_accepted", 0),
+             refined.metrics.get("loop_closures_accepted", 0), refined.metrics["moved_mean_m"])
+    return dataclasses.replace(sv, track=track), refined.metrics
 
 
 def prepare(
@@ -163,7 +210,11 @@ def prepare(
 
 
 def grid_for(sv: Survey, sensors: SensorTable, config: Config) -> GridSpec:
-    """The grid: ``[grid] extent`` if given, else the poses' box grown by the sonars' reach."""
+    """The grid: ``[grid] extent`` if given, else the poses' box grown by the sonars' reach.
+
+    The box leaves out isolated pose outliers (:meth:`PoseTrack.bulk_bounds`: an odometry
+    glitch must not blow the grid up to kilometres); readings placed outside the grid are
+    dropped and counted (``outside_grid``)."""
     g = config.grid
     if g.extent:
         x0, y0, x1, y1 = g.extent
@@ -179,15 +230,17 @@ def grid_for(sv: Survey, sensors: SensorTable, config: Config) -> GridSpec:
         offsets = np.hypot(sensors.mount_x, sensors.mount_y)
         offset = float(np.nanmax(offsets)) if np.isfinite(offsets).any() else 0.0
         reach = max(finite) + offset + g.margin
-        bx0, by0, bx1, by1 = sv.track.bounds()
+        (bx0, by0, bx1, by1), _ = sv.track.bulk_bounds()
         x0, x1 = bx0 - reach, bx1 + reach
         y0, y1 = by0 - reach, by1 + reach
     grid = GridSpec.covering(x0, y0, x1, y1, g.resolution)
     cells = grid.width * grid.height
     if cells > g.max_cells:
         raise ConfigError(
-            f"grid of {grid.width}x{grid.height} = {cells} cells exceeds grid.max_cells = "
-            f"{g.max_cells}; use a coarser grid.resolution or a [grid] extent"
+            f"grid of {grid.width}x{grid.height} = {cells} cells "
+            f"({grid.width * g.resolution:.0f} x {grid.height * g.resolution:.0f} m) exceeds "
+            f"grid.max_cells = {g.max_cells}; use a coarser grid.resolution, a [grid] extent, "
+            "or a larger grid.max_cells if the memory is there (~32 bytes a cell)"
         )
     return grid
 
@@ -196,6 +249,7 @@ def _map_stream(
     reader: LogReader,
     sv: Survey,
     sensors: SensorTable,
+    grid: GridSpec,
     mappers: dict[str, Mapper],
     config: Config,
     timer: StageTimer,
@@ -207,26 +261,30 @@ def _map_stream(
         with timer.stage("mapping"):
             _integrate(mappers, scans)
 
-    return stream_scans(reader, sv, sensors, config, integrate, timer, progress)
+    return stream_scans(reader, sv, sensors, grid, config, integrate, timer, progress)
 
 
 def stream_scans(
     reader: LogReader,
     sv: Survey,
     sensors: SensorTable,
+    grid: GridSpec,
     config: Config,
     consume: Callable[[list[Scan]], None],
     timer: StageTimer | None = None,
     progress: Progress | None = None,
 ) -> StreamState:
     """Pose sync and scan building over the log's time-ordered readings: ``consume`` gets
-    the scans in order, chunk by chunk (any mapper, or a baseline such as OctoMap)."""
+    the scans in order, chunk by chunk (any mapper, or a baseline such as OctoMap);
+    readings placed outside ``grid`` are dropped (``outside_grid``)."""
     timer = timer if timer is not None else StageTimer()
     track = sv.track
     offset_ns = round(config.pose_sync.time_offset_s * 1e9)
-    max_gap_ns = round(config.pose_sync.max_pose_gap_s * 1e9)
+    median_s = track.median_interval_s()
+    gap_s = pose_gap_limit_s(config.pose_sync.max_pose_gap_s, median_s)
+    max_gap_ns = round(gap_s * 1e9)
     builder = ScanBuilder(ScanKeys(config.scans, track))
-    state = StreamState(0, Counter(), Counter(), 0)
+    state = StreamState(0, Counter(), Counter(), 0, gap_s, median_s)
     total = sv.ranges.count
     stream = ordered_ranges(reader)
     while True:
@@ -241,7 +299,7 @@ def stream_scans(
         if len(batch) == 0:
             continue
         with timer.stage("pose_sync"):
-            scan_ids, readings = _sync(batch, track, sensors, offset_ns, max_gap_ns, state)
+            scan_ids, readings = _sync(batch, track, sensors, grid, offset_ns, max_gap_ns, state)
         with timer.stage("scan_building"):
             scans = list(builder.push(scan_ids, readings))
         # Later readings are newer than this chunk: the poses before it are done with.
@@ -279,11 +337,13 @@ def _sync(
     batch: RangeBatch,
     track: PoseTrack,
     sensors: SensorTable,
+    grid: GridSpec,
     offset_ns: int,
     max_gap_ns: int,
     state: StreamState,
 ) -> tuple[np.ndarray, Scan]:
-    """Pose sync of one chunk: drop readings without a pose, resolve world geometry."""
+    """Pose sync of one chunk: drop readings without a pose or placed outside the grid,
+    check beam widths and limits, resolve world geometry."""
     look = interpolate_poses(track, batch.t_ns + offset_ns, max_gap_ns)
     codes, counts = np.unique(look.reason, return_counts=True)
     for c, n in zip(codes.tolist(), counts.tolist(), strict=True):
@@ -292,6 +352,17 @@ def _sync(
     ok = look.reason == POSE_OK
     b = batch.take(ok)
     sid = b.sensor_id
+    ox, oy, alpha = sonar_geometry(
+        look.x[ok], look.y[ok], look.yaw[ok],
+        sensors.mount_x[sid], sensors.mount_y[sid], sensors.mount_yaw[sid],
+    )
+    x0, y0 = grid.origin_x, grid.origin_y
+    inside = (ox >= x0) & (ox < x0 + grid.width * grid.resolution)
+    inside &= (oy >= y0) & (oy < y0 + grid.height * grid.resolution)
+    if not inside.all():  # a pose outlier left out of the grid extent
+        state.dropped["outside_grid"] += int((~inside).sum())
+        b, ox, oy, alpha = b.take(inside), ox[inside], oy[inside], alpha[inside]
+        sid = b.sensor_id
     ids, per = np.unique(sid, return_counts=True)
     state.per_sensor.update(dict(zip(ids.tolist(), per.tolist(), strict=True)))
     fov, lo, hi = sensors.apply_limits(b)
@@ -301,10 +372,9 @@ def _sync(
             f"no beam width (fov) for sensor(s) {', '.join(bad)}: the log carries none; set "
             f"fov_deg in [sensors] or [[sensors.mounts]]"
         )
-    ox, oy, alpha = sonar_geometry(
-        look.x[ok], look.y[ok], look.yaw[ok],
-        sensors.mount_x[sid], sensors.mount_y[sid], sensors.mount_yaw[sid],
-    )
+    problem = beam_problem(sensors.names, sid, fov, lo, hi)
+    if problem is not None:
+        raise InputError(problem)
     scan = Scan(
         t_ns=b.t_ns, sensor_id=sid, range_m=b.range_m, origin_x=ox, origin_y=oy, alpha=alpha,
         fov=fov, min_range=lo, max_range=hi,
@@ -314,8 +384,7 @@ def _sync(
 
 def _metrics(
     log_path: Path,
-    fmt: str,
-    duration_s: float,
+    info: LogInfo,
     sv: Survey,
     sensors: SensorTable,
     mappers: dict[str, Mapper],
@@ -326,6 +395,7 @@ def _metrics(
     main = mappers["main"]
     counters = main.counters.as_dict()
     dropped = {name: int(state.dropped.get(name, 0)) for name in list(POSE_REASONS.values())[1:]}
+    dropped["outside_grid"] = int(state.dropped.get("outside_grid", 0))
     dropped["late"] = int(state.dropped.get("late", 0))
     dropped["stamp_backwards"] = int(state.dropped.get("stamp_backwards", 0))
     for name in list(REASONS.values())[1:]:
@@ -354,11 +424,15 @@ def _metrics(
             "path": str(log_path),
             "name": log_path.name,
             "sha256": sha256_of(log_path),
-            "format": fmt,
-            "duration_s": duration_s,
+            "format": info.format,
+            "duration_s": info.duration_s,
             "start_ns": sv.ranges.t_min,
             "end_ns": sv.ranges.t_max,
             "max_range_m": sv.ranges.max_range_m,
+            # A damaged log is mapped from its intact part; what was lost is recorded.
+            "bytes_lost": info.bytes_lost,
+            "messages_recovered": info.message_count if info.losses else None,
+            "losses": list(info.losses),
         },
         run={
             "tool_version": __version__,
@@ -366,15 +440,21 @@ def _metrics(
             "feature_correction": config.mapper.feature_correction,
             "config_hash": config.hash(),
             "scan_policy": config.scans.policy,
+            "max_pose_gap_s": state.max_pose_gap_s,
+            "median_pose_interval_s": state.median_pose_interval_s,
         },
         counts={
             "readings": sv.ranges.count,
             "readings_pose_synced": int(sum(state.per_sensor.values())),
             "readings_used": counters.get("readings_used", 0),
+            "readings_mapped": mapped_readings(
+                counters.get("readings_used", 0), dropped, config.mapper.clear_on_max_range
+            ),
             "readings_stamp_backwards": sv.ranges.backwards,
             "poses": len(track),
             "poses_stamp_backwards": track.backwards,
             "poses_duplicate_stamp": track.duplicates,
+            "poses_outliers": track.bulk_bounds()[1],
             "scans": state.scans,
             **{k: v for k, v in counters.items() if not k.startswith("skipped_") and k not in ("readings", "readings_used", "scans")},
             "features": len(snap.features),
@@ -445,9 +525,14 @@ def _write_outputs(
     metrics: RunMetrics,
     timer: StageTimer,
     t_start: float,
+    *,
+    odometry: PoseTrack | None = None,
 ) -> None:
     """Write every output; metrics.json and the reports last, so that they can carry the
-    timing of everything before them (total = up to the reports)."""
+    timing of everything before them (total = up to the reports).
+
+    ``trajectory.csv`` holds the poses the map was built on; with pose refinement those are
+    the refined ones and ``odometry.csv`` the odometry they started from."""
     from formats.writers.features_parquet import write_features
     from formats.writers.map_mcap import write_map_mcap
     from formats.writers.map_png import write_map_png
@@ -466,6 +551,15 @@ def _write_outputs(
     write_trajectory_tum(out.path("trajectory.csv"), track.t_ns, track.x, track.y, track.yaw,
                          frame=track.parent_frame)
     track.release_before(None)
+    if odometry is not None:  # pose refinement: the odometry the trajectory started from
+        from formats.writers.trajectory_png import write_trajectory_png
+
+        write_trajectory_tum(out.path("odometry.csv"), odometry.t_ns, odometry.x, odometry.y,
+                             odometry.yaw, frame=odometry.parent_frame)
+        drawn_odometry = _drawn_trajectory(odometry)
+        write_trajectory_png(out.path("trajectory.png"),
+                             np.column_stack([drawn_odometry.x, drawn_odometry.y]), traj_xy,
+                             title=f"{metrics.input['name']} - pose refinement")
     write_map_mcap(
         out.path("map.mcap"), probability=snap.probability, grid=snap.grid,
         features=snap.features, trajectory=traj, frame_id=track.parent_frame,

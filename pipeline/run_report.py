@@ -20,6 +20,8 @@ __all__ = ["COMPARISON_IMAGES", "write_run_reports"]
 
 #: The map image of each column of metrics.json ``comparison``.
 COMPARISON_IMAGES = {"with_correction": "map.png", "without_correction": "map_no_correction.png"}
+#: Further images a run may hold, with their caption in the reports.
+FIGURES = {"trajectory.png": "Pose refinement: odometry and refined trajectory"}
 
 
 def write_run_reports(run_dir: Path, evaluation: Mapping[str, Any] | None = None) -> None:
@@ -36,5 +38,8 @@ def write_run_reports(run_dir: Path, evaluation: Mapping[str, Any] | None = None
         for key, name in COMPARISON_IMAGES.items()
         if key in comparison
     }
+    figures = {caption: run_dir / name for name, caption in FIGURES.items()
+               if (run_dir / name).is_file()}
     write_reports(run_dir, metrics=metrics, features=features, map_png=run_dir / "map.png",
-                  comparison_pngs=images or None, evaluation=evaluation)
+                  comparison_pngs=images or None, evaluation=evaluation,
+                  figures=figures or None)

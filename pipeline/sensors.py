@@ -8,14 +8,17 @@ log has and the static mounts it carries. A sensor with readings and no mount is
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from formats.arrays import F64
 from formats.contract import RangeBatch, SensorMount
 from formats.errors import InputError
+from formats.options import FOV_MAX_DEG, FOV_MIN_DEG
 from formats.sensor_config import sensor_setup
 from pipeline.config import Config
 
@@ -43,6 +46,33 @@ class SensorTable:
         lo = _pick(self.min_override[sid], batch.min_range_m, self.default_min)
         hi = _pick(self.max_override[sid], batch.max_range_m, self.default_max)
         return fov, lo, hi
+
+
+def beam_problem(
+    names: Sequence[str], sensor_id: npt.NDArray[np.int32], fov: F64, lo: F64, hi: F64
+) -> str | None:
+    """Why the resolved beam widths / limits of these readings cannot be mapped, naming
+    the sensor, the value and the fix; None when they can. NaN fov is "none" (reported by
+    the caller); limits that are NaN or <= 0 mean "no limit" (reading_quality)."""
+    lo_fov, hi_fov = math.radians(FOV_MIN_DEG), math.radians(FOV_MAX_DEG)
+    with np.errstate(invalid="ignore"):
+        bad_fov = ~np.isnan(fov) & ~((fov >= lo_fov) & (fov < hi_fov))
+        bad_lim = (lo > 0) & (hi > 0) & np.isfinite(lo) & ~(hi > lo)
+    if bad_fov.any():
+        i = int(np.flatnonzero(bad_fov)[0])
+        return (
+            f"sensor {names[int(sensor_id[i])]}: beam width (fov) {float(fov[i])!r} rad is "
+            f"not in [{FOV_MIN_DEG:g}°, {FOV_MAX_DEG:g}°) ({int(bad_fov.sum())} readings); "
+            "set fov_deg for it in [[sensors.mounts]]"
+        )
+    if bad_lim.any():
+        i = int(np.flatnonzero(bad_lim)[0])
+        return (
+            f"sensor {names[int(sensor_id[i])]}: max_range {float(hi[i])!r} m is not above "
+            f"min_range {float(lo[i])!r} m ({int(bad_lim.sum())} readings); set min_range "
+            "and max_range for it in [[sensors.mounts]]"
+        )
+    return None
 
 
 def _pick(override: F64, logged: F64, default: float) -> F64:

@@ -10,10 +10,19 @@ code                      severity  what
 ========================  ========  =====================================================
 ``no_ranges``             ERROR     the log has no range readings
 ``no_poses``              ERROR     the log has no poses
-``stamps_backwards``      ERROR     stamps older than an earlier stamp of the sensor
+``stamps_backwards``      ERROR     a sensor's header stamp is older than an earlier one
+                                    (the running maximum, as the pipeline drops them)
 ``stamp_skew``            WARNING   header stamp vs record time differ by more than 0.1 s
-``pose_gap``              WARNING   pose stream gaps longer than ``max_pose_gap_s``
+``pose_gap``              WARNING   pose gaps longer than the pose gap limit (set, or
+                                    automatic from the pose rate), with the readings
+                                    they drop; ERROR when a run would map too few
+``pose_jump``             WARNING   consecutive poses further apart than a robot moves
+                                    (MAX_POSE_SPEED_MPS): odometry glitches
 ``pose_stamps_backwards`` WARNING   pose stamps go backwards (the pipeline sorts them)
+``bad_beam``              ERROR     a beam width (fov) or range limits from the log that
+                                    cannot be mapped
+``damaged_log``           WARNING   the log is truncated or corrupt: what was lost (the
+                                    intact part is mapped)
 ``outside_pose_coverage`` WARNING   readings before the first / after the last pose
 ``nan_readings``          ERROR     NaN ranges (REP 117: erroneous reading)
 ``negative_readings``     ERROR     negative finite ranges
@@ -42,7 +51,9 @@ from formats.contract import Kind, LogReader, MountBatch, PoseBatch, RangeBatch,
 from formats.natural_order import natural_key
 from formats.tables import text_table
 from pipeline.config import Config
-from pipeline.ingest import stamps_behind
+from pipeline.ingest import StampOrder
+from pipeline.mapped_share import MIN_MAPPED_FRACTION
+from pipeline.pose_sync import MAX_POSE_SPEED_MPS, pose_gap_limit_s
 from pipeline.reading_quality import (
     MAX_RANGE,
     NAN,
@@ -52,7 +63,7 @@ from pipeline.reading_quality import (
     classify_readings,
     count_reasons,
 )
-from pipeline.sensors import SensorTable, resolve_sensors
+from pipeline.sensors import SensorTable, beam_problem, resolve_sensors
 
 Severity = Literal["ERROR", "WARNING"]
 
@@ -213,7 +224,6 @@ class _SensorState:
         self.readings = 0
         self.t_min: int | None = None
         self.t_max: int | None = None
-        self.newest_t: int | None = None
         self.backwards = 0
         self.max_back_ns = 0
         self.reasons = dict.fromkeys(REASONS.values(), 0)
@@ -233,17 +243,18 @@ class _SensorState:
         rec: npt.NDArray[np.int64],
         d: npt.NDArray[np.float64],
         codes: npt.NDArray[np.int8],
+        back_ns: npt.NDArray[np.int64],
     ) -> None:
-        """Fold in this sensor's readings of one batch, in stream order."""
+        """Fold in this sensor's readings of one batch, in stream order; ``back_ns`` is how
+        far each stamp lies below the sensor's running maximum (ingest's StampOrder)."""
         self.readings += int(t.shape[0])
         lo, hi = int(t.min()), int(t.max())
         self.t_min = lo if self.t_min is None else min(self.t_min, lo)
         self.t_max = hi if self.t_max is None else max(self.t_max, hi)
-        # Stamps going backwards, as the pipeline counts (and drops) them.
-        back, behind, self.newest_t = stamps_behind(t, self.newest_t)
+        back = back_ns > 0
         if back.any():
             self.backwards += int(back.sum())
-            self.max_back_ns = max(self.max_back_ns, int(behind.max()))
+            self.max_back_ns = max(self.max_back_ns, int(back_ns.max()))
         for name, n in count_reasons(codes).items():
             self.reasons[name] += n
         skew = np.abs(rec - t)
@@ -351,6 +362,9 @@ def validate_log(reader: LogReader, config: Config) -> ValidationReport:
     states: dict[int, _SensorState] = {}
     log_mounts: dict[str, SensorMount] = {}
     pose_t: dict[tuple[str, str], list[npt.NDArray[np.int64]]] = {}
+    pose_xy: dict[tuple[str, str], list[npt.NDArray[np.float64]]] = {}
+    stamps = StampOrder()
+    beam_problems: dict[str, str] = {}
     coverage = _Coverage(round(config.pose_sync.time_offset_s * 1e9))
     table: SensorTable | None = None
     eps = config.mapper.eps_max
@@ -368,8 +382,10 @@ def validate_log(reader: LogReader, config: Config) -> ValidationReport:
             log_mounts.update(batch.mounts)
         elif isinstance(batch, PoseBatch):
             if len(batch):
-                pose_t.setdefault((batch.parent_frame, batch.child_frame), []).append(
-                    np.asarray(batch.t_ns, dtype=np.int64)
+                frames = (batch.parent_frame, batch.child_frame)
+                pose_t.setdefault(frames, []).append(np.asarray(batch.t_ns, dtype=np.int64))
+                pose_xy.setdefault(frames, []).append(
+                    np.column_stack([batch.x, batch.y]).astype(np.float64)
                 )
                 coverage.add_poses(batch.t_ns)
         elif isinstance(batch, RangeBatch) and len(batch):
@@ -377,8 +393,12 @@ def validate_log(reader: LogReader, config: Config) -> ValidationReport:
             if table is None or len(table.names) != len(names):
                 # Beam limits resolved exactly as the pipeline does (mounts don't matter here).
                 table = resolve_sensors(names, {}, config, used=[False] * len(names))
-            _, lo, hi = table.apply_limits(batch)
+            fov, lo, hi = table.apply_limits(batch)
+            problem = beam_problem(table.names, batch.sensor_id, fov, lo, hi)
+            if problem is not None:
+                beam_problems.setdefault(problem.split(":", 1)[0], problem)
             codes = classify_readings(batch.range_m, lo, hi, eps)
+            back_ns = stamps.steps_back(batch)
             coverage.add_ranges(batch.t_ns, batch.sensor_id)
             # One group per sensor (a stable sort keeps each sensor's stream order).
             order = np.argsort(batch.sensor_id, kind="stable")
@@ -388,7 +408,8 @@ def validate_log(reader: LogReader, config: Config) -> ValidationReport:
                 sid = int(batch.sensor_id[idx[0]])
                 state = states.setdefault(sid, _SensorState())
                 state.update(
-                    batch.t_ns[idx], batch.record_t_ns[idx], batch.range_m[idx], codes[idx]
+                    batch.t_ns[idx], batch.record_t_ns[idx], batch.range_m[idx], codes[idx],
+                    back_ns[idx],
                 )
 
     names = list(reader.sensor_names)
@@ -417,11 +438,22 @@ def validate_log(reader: LogReader, config: Config) -> ValidationReport:
     n_poses = sum(int(t.shape[0]) for t in all_pose_t)
     if not states:
         findings.append(Finding("ERROR", "no_ranges", "the log has no range readings"))
+    findings += [Finding("ERROR", "bad_beam", msg, key.removeprefix("sensor "))
+                 for key, msg in sorted(beam_problems.items())]
     if not n_poses:
         findings.append(Finding("ERROR", "no_poses", "the log has no poses"))
     else:
+        # The pose stream the pipeline maps with: the frame pair with the most poses.
+        main = max(sorted(pose_t), key=lambda k: sum(int(t.shape[0]) for t in pose_t[k]))
         for frames, ts in sorted(pose_t.items()):
-            findings += _pose_findings(frames, np.concatenate(ts), config.pose_sync.max_pose_gap_s)
+            t = np.concatenate(ts)
+            order = np.argsort(t, kind="stable")
+            xy = np.concatenate(pose_xy[frames])[order]
+            total = sum(st.readings for st in states.values())
+            findings += _pose_findings(
+                frames, t, xy, config,
+                reader if frames == main and total else None, total,
+            )
         n_before, n_after = int(before.sum()), int(after.sum())
         if n_before or n_after:
             worst = sorted(
@@ -439,6 +471,17 @@ def validate_log(reader: LogReader, config: Config) -> ValidationReport:
                 )
             )
 
+    if info.losses:
+        findings.append(
+            Finding(
+                "WARNING",
+                "damaged_log",
+                f"the log is damaged, {info.bytes_lost} bytes lost: {'; '.join(info.losses)}; "
+                f"sonarmap maps the intact part ({info.message_count} messages)",
+                counts={"bytes_lost": info.bytes_lost, "messages_recovered": info.message_count,
+                        "losses": len(info.losses)},
+            )
+        )
     findings.sort(key=lambda f: (_SEVERITY_ORDER[f.severity], f.code, natural_key(f.sensor or "")))
     t_first = min((int(t.min()) for t in all_pose_t), default=None)
     t_last = max((int(t.max()) for t in all_pose_t), default=None)
@@ -522,8 +565,15 @@ def _sensor_findings(name: str, st: _SensorState, mount: str) -> list[Finding]:
 
 
 def _pose_findings(
-    frames: tuple[str, str], t: npt.NDArray[np.int64], max_gap_s: float
+    frames: tuple[str, str],
+    t: npt.NDArray[np.int64],
+    xy_sorted: npt.NDArray[np.float64],
+    config: Config,
+    reader: LogReader | None,
+    total_readings: int,
 ) -> list[Finding]:
+    """Pose stamps going backwards, gaps (with the readings they drop, counted in a second
+    pass over ``reader`` when given) and impossible jumps of one pose stream."""
     out: list[Finding] = []
     label = f"{frames[0]}→{frames[1]}"
     back = int((np.diff(t) < 0).sum())
@@ -536,8 +586,14 @@ def _pose_findings(
                 counts={"backwards": back},
             )
         )
-    ts = np.sort(t)
+    ts = np.sort(t, kind="stable")
     gaps = np.diff(ts)
+    median_s = float(np.median(gaps)) / 1e9 if gaps.size else math.nan
+    configured = config.pose_sync.max_pose_gap_s
+    max_gap_s = pose_gap_limit_s(configured, median_s)
+    limit = (f"[pose_sync] max_pose_gap_s = {max_gap_s:g} s" if configured > 0 else
+             f"the automatic pose gap limit {max_gap_s:g} s (3 × the median pose interval "
+             f"{median_s:.3g} s, within [0.5, 5] s; [pose_sync] max_pose_gap_s sets it)")
     big = np.flatnonzero(gaps > round(max_gap_s * 1e9))
     if big.size:
         # Largest first; ties broken by time so the list is deterministic.
@@ -545,18 +601,81 @@ def _pose_findings(
         largest = [gaps[i] / 1e9 for i in top.tolist()]
         at = [(ts[i] - ts[0]) / 1e9 for i in top.tolist()]
         listed = ", ".join(f"{g:.3f} s at +{a:.3f} s" for g, a in zip(largest, at, strict=True))
+        dropped = _readings_in_gaps(reader, ts, gaps, max_gap_s, config) if reader else None
+        severity: Severity = "WARNING"
+        what = "readings in them are dropped"
+        if dropped is not None:
+            share = dropped / total_readings
+            what = (f"{dropped} of {total_readings} readings ({share:.1%}) are in them and "
+                    "will be dropped; raise [pose_sync] max_pose_gap_s to keep them")
+            if total_readings - dropped < MIN_MAPPED_FRACTION * total_readings:
+                severity = "ERROR"  # sonarmap run would refuse to map this log
         out.append(
             Finding(
-                "WARNING",
+                severity,
                 "pose_gap",
-                f"{big.size} gaps in the poses ({label}) longer than {max_gap_s:g} s "
-                f"(readings in them are dropped); largest: {listed}",
+                f"{big.size} gaps in the poses ({label}) longer than {limit}; {what}; "
+                f"largest: {listed}",
                 counts={
                     "gaps": int(big.size),
                     "largest_s": largest,
                     "at_s": at,
                     "max_pose_gap_s": max_gap_s,
+                    "median_pose_interval_s": median_s,
+                    "readings_dropped": dropped,
                 },
             )
         )
+    out += _pose_jumps(label, ts, xy_sorted)
     return out
+
+
+def _pose_jumps(
+    label: str, ts: npt.NDArray[np.int64], xy: npt.NDArray[np.float64]
+) -> list[Finding]:
+    """Consecutive poses further apart than a robot moves at MAX_POSE_SPEED_MPS."""
+    if ts.shape[0] < 2:
+        return []
+    dist = np.hypot(np.diff(xy[:, 0]), np.diff(xy[:, 1]))
+    dt = np.diff(ts).astype(np.float64) / 1e9
+    with np.errstate(invalid="ignore"):
+        jump = np.flatnonzero(dist > MAX_POSE_SPEED_MPS * np.maximum(dt, 0.0))
+    if not jump.size:
+        return []
+    i = int(jump[np.argmax(dist[jump])])
+    return [
+        Finding(
+            "WARNING",
+            "pose_jump",
+            f"{jump.size} steps in the poses ({label}) faster than {MAX_POSE_SPEED_MPS:g} m/s "
+            f"(largest {dist[i]:.1f} m in {dt[i]:.3f} s at +{(ts[i] - ts[0]) / 1e9:.3f} s): "
+            "odometry glitches; sonarmap run drops the readings between them (pose_jump) and "
+            "leaves isolated outliers out of the grid (outside_grid)",
+            counts={"jumps": int(jump.size), "largest_m": float(dist[i]),
+                    "max_speed_mps": MAX_POSE_SPEED_MPS},
+        )
+    ]
+
+
+def _readings_in_gaps(
+    reader: LogReader,
+    ts: npt.NDArray[np.int64],
+    gaps: npt.NDArray[np.int64],
+    max_gap_s: float,
+    config: Config,
+) -> int:
+    """Readings whose stamp falls strictly inside a pose gap longer than the limit (as
+    pose sync drops them), from a second pass over the ranges."""
+    offset = round(config.pose_sync.time_offset_s * 1e9)
+    limit = round(max_gap_s * 1e9)
+    n = 0
+    for batch in reader.batches(("ranges",)):
+        if not isinstance(batch, RangeBatch) or not len(batch):
+            continue
+        t = batch.t_ns + offset
+        hi = np.searchsorted(ts, t, side="left")
+        inside = (hi > 0) & (hi < ts.shape[0])
+        h = hi[inside]
+        exact = ts[h] == t[inside]
+        n += int(((gaps[h - 1] > limit) & ~exact).sum())
+    return n

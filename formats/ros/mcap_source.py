@@ -383,12 +383,14 @@ class McapSource(FileSource, SourceAccessors):
             if len(head) < _RECORD_HEAD:
                 lost = self._size - pos
                 if lost:
+                    self._bytes_lost += lost
                     self._warn(f"truncated: {lost} bytes at the end are not a whole record")
                 break
             op = head[0]
             (length,) = struct.unpack_from("<Q", head, 1)
             end = pos + _RECORD_HEAD + length
             if end > self._size:
+                self._bytes_lost += self._size - pos
                 self._warn(
                     f"truncated: record at byte {pos} (opcode 0x{op:02x}) needs {length} bytes,"
                     f" file ends first; {self._size - pos} bytes lost"
@@ -506,7 +508,10 @@ class McapSource(FileSource, SourceAccessors):
     def _block_batches(self, block: _Block, wanted: set[int]) -> Iterator[RawBatch]:
         content = self._read_at(block.record_offset, block.record_length)
         if len(content) < block.record_length:
-            self._warn(f"chunk at byte {block.record_offset} is cut off by the end of file")
+            line = f"chunk at byte {block.record_offset} is cut off by the end of file"
+            if line not in self._warnings:  # each pass meets it again: count it once
+                self._bytes_lost += len(content)
+            self._warn(line)
             return
         if block.is_chunk:
             try:

@@ -164,6 +164,8 @@ class RosLogReader:
             range_topics=list(sel.range_topics),
             pose_topic=sel.pose_topic,
             notes=notes,
+            losses=list(self.source.warnings),
+            bytes_lost=self.source.bytes_lost,
         )
 
     def batches(self, kinds: Sequence[Kind] = ALL_KINDS) -> Iterator[Batch]:

@@ -190,6 +190,7 @@ class Ros1BagSource(FileSource):
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
         self._warnings: list[str] = []
+        self._bytes_lost = 0
         self._open_file()
 
     # ------------------------------------------------------------------ opening
@@ -230,6 +231,7 @@ class Ros1BagSource(FileSource):
             scan = self._scan()
             conns, chunks = scan.conns, scan.chunks
             lost = self._size - scan.end
+            self._bytes_lost = lost
             n = sum(c.count for c in conns.values())
             cut = f" ({scan.salvaged} of them from a cut-off chunk)" if scan.salvaged else ""
             self._warnings.append(
@@ -438,6 +440,11 @@ class Ros1BagSource(FileSource):
     def end_ns(self) -> int | None:
         """Log time of the last message (ns), None for a bag without messages."""
         return max((c.end_ns for c in self._chunks), default=None)
+
+    @property
+    def bytes_lost(self) -> int:
+        """Bytes at the end of a bag cut by power loss that could not be read."""
+        return self._bytes_lost
 
     @property
     def warnings(self) -> list[str]:

@@ -49,6 +49,9 @@ class _StorageFile(Protocol):
     @property
     def warnings(self) -> list[str]: ...
 
+    @property
+    def bytes_lost(self) -> int: ...
+
     def raw_batches(self, connection_ids: Collection[int]) -> Iterator[RawBatch]: ...
 
     def close(self) -> None: ...
@@ -65,7 +68,9 @@ class Sqlite3File(SourceAccessors):
         if not path.is_file() or path.stat().st_size == 0:
             what = "empty file (0 bytes)" if path.is_file() else "missing file"
             raise FormatError(f"{what}, not a rosbag2 sqlite3 database", self._name)
-        uri = f"file:{quote(str(path.resolve()))}?mode=ro"
+        # Read-only and immutable: sqlite neither writes -wal/-shm files next to the user's
+        # bag nor needs write access to its directory (archive mounts, read-only binds).
+        uri = f"file:{quote(str(path.resolve()))}?mode=ro&immutable=1"
         try:
             self._db = sqlite3.connect(uri, uri=True, check_same_thread=False)
         except sqlite3.Error as err:
@@ -297,6 +302,10 @@ class Ros2BagSource(SourceAccessors):
         self._end = max(ends) if ends else None
 
     # -- MessageSource -------------------------------------------------------------------
+
+    @property
+    def bytes_lost(self) -> int:
+        return self._bytes_lost + sum(f.bytes_lost for f in self._files)
 
     @property
     def warnings(self) -> list[str]:

@@ -76,12 +76,14 @@ def normalize_msgtype(name: str) -> str:
 class SourceAccessors:
     """The MessageSource accessors, over the state a source fills in while opening:
     ``_connections`` (by id, in id order), ``_start``/``_end`` (log time, ns) and
-    ``_warnings`` (losses found while reading)."""
+    ``_warnings`` (losses found while reading) and ``_bytes_lost`` (bytes of the file that
+    could not be read: a truncated end, a cut-off chunk)."""
 
     _connections: dict[int, Connection]
     _start: int | None
     _end: int | None
     _warnings: list[str]
+    _bytes_lost: int = 0
 
     @property
     def connections(self) -> list[Connection]:
@@ -98,6 +100,10 @@ class SourceAccessors:
     @property
     def warnings(self) -> list[str]:
         return self._warnings
+
+    @property
+    def bytes_lost(self) -> int:
+        return self._bytes_lost
 
 
 class MessageSource(Protocol):
@@ -126,6 +132,9 @@ class MessageSource(Protocol):
 
     @property
     def warnings(self) -> list[str]: ...
+
+    @property
+    def bytes_lost(self) -> int: ...
 
     def close(self) -> None: ...
 

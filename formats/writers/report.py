@@ -187,13 +187,15 @@ def write_reports(
     map_png: Path,
     comparison_pngs: Mapping[str, Path] | None = None,
     evaluation: Mapping[str, Any] | None = None,
+    figures: Mapping[str, Path] | None = None,
 ) -> None:
     """Write ``out_dir/report.html`` and ``out_dir/report.md`` (see the module docstring).
 
     ``metrics``: a run's metrics.json as a dict (a ``timing`` section is ignored);
     ``features``: its feature table (σ histogram); ``map_png``: the map image;
     ``comparison_pngs``: column label → image of the maps shown side by side (with
-    ``metrics["comparison"]``); ``evaluation``: a ``sonarmap evaluate`` result as a dict.
+    ``metrics["comparison"]``); ``evaluation``: a ``sonarmap evaluate`` result as a dict;
+    ``figures``: caption → image shown after the map (the pose refinement's trajectories).
     """
     out_dir = Path(out_dir)
     map_png = Path(map_png)
@@ -243,6 +245,9 @@ def write_reports(
         "<h2>Map</h2>",
         f'<img alt="map of {html.escape(summary.title)}" src="{_data_uri(map_png)}">',
     ]
+    for cap, img in (figures or {}).items():
+        h += [f"<h2>{html.escape(cap)}</h2>",
+              f'<img alt="{html.escape(cap)}" src="{_data_uri(Path(img))}">']
     if comp_cols:
         h.append("<h2>With and without feature correction</h2>")
         if images:
@@ -288,6 +293,8 @@ def write_reports(
     else:
         m.append("No warnings.")
     m += ["", "## Map", "", f"![map of {summary.title}]({_image_ref(map_png, out_dir)})"]
+    for cap, img in (figures or {}).items():
+        m += ["", f"## {cap}", "", f"![{cap}]({_image_ref(Path(img), out_dir)})"]
     if comp_cols:
         m += ["", "## With and without feature correction", ""]
         if images:

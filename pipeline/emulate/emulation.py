@@ -3,6 +3,7 @@ its cone (see the package docstring)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -14,6 +15,7 @@ from formats.contract import PoseBatch, SensorMount, make_range_batch
 from formats.errors import InputError
 from formats.laser_log import LaserLog
 from formats.log_writers import LogContent
+from pipeline.drift import DriftModel, apply_drift
 from pipeline.emulate.ring import VirtualRing, cone_coverage, laser_view
 
 CHUNK_CELLS = 2_000_000  # bound on (scan × beam × sonar) and ray samples held at once
@@ -53,6 +55,27 @@ class Emulation:
     ring: VirtualRing  # the emitted sonars
     dropped: tuple[str, ...]  # sonars not emitted (outside the laser's view)
     notes: tuple[str, ...]
+    truth: PoseBatch | None = None  # the true poses when the log's odometry is drifted
+
+    def with_drift(self, model: DriftModel, seed: int) -> Emulation:
+        """The same emulation with its odometry drifted by ``model`` (:mod:`pipeline.drift`,
+        noise from ``PCG64(seed)``); the poses it started from become the truth."""
+        if model.is_zero:
+            return self
+        p = self.content.poses
+        rng = np.random.Generator(np.random.PCG64(seed))
+        x, y, yaw = apply_drift(p.x, p.y, p.yaw, model.validate(), rng)
+        drifted = PoseBatch(p.t_ns.copy(), x, y, yaw, p.parent_frame, p.child_frame)
+        note = (
+            f"odometry drifted: scale error {model.scale_error:g}, heading bias "
+            f"{model.heading_bias_deg_per_m:g} deg/m, noise {model.noise_xy:g} m/√m and "
+            f"{model.noise_yaw:g} rad/√rad (seed {seed}); the truth trajectory keeps the "
+            "poses before drift"
+        )
+        return dataclasses.replace(
+            self, content=dataclasses.replace(self.content, poses=drifted), truth=p,
+            notes=(*self.notes, note),
+        )
 
 
 def emulate(log: LaserLog, ring: VirtualRing, *, require_full_cone: bool = False) -> Emulation:

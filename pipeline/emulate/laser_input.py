@@ -13,7 +13,7 @@ from formats.errors import ConfigError, FormatError, InputError
 from formats.laser_log import LaserLog, read_carmen_laser_log, read_ros_laser_scans, sorted_by_time
 from formats.ros.reader import RosLogReader
 from pipeline.config import Config
-from pipeline.pose_sync import POSE_OK, build_pose_track, interpolate_poses
+from pipeline.pose_sync import POSE_OK, build_pose_track, interpolate_poses, pose_gap_limit_s
 
 
 def load_laser_log(
@@ -74,7 +74,8 @@ def _load_ros(
     track = build_pose_track(scans.poses)
     t = scans.t_ns
     notes = list(scans.notes)
-    look = interpolate_poses(track, t, round(cfg.pose_sync.max_pose_gap_s * 1e9))
+    gap_s = pose_gap_limit_s(cfg.pose_sync.max_pose_gap_s, track.median_interval_s())
+    look = interpolate_poses(track, t, round(gap_s * 1e9))
     ok = look.reason == POSE_OK
     if not ok.any():
         raise InputError(f"no robot pose at any of the {len(t)} laser scan stamps", p)

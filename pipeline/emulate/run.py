@@ -8,6 +8,7 @@ from pathlib import Path
 
 from formats.errors import OutputError
 from pipeline.config import Config
+from pipeline.drift import DriftModel
 from pipeline.emulate.emulation import Emulation, emulate
 from pipeline.emulate.laser_input import load_laser_log
 from pipeline.emulate.laser_map import LaserMap, LaserMapOptions, laser_occupancy_map
@@ -33,13 +34,15 @@ def write_emulation(
     *,
     compression: str = "none",
 ) -> list[Path]:
-    """Write the sonar log, the laser map and the trajectory; return the paths (log first).
+    """Write the sonar log, the laser map and the trajectory (the true poses: those before
+    drift when the odometry is drifted); return the paths (log first).
 
     Refuses (OutputError) when any of them exists already, before writing anything.
     """
+    truth = em.truth if em.truth is not None else em.content.poses
     return write_log_with_reference(
         em.content, out_path, fmt, compression=compression, kind="laser",
-        probability=laser_map.probability, grid=laser_map.grid, trajectory=em.content.poses,
+        probability=laser_map.probability, grid=laser_map.grid, trajectory=truth,
     )
 
 
@@ -57,6 +60,8 @@ class EmulateOptions:
     map_resolution: float | None = None  # default: [grid] resolution of the config
     max_free_range: float = 30.0
     compression: str = "none"
+    drift: DriftModel = field(default_factory=DriftModel)  # odometry drift (pipeline.drift)
+    drift_seed: int = 0
 
 
 @dataclass(frozen=True)
@@ -102,7 +107,9 @@ def run_emulation(
         laser_topic=opt.laser_topic,
         laser_max_range=opt.laser_max_range,
     )
-    em = emulate(log, ring, require_full_cone=opt.require_full_cone)
+    em = emulate(log, ring, require_full_cone=opt.require_full_cone).with_drift(
+        opt.drift, opt.drift_seed
+    )
     lmap = laser_occupancy_map(
         log,
         LaserMapOptions(

@@ -7,7 +7,9 @@ plus the ground truth next to it: ``<stem>.truth.yaml/.pgm`` (nav2 map) and
 ``<stem>.truth.csv`` (true trajectory ``t,x,y,yaw``).
 
 Frames (REP 105): the logged poses are ``odom → base_link``; ``odom`` coincides with the
-world frame at the start, so with drift off the logged poses equal the true ones.
+world frame at the start, so with drift off the logged poses equal the true ones. With
+drift on (:mod:`pipeline.drift`: scale error, heading bias per metre, noise per step) the
+log carries the drifted odometry and ``<stem>.truth.csv`` the true trajectory.
 """
 
 from __future__ import annotations
@@ -19,7 +21,6 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from formats.angles import wrap_angle
 from formats.arrays import F64, I32, I64
 from formats.contract import PoseBatch, SensorMount, make_range_batch
 from formats.errors import ConfigError
@@ -27,6 +28,7 @@ from formats.log_writers import LogContent
 from formats.options import MountConfig
 from formats.presets import PRESETS
 from pipeline.config import MapperConfig
+from pipeline.drift import DriftModel, apply_drift
 from pipeline.log_with_reference import reference_paths, write_log_with_reference
 from pipeline.simulate.sonar import SonarRing, add_sensor_errors, firing_schedule, true_ranges
 from pipeline.simulate.trajectory import (
@@ -59,7 +61,19 @@ class SimOptions:
     p_crosstalk: float = 0.01
     drift_xy: float = 0.0  # std of position error after 1 m travelled, m (grows as √m)
     drift_yaw: float = 0.0  # std of yaw error after 1 rad turned, rad (grows as √rad)
+    drift_scale: float = 0.0  # odometry scale error (0.03: 3 % too long), see pipeline.drift
+    drift_heading_bias_deg_per_m: float = 0.0  # odometry heading bias, deg per metre driven
     truth_resolution: float = 0.05  # m, cell size of the ground-truth map
+
+    @property
+    def drift(self) -> DriftModel:
+        """The odometry drift model of these options (:mod:`pipeline.drift`)."""
+        return DriftModel(
+            scale_error=self.drift_scale,
+            heading_bias_deg_per_m=self.drift_heading_bias_deg_per_m,
+            noise_xy=self.drift_xy,
+            noise_yaw=self.drift_yaw,
+        )
 
     def validate(self) -> SimOptions:
         """Raise ConfigError naming the option when a value is out of range."""
@@ -78,6 +92,7 @@ class SimOptions:
             (self.drift_yaw >= 0, "drift_yaw", ">= 0"),
             (self.truth_resolution > 0, "truth_resolution", "> 0"),
         ]
+        self.drift.validate()
         for ok, key, rule in checks:
             if not ok:
                 raise ConfigError(
@@ -184,7 +199,8 @@ def simulate(
         p_miss=opt.p_miss,
         p_crosstalk=opt.p_crosstalk,
     )
-    logged = _odometry(truth, opt.drift_xy, opt.drift_yaw, rng)
+    ox_, oy_, oyaw = apply_drift(truth.x, truth.y, truth.yaw, opt.drift, rng)
+    logged = Trajectory(truth.t_ns.copy(), ox_, oy_, oyaw)
     ranges = SimRanges(
         t_ns=t_ns,
         sensor=sensor,
@@ -201,34 +217,6 @@ def simulate(
         world=world,
         options=opt,
     )
-
-
-def _odometry(
-    truth: Trajectory, drift_xy: float, drift_yaw: float, rng: np.random.Generator
-) -> Trajectory:
-    """Logged poses: the true motion increments with random-walk errors, composed again.
-
-    Each step's translation (in the robot frame) gets N(0, drift_xy²·Δs) per axis and its
-    rotation N(0, drift_yaw²·|Δθ|), so errors grow with the square root of the distance
-    travelled and the angle turned. With both drifts 0 the true poses are returned as is.
-    """
-    n = len(truth)
-    if drift_xy == 0 and drift_yaw == 0:
-        return Trajectory(truth.t_ns.copy(), truth.x.copy(), truth.y.copy(), truth.yaw.copy())
-    dx, dy = np.diff(truth.x), np.diff(truth.y)
-    dyaw = wrap_angle(np.diff(truth.yaw))
-    c, s = np.cos(truth.yaw[:-1]), np.sin(truth.yaw[:-1])
-    lx, ly = c * dx + s * dy, -s * dx + c * dy  # step in the robot frame
-    ds = np.hypot(dx, dy)
-    noise = rng.standard_normal((3, n - 1))
-    lx = lx + noise[0] * drift_xy * np.sqrt(ds)
-    ly = ly + noise[1] * drift_xy * np.sqrt(ds)
-    dyaw = dyaw + noise[2] * drift_yaw * np.sqrt(np.abs(dyaw))
-    yaw = truth.yaw[0] + np.concatenate([[0.0], np.cumsum(dyaw)])
-    c, s = np.cos(yaw[:-1]), np.sin(yaw[:-1])
-    x = truth.x[0] + np.concatenate([[0.0], np.cumsum(c * lx - s * ly)])
-    y = truth.y[0] + np.concatenate([[0.0], np.cumsum(s * lx + c * ly)])
-    return Trajectory(truth.t_ns.copy(), x, y, wrap_angle(yaw))
 
 
 # --------------------------------------------------------------------------- writing

@@ -6,6 +6,8 @@ import json
 import shutil
 from pathlib import Path
 
+import numpy as np
+import pytest
 import typer
 from evaluate_helpers import metrics_doc, shifted_wall, write_run, write_truth
 from typer.testing import CliRunner
@@ -103,3 +105,31 @@ def test_regress_tolerances_option(tmp_path: Path) -> None:
     tol.write_text("features = 0.1\n", encoding="utf-8")
     code, _, err = invoke("regress", str(run), "--golden", str(golden), "--tolerances", str(tol))
     assert code == 1 and f"{tol}: unknown key 'features'" in err
+
+
+def test_evaluate_truth_trajectory_reports_ate_and_rpe(tmp_path: Path) -> None:
+    from formats.writers.trajectory_csv import write_trajectory_csv
+    from formats.writers.trajectory_tum import write_trajectory_tum
+
+    truth = write_truth(tmp_path)
+    run = write_run(tmp_path / "run")
+    t = (np.arange(5) * 1_000_000_000).astype(np.int64)
+    write_trajectory_tum(run / "trajectory.csv", t, np.array([0, 1, 2, 3, 4.4]), np.zeros(5),
+                         np.zeros(5))
+    true_csv = tmp_path / "world.truth.csv"
+    write_trajectory_csv(true_csv, t, np.arange(5.0), np.zeros(5), np.zeros(5))
+    code, out, _ = invoke("evaluate", str(run), "--truth", str(truth), "--truth-trajectory",
+                          str(true_csv), "--json")
+    assert code == 0
+    te = json.loads(out)["trajectory_error"]
+    # Estimate stretched at the end only: ATE after a best shift of 0.08 m along x.
+    errs = np.array([0.08, 0.08, 0.08, 0.08, 0.32])
+    assert te["ate_rmse_m"] == pytest.approx(float(np.sqrt(np.mean(errs**2))))
+    assert te["rpe_pairs"] == 4 and te["rpe_trans_rmse_m"] == pytest.approx(0.2)
+    code, out, _ = invoke("evaluate", str(run), "--truth", str(truth), "--truth-trajectory",
+                          str(true_csv))
+    assert code == 0 and "ATE (aligned)" in out and "RPE per 1 m" in out
+    (run / "trajectory.csv").unlink()
+    code, _, err = invoke("evaluate", str(run), "--truth", str(truth), "--truth-trajectory",
+                          str(true_csv))
+    assert code == 1 and "no trajectory.csv" in err and len(err.strip().splitlines()) == 1

@@ -17,7 +17,7 @@ def test_defaults_are_the_documented_ones():
     assert m.clear_on_max_range is False and m.feature_correction is True
     assert c.grid.resolution == 0.05 and c.scans.window_s == 0.2
     assert c.scans.max_travel_m == 0.10 and c.scans.max_turn_deg == 10.0
-    assert c.pose_sync.max_pose_gap_s == 0.5
+    assert c.pose_sync.max_pose_gap_s == 0.0  # automatic: from the log's pose rate
     assert m.sigma_floor(0.05) == 0.025
 
 

@@ -12,9 +12,11 @@ from pipeline.pose_sync import (
     AFTER_LAST_POSE,
     BEFORE_FIRST_POSE,
     IN_POSE_GAP,
+    POSE_JUMP,
     POSE_OK,
     build_pose_track,
     interpolate_poses,
+    pose_gap_limit_s,
     sonar_geometry,
 )
 
@@ -63,8 +65,38 @@ def test_backwards_and_duplicate_pose_stamps_are_removed_and_counted():
 def test_epoch_stamps_keep_nanosecond_precision():
     t0 = 1_700_000_000 * S
     tr = track([t0, t0 + 2], [0.0, 2.0], [0, 0], [0, 0])
-    look = interpolate_poses(tr, np.array([t0 + 1], np.int64), S)
+    # 2 m in 2 ns is no robot: only the arithmetic is under test here.
+    look = interpolate_poses(tr, np.array([t0 + 1], np.int64), S, max_speed=math.inf)
     assert look.x[0] == pytest.approx(1.0)
+
+
+def test_readings_between_poses_a_robot_cannot_reach_get_pose_jump():
+    # 0.1 s apart: 0.5 m is 5 m/s (a robot), 3 m is 30 m/s (a glitch).
+    tr = track([0, S // 10, 2 * S // 10], [0.0, 0.5, 3.5], [0, 0, 0], [0, 0, 0])
+    t = np.array([S // 20, S // 10, 3 * S // 20], np.int64)
+    look = interpolate_poses(tr, t, S)
+    assert look.reason.tolist() == [POSE_OK, POSE_OK, POSE_JUMP]  # at a pose stamp: its pose
+    assert look.x[0] == pytest.approx(0.25)
+
+
+def test_pose_gap_limit_adapts_to_the_pose_rate_within_bounds():
+    assert pose_gap_limit_s(0.0, 0.9) == pytest.approx(2.7)  # 1 Hz odometry
+    assert pose_gap_limit_s(0.0, 0.05) == 0.5  # 20 Hz: the floor
+    assert pose_gap_limit_s(0.0, 3.0) == 5.0  # the ceiling
+    assert pose_gap_limit_s(0.0, math.nan) == 0.5
+    assert pose_gap_limit_s(0.8, 0.05) == 0.8  # set in the configuration: as set
+
+
+def test_bulk_bounds_leave_isolated_outliers_out():
+    n = 1000
+    t = [i * S // 20 for i in range(n)]
+    x = [0.01 * i for i in range(n)]
+    x[500] = 2000.0  # one pose 2 km away and back
+    tr = track(t, x, [0.0] * n, [0.0] * n)
+    box, left_out = tr.bulk_bounds()
+    assert box == (0.0, 0.0, pytest.approx(9.99), 0.0) and left_out == 1
+    assert tr.bounds()[2] == 2000.0
+    assert tr.median_interval_s() == pytest.approx(0.05)
 
 
 def test_sonar_geometry_applies_the_mount_in_the_robot_frame():

@@ -369,3 +369,20 @@ def test_udacity_sample_is_clean() -> None:
     assert [s.readings for s in report.sensors] == [413] * 8
     assert sum(s.reasons["pos_inf"] for s in report.sensors) == 1068
     assert report.pose_count == 413
+
+
+def test_stamps_backwards_is_the_pipelines_rule_running_maximum(tmp_path: Path) -> None:
+    """0.4 → 0.1 → 0.15: against the previous stamp only 0.1 goes back; both lie below the
+    running maximum 0.4 and the pipeline drops both, so validate counts both."""
+    from pipeline.ingest import StampOrder
+
+    rows = [(0.0, "s0", "1.0"), (0.2, "s0", "1.0"), (0.4, "s0", "1.1"), (0.1, "s0", "1.2"),
+            (0.15, "s0", "1.3"), (0.6, "s0", "1.4")]
+    folder = _write_set(tmp_path, rows)
+    f = _one(_validate(folder), "stamps_backwards")
+    assert f.counts == {"backwards": 2, "max_step_back_s": pytest.approx(0.3)}
+    cfg = _config({"layout": "set"})
+    order = StampOrder()
+    with CsvLogReader(folder, cfg) as reader:
+        dropped = sum(int(order.backwards(b).sum()) for b in reader.batches(("ranges",)))
+    assert dropped == 2

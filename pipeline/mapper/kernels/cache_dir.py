@@ -13,6 +13,7 @@ from __future__ import annotations
 import os
 import sys
 import tempfile
+from collections.abc import Callable, Mapping
 from pathlib import Path
 
 KERNELS_DIR = Path(__file__).resolve().parent
@@ -34,12 +35,12 @@ def _user_cache_dir() -> Path:
     return Path(base) / "numba"
 
 
-def choose_cache_dir(env: dict[str, str] | os._Environ[str], kernels_dir: Path,
-                     user_dir: Path, temp_dir: Path) -> str | None:
+def choose_cache_dir(env: Mapping[str, str], kernels_dir: Path, user_dir: Path, temp_dir: Path,
+                     writable: Callable[[Path], bool] = _writable) -> str | None:
     """The directory to put in ``NUMBA_CACHE_DIR``, or None to leave numba's defaults."""
     if env.get("NUMBA_CACHE_DIR"):
         return None
-    if _writable(kernels_dir / "__pycache__") or _writable(user_dir):
+    if writable(kernels_dir / "__pycache__") or writable(user_dir):
         return None
     uid = os.getuid() if hasattr(os, "getuid") else 0
     return str(temp_dir / f"sonarmap-numba-cache-{uid}")

@@ -75,7 +75,8 @@ def classic_scans(cones: np.ndarray, up_down: np.ndarray, ranges: np.ndarray, ec
             dy = (gy + (row + 0.5) * res) - oy
             for c in range(c0s[j], c1s[j] + 1):
                 if echo[i]:
-                    dist = math.hypot((gx + (c + 0.5) * res) - ox, dy)
+                    dx = (gx + (c + 0.5) * res) - ox
+                    dist = math.sqrt(dx * dx + dy * dy)
                     if abs(dist - d) <= half_w:
                         code = _OCC
                     elif dist < d - half_w:

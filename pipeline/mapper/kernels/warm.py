@@ -18,9 +18,11 @@ def warm() -> float:
     """Map a few synthetic scans with every compiled path; returns the seconds it took."""
     t0 = time.perf_counter()
     scans = ring_scans(4)
-    for cfg in (MapperConfig(), MapperConfig(method="classic")):
-        mapper = make_mapper(cfg, room_grid(0.1))
-        mapper.integrate_many(scans)
+    for method in ("attribution", "andersone", "classic"):
+        mapper = make_mapper(MapperConfig(method=method), room_grid(0.1))
+        for index in range(mapper.passes):
+            mapper.begin_pass(index)
+            mapper.integrate_many(scans)
         mapper.snapshot()
     return time.perf_counter() - t0
 

@@ -109,23 +109,26 @@ def test_output_names_disambiguate_equal_names_by_path_hash() -> None:
 
 def test_summary_files_sorted_rows_and_markdown(tmp_path: Path) -> None:
     rows = [
-        LogOutcome("/l/a.csv", "a", "ok", None, 9.9, 300, 38, 0.0025, 10.96, 0.5),
+        LogOutcome("/l/a.csv", "a", "ok", None, 9.9, 300, 38, 0.0025, 10.96, 0.5,
+                   warnings="data lost: the log is damaged (bytes lost 1,234)"),
         LogOutcome("/l/b.csv", "b", "failed", "/l/b.csv: line 3: bad | pipe", seconds=0.1),
     ]
     pq_path, md_path = batch.write_summary(tmp_path, rows)
     t = pq.read_table(pq_path)
     assert t.column_names == [
         "path", "name", "status", "error", "duration_s", "readings", "features",
-        "mean_feature_variance_m2", "mapped_area_m2", "seconds",
+        "mean_feature_variance_m2", "mapped_area_m2", "seconds", "warnings",
     ]
     assert t.to_pylist()[1] == {
         "path": "/l/b.csv", "name": "b", "status": "failed", "error": "/l/b.csv: line 3: bad | pipe",
         "duration_s": None, "readings": None, "features": None,
         "mean_feature_variance_m2": None, "mapped_area_m2": None, "seconds": 0.1,
+        "warnings": None,
     }
     md = md_path.read_text()
     assert "2 logs: 1 mapped, 0 skipped (unchanged), 1 failed." in md
-    assert "| a | ok | 9.9 | 300 | 38 | 0.0025 | 10.96 | 0.50 | /l/a.csv |  |" in md
+    assert ("| a | ok | 9.9 | 300 | 38 | 0.0025 | 10.96 | 0.50 | /l/a.csv |  | data lost: the "
+            "log is damaged (bytes lost 1,234) |") in md
     assert "bad \\| pipe |" in md
     first = pq_path.read_bytes()
     batch.write_summary(tmp_path, rows)
@@ -216,3 +219,12 @@ def test_whole_batch_problems_raise_before_any_mapping(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match=r"nope\.toml: configuration file not found"):
         batch.run_batch([log], tmp_path / "out2", tmp_path / "nope.toml")
     assert not (tmp_path / "out2").exists()
+
+
+def test_local_workers_get_a_memory_limit() -> None:
+    with batch._client(1, None, "1GiB") as client:
+        limits = [w["memory_limit"] for w in client.scheduler_info()["workers"].values()]
+    assert limits == [2**30]
+    with pytest.raises(ConfigError, match=r"--memory-limit must be 'auto' or a size like 4GB"), \
+            batch._client(1, None, "lots"):
+        pass

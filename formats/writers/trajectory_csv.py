@@ -1,0 +1,150 @@
+"""Trajectory CSV: ``t,x,y,yaw`` per pose — the format of ``<stem>.truth.csv`` and of a
+run's ``trajectory.csv``.
+
+``t`` is exact decimal seconds (``<sec>.<9-digit nsec>`` of the int64 ns stamp), ``x, y``
+metres and ``yaw`` radians as Python ``repr`` floats (they round-trip exactly), so a file
+written and read back gives the same arrays. Reading accepts a header naming the columns
+(any order, extra columns ignored) or none (then the order is ``t,x,y,yaw``); ``#`` lines
+are comments.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+
+from formats.arrays import F64, I64
+from formats.errors import FormatError, InputError
+from formats.writers.atomic import atomic_write_text
+
+COLUMNS = ("t", "x", "y", "yaw")
+
+
+@dataclass(frozen=True)
+class TrajectoryTable:
+    """Stamped poses read from a trajectory CSV (ns, m, m, rad)."""
+
+    t_ns: I64
+    x: F64
+    y: F64
+    yaw: F64
+
+    def __len__(self) -> int:
+        return int(self.t_ns.shape[0])
+
+
+def format_stamp(t_ns: int) -> str:
+    """Exact decimal seconds ``<sec>.<9-digit nsec>`` of an int ns stamp."""
+    sign = "-" if t_ns < 0 else ""
+    sec, nsec = divmod(abs(t_ns), 1_000_000_000)
+    return f"{sign}{sec}.{nsec:09d}"
+
+
+def trajectory_csv_text(t_ns: npt.ArrayLike, x: npt.ArrayLike, y: npt.ArrayLike,
+                        yaw: npt.ArrayLike) -> str:
+    """The CSV text of a trajectory (header ``t,x,y,yaw``)."""
+    cols = [np.asarray(c, dtype=np.float64).tolist() for c in (x, y, yaw)]
+    stamps = np.asarray(t_ns, dtype=np.int64).tolist()
+    rows = [
+        f"{format_stamp(t)},{a!r},{b!r},{c!r}"
+        for t, a, b, c in zip(stamps, *cols, strict=True)
+    ]
+    return ",".join(COLUMNS) + "\n" + "".join(r + "\n" for r in rows)
+
+
+def write_trajectory_csv(path: Path, t_ns: npt.ArrayLike, x: npt.ArrayLike, y: npt.ArrayLike,
+                         yaw: npt.ArrayLike) -> None:
+    """Write a trajectory CSV atomically (replaces ``path``)."""
+    atomic_write_text(path, trajectory_csv_text(t_ns, x, y, yaw))
+
+
+def _stamp_ns(text: str) -> int:
+    """Exact int ns of decimal seconds text (``12.5``, ``-3``, ``1700000000.000000001``)."""
+    s = text.strip()
+    sign = -1 if s.startswith("-") else 1
+    body = s.lstrip("+-")
+    whole, _, frac = body.partition(".")
+    if not (whole or frac) or not (whole.isdigit() or whole == "") or not (
+        frac.isdigit() or frac == ""
+    ) or not whole.isascii() or not frac.isascii():
+        raise ValueError(f"not a decimal time: {text!r}")
+    if len(frac) > 9 and frac[9:].strip("0"):
+        raise ValueError(f"time finer than 1 ns: {text!r}")
+    return sign * (int(whole or "0") * 1_000_000_000 + int((frac[:9] or "0").ljust(9, "0")))
+
+
+def read_trajectory_csv(path: Path) -> TrajectoryTable:
+    """A trajectory CSV as arrays; InputError when missing, FormatError (naming the file and
+    the line) when malformed, unsorted or not finite."""
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except FileNotFoundError as err:
+        raise InputError("trajectory file not found", path) from err
+    except (OSError, UnicodeDecodeError) as err:
+        raise FormatError(f"cannot read trajectory: {err}", path) from err
+    lines = [
+        (i + 1, ln) for i, ln in enumerate(text.splitlines())
+        if ln.strip() and not ln.lstrip().startswith("#")
+    ]
+    if not lines:
+        raise FormatError("trajectory is empty", path)
+    head = [c.strip().lower() for c in lines[0][1].split(",")]
+    if not _is_number(head[0]):  # a header row
+        missing = [c for c in COLUMNS if c not in head]
+        if missing:
+            raise FormatError(f"trajectory header has no {', '.join(missing)} column: "
+                              f"{lines[0][1]!r}", path)
+        idx = [head.index(c) for c in COLUMNS]
+        body = lines[1:]
+    else:
+        idx, body = [0, 1, 2, 3], lines
+    if not body:
+        raise FormatError("trajectory has a header but no poses", path)
+    n = len(body)
+    t = np.empty(n, np.int64)
+    vals = np.empty((3, n), np.float64)
+    for k, (lineno, ln) in enumerate(body):
+        cells = ln.split(",")
+        try:
+            t[k] = _stamp_ns(cells[idx[0]])
+            for j in range(3):
+                vals[j, k] = float(cells[idx[j + 1]])
+        except (ValueError, IndexError) as err:
+            raise FormatError(f"line {lineno}: not a t,x,y,yaw row ({err})", path) from err
+    if not np.isfinite(vals).all():
+        bad = body[int(np.flatnonzero(~np.isfinite(vals).all(axis=0))[0])][0]
+        raise FormatError(f"line {bad}: pose is not finite", path)
+    if n > 1 and not (np.diff(t) > 0).all():
+        bad = body[int(np.flatnonzero(np.diff(t) <= 0)[0]) + 1][0]
+        raise FormatError(f"line {bad}: stamps must increase", path)
+    return TrajectoryTable(t, vals[0].copy(), vals[1].copy(), vals[2].copy())
+
+
+def _is_number(s: str) -> bool:
+    try:
+        float(s)
+    except ValueError:
+        return False
+    return True
+
+
+def read_trajectory(path: Path) -> TrajectoryTable:
+    """A trajectory file of either layout sonarmap writes: the CSV ``t,x,y,yaw`` (truth
+    files) or TUM (a run's ``trajectory.csv``, :mod:`formats.writers.trajectory_tum`),
+    told apart by the first line that is not a comment (commas or not)."""
+    from formats.writers.trajectory_tum import read_trajectory_tum
+
+    try:
+        with Path(path).open(encoding="utf-8") as f:
+            first = next((ln for ln in f if ln.strip() and not ln.lstrip().startswith("#")), "")
+    except FileNotFoundError as err:
+        raise InputError("trajectory file not found", path) from err
+    except (OSError, UnicodeDecodeError) as err:
+        raise FormatError(f"cannot read trajectory: {err}", path) from err
+    if "," in first or not first:
+        return read_trajectory_csv(path)
+    tum = read_trajectory_tum(path)
+    return TrajectoryTable(tum.t_ns, tum.x, tum.y, tum.yaw)

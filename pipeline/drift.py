@@ -1,0 +1,100 @@
+"""Odometry drift: a documented, seeded model of wheel-odometry error.
+
+``simulate`` and ``emulate`` use it to turn a true trajectory into the odometry a robot
+would log, keeping the true trajectory as truth. The model works on the motion
+increments between consecutive poses, expressed in the robot frame at the earlier pose
+(``Δs`` = the true distance of the step, ``Δθ`` = its true rotation):
+
+* **scale error** ``k``: the step's translation is reported ``(1 + k)`` times its true
+  length (a wheel radius off by ``k``);
+* **heading bias** ``b`` (deg/m): the step's rotation is reported ``Δθ + b·Δs``, so the
+  heading error grows by ``b`` degrees per metre driven (a wheelbase or gyro bias;
+  positive = counter-clockwise);
+* **noise per step**: each translation axis gets ``N(0, noise_xy²·Δs)`` and the rotation
+  ``N(0, noise_yaw²·|Δθ|)``, so random errors grow with the square root of the distance
+  travelled (m per √m) and of the angle turned (rad per √rad).
+
+The drifted increments are composed again from the first true pose, so the odometry
+starts where the truth starts (REP 105: ``odom`` coincides with the world at the start).
+Noise is drawn from the generator given (one ``standard_normal((3, n−1))`` call, only when
+a noise term is non-zero), so the same seed gives the same bytes.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from formats.angles import wrap_angle
+from formats.arrays import F64
+from formats.errors import ConfigError
+
+
+@dataclass(frozen=True)
+class DriftModel:
+    """The odometry error model (see the module docstring); all zero = no drift."""
+
+    scale_error: float = 0.0  # fraction: 0.03 reports 3 % more distance than driven
+    heading_bias_deg_per_m: float = 0.0  # deg of yaw error per metre driven (+ = CCW)
+    noise_xy: float = 0.0  # m per √m, per translation axis
+    noise_yaw: float = 0.0  # rad per √rad turned
+
+    @property
+    def is_zero(self) -> bool:
+        return (self.scale_error, self.heading_bias_deg_per_m, self.noise_xy, self.noise_yaw) == (
+            0.0, 0.0, 0.0, 0.0,
+        )
+
+    def validate(self) -> DriftModel:
+        """Raise ConfigError naming the parameter when a value is out of range."""
+        checks = [
+            (math.isfinite(self.scale_error) and -0.5 < self.scale_error < 0.5,
+             "scale_error", "in (-0.5, 0.5)"),
+            (math.isfinite(self.heading_bias_deg_per_m)
+             and abs(self.heading_bias_deg_per_m) <= 45, "heading_bias_deg_per_m",
+             "in [-45, 45]"),
+            (math.isfinite(self.noise_xy) and self.noise_xy >= 0, "noise_xy", ">= 0"),
+            (math.isfinite(self.noise_yaw) and self.noise_yaw >= 0, "noise_yaw", ">= 0"),
+        ]
+        for ok, key, rule in checks:
+            if not ok:
+                raise ConfigError(f"drift '{key}' must be {rule}, got {getattr(self, key)!r}")
+        return self
+
+
+def apply_drift(
+    x: F64, y: F64, yaw: F64, model: DriftModel, rng: np.random.Generator | None = None
+) -> tuple[F64, F64, F64]:
+    """Drifted odometry ``(x, y, yaw)`` of the true poses ``(x, y, yaw)`` (m, rad).
+
+    ``rng`` is needed only when a noise term is non-zero. With a zero model the true poses
+    are returned (as copies).
+    """
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    yaw = np.asarray(yaw, dtype=np.float64)
+    n = x.shape[0]
+    if model.is_zero or n < 2:
+        return x.copy(), y.copy(), yaw.copy()
+    dx, dy = np.diff(x), np.diff(y)
+    dyaw = wrap_angle(np.diff(yaw))
+    c, s = np.cos(yaw[:-1]), np.sin(yaw[:-1])
+    lx, ly = c * dx + s * dy, -s * dx + c * dy  # the step in the robot frame
+    ds = np.hypot(dx, dy)
+    lx = lx * (1.0 + model.scale_error)
+    ly = ly * (1.0 + model.scale_error)
+    dyaw = dyaw + math.radians(model.heading_bias_deg_per_m) * ds
+    if model.noise_xy or model.noise_yaw:
+        if rng is None:
+            raise ValueError("apply_drift needs a random generator for a noisy drift model")
+        noise = rng.standard_normal((3, n - 1))
+        lx = lx + noise[0] * model.noise_xy * np.sqrt(ds)
+        ly = ly + noise[1] * model.noise_xy * np.sqrt(ds)
+        dyaw = dyaw + noise[2] * model.noise_yaw * np.sqrt(np.abs(wrap_angle(np.diff(yaw))))
+    heading = yaw[0] + np.concatenate([[0.0], np.cumsum(dyaw)])
+    c, s = np.cos(heading[:-1]), np.sin(heading[:-1])
+    ox = x[0] + np.concatenate([[0.0], np.cumsum(c * lx - s * ly)])
+    oy = y[0] + np.concatenate([[0.0], np.cumsum(s * lx + c * ly)])
+    return ox, oy, wrap_angle(heading)

@@ -1,0 +1,195 @@
+"""The pose graph over submap anchors, solved by ``scipy.optimize.least_squares``.
+
+Variables: every anchor pose ``X_i = (x, y, θ)`` and, with ``calibrate``, two odometry
+calibration terms shared by the whole run — the scale error ``k`` and the heading bias
+``b`` (rad per metre) of :mod:`pipeline.drift` — because wheel odometry errs
+systematically (wheel radius, wheelbase) and two numbers estimated from every match
+remove most of its drift. Residuals, each whitened by its square-root information:
+
+* **odometry** between consecutive anchors: ``X_i⁻¹X_{i+1} ⊖ ô_i`` with the odometry's
+  relative motion corrected by the calibration, ``ô_i = (R(−b·L_i/2)·t_i/(1+k), θ_i − b·L_i)``
+  (``L_i`` the odometry path between the anchors; the chord turns by half the heading
+  error accumulated along it); standard deviations ``σ_xy·√L_i + 5 mm`` and
+  ``σ_θ·√L_i + 0.1° + 1 % of the turn``;
+* **match** (consecutive submaps and loop closures): ``X_i⁻¹X_j ⊖ z`` whitened by the
+  match's information (its score-surface covariance, :mod:`pipeline.refine.matcher`);
+* **priors**: anchor 0 stays where it is (σ 1 mm, 0.01°); ``k`` and ``b`` are pulled to 0
+  with the configured standard deviations.
+
+``⊖`` subtracts poses component-wise with the angle wrapped. A robust loss (Cauchy,
+scale ``robust_scale``) bounds the pull of a wrong match. The Jacobian's sparsity pattern
+is given, so finite differences cost a few residual evaluations per iteration.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from formats.angles import wrap_angle
+from formats.arrays import F64, I64
+from pipeline.refine.se2 import between
+
+
+@dataclass(frozen=True)
+class Odometry:
+    """Relative odometry motion between consecutive anchors: ``delta`` (n−1, 3) in the
+    earlier anchor's frame, ``length`` (n−1,) odometry path, m."""
+
+    delta: F64
+    length: F64
+
+
+@dataclass(frozen=True)
+class MatchConstraints:
+    """Measured relative poses ``z[m]`` of anchor ``j[m]`` in the frame of ``i[m]``, with the
+    upper Cholesky factor ``u[m]`` of their information (``e·infoe = |u e|²``)."""
+
+    i: I64
+    j: I64
+    z: F64  # (M, 3)
+    u: F64  # (M, 3, 3)
+
+    def __len__(self) -> int:
+        return int(self.i.shape[0])
+
+    def take(self, keep: npt.NDArray[np.bool_]) -> MatchConstraints:
+        return MatchConstraints(self.i[keep], self.j[keep], self.z[keep], self.u[keep])
+
+
+@dataclass(frozen=True)
+class GraphOptions:
+    sigma_xy: float  # m per √m
+    sigma_yaw: float  # rad per √m
+    calibrate: bool
+    prior_scale: float  # σ of k
+    prior_bias: float  # σ of b, rad/m
+    robust_scale: float
+
+
+@dataclass(frozen=True)
+class Solution:
+    anchors: F64  # (n, 3)
+    scale_error: float
+    heading_bias: float  # rad per metre
+    cost_initial: float
+    cost_final: float
+    iterations: int
+    match_chi2: F64  # (M,) e·info·e of each match at the solution (no robust loss)
+
+
+def sqrt_information(cov: F64) -> F64:
+    """Upper factor ``u`` with ``uᵀu = cov⁻¹``."""
+    info = np.linalg.inv(cov)
+    info = 0.5 * (info + info.T)
+    return np.asarray(np.linalg.cholesky(info).T)
+
+
+def _odometry_sigmas(odo: Odometry, opt: GraphOptions) -> F64:
+    root = np.sqrt(np.maximum(odo.length, 0.0))
+    s_xy = opt.sigma_xy * root + 0.005
+    s_yaw = opt.sigma_yaw * root + math.radians(0.1) + 0.01 * np.abs(odo.delta[:, 2])
+    return np.column_stack([s_xy, s_xy, s_yaw])
+
+
+class _Problem:
+    def __init__(self, x0: F64, odo: Odometry, matches: MatchConstraints, opt: GraphOptions):
+        self.n = x0.shape[0]
+        self.first = x0[0].copy()
+        self.odo = odo
+        self.matches = matches
+        self.opt = opt
+        self.w_odo = 1.0 / _odometry_sigmas(odo, opt)
+        self.n_var = 3 * self.n + (2 if opt.calibrate else 0)
+
+    def unpack(self, v: F64) -> tuple[F64, float, float]:
+        x = v[: 3 * self.n].reshape(self.n, 3)
+        if self.opt.calibrate:
+            return x, float(v[-2]), float(v[-1])
+        return x, 0.0, 0.0
+
+    def residuals(self, v: F64) -> F64:
+        x, k, b = self.unpack(v)
+        parts = [np.array([(x[0, 0] - self.first[0]) / 1e-3, (x[0, 1] - self.first[1]) / 1e-3,
+                           float(wrap_angle(x[0, 2] - self.first[2])) / math.radians(0.01)])]
+        if self.n > 1:
+            rel = between(x[:-1], x[1:])
+            d, length = self.odo.delta, self.odo.length
+            turn = -b * length / 2
+            c, s = np.cos(turn), np.sin(turn)
+            px = (c * d[:, 0] - s * d[:, 1]) / (1 + k)
+            py = (s * d[:, 0] + c * d[:, 1]) / (1 + k)
+            e = np.column_stack([rel[:, 0] - px, rel[:, 1] - py, wrap_angle(rel[:, 2] - (d[:, 2] - b * length))])
+            parts.append((e * self.w_odo).ravel())
+        if len(self.matches):
+            m = self.matches
+            rel = between(x[m.i], x[m.j])
+            e = np.column_stack([rel[:, :2] - m.z[:, :2], wrap_angle(rel[:, 2] - m.z[:, 2])])
+            parts.append(np.einsum("mab,mb->ma", m.u, e).ravel())
+        if self.opt.calibrate:
+            parts.append(np.array([k / self.opt.prior_scale, b / self.opt.prior_bias]))
+        return np.concatenate(parts)
+
+    def sparsity(self) -> object:
+        from scipy.sparse import lil_matrix
+
+        rows = 3 + 3 * (self.n - 1) + 3 * len(self.matches) + (2 if self.opt.calibrate else 0)
+        s = lil_matrix((rows, self.n_var), dtype=np.int8)
+        s[0:3, 0:3] = 1
+        r = 3
+        for i in range(self.n - 1):
+            s[r:r + 3, 3 * i:3 * i + 6] = 1
+            if self.opt.calibrate:
+                s[r:r + 3, self.n_var - 2:] = 1
+            r += 3
+        for i, j in zip(self.matches.i.tolist(), self.matches.j.tolist(), strict=True):
+            s[r:r + 3, 3 * i:3 * i + 3] = 1
+            s[r:r + 3, 3 * j:3 * j + 3] = 1
+            r += 3
+        if self.opt.calibrate:
+            s[r, self.n_var - 2] = 1
+            s[r + 1, self.n_var - 1] = 1
+        return s.tocsr()
+
+    def match_chi2(self, v: F64) -> F64:
+        x, _, _ = self.unpack(v)
+        m = self.matches
+        if not len(m):
+            return np.zeros(0)
+        rel = between(x[m.i], x[m.j])
+        e = np.column_stack([rel[:, :2] - m.z[:, :2], wrap_angle(rel[:, 2] - m.z[:, 2])])
+        r = np.einsum("mab,mb->ma", m.u, e)
+        return np.asarray((r * r).sum(axis=1))
+
+
+def robust_cost(r: F64, scale: float) -> float:
+    """least_squares' Cauchy cost ``½ Σ C²·log(1 + (r/C)²)``."""
+    return float(0.5 * np.sum(scale**2 * np.log1p((r / scale) ** 2)))
+
+
+def solve(x0: F64, odo: Odometry, matches: MatchConstraints, opt: GraphOptions) -> Solution:
+    """Optimise the anchors (and the calibration) from ``x0``."""
+    from scipy.optimize import least_squares
+
+    prob = _Problem(x0, odo, matches, opt)
+    v0 = np.concatenate([x0.ravel(), [0.0, 0.0] if opt.calibrate else []])
+    cost0 = robust_cost(prob.residuals(v0), opt.robust_scale)
+    res = least_squares(
+        prob.residuals, v0, jac_sparsity=prob.sparsity(), method="trf", loss="cauchy",
+        f_scale=opt.robust_scale, x_scale="jac", max_nfev=200, xtol=1e-10, ftol=1e-10,
+    )
+    x, k, b = prob.unpack(res.x)
+    x = x.copy()
+    x[:, 2] = wrap_angle(x[:, 2])
+    return Solution(x, k, b, cost0, robust_cost(prob.residuals(res.x), opt.robust_scale),
+                    int(res.nfev), prob.match_chi2(res.x))
+
+
+def cost_at(x: F64, odo: Odometry, matches: MatchConstraints, opt: GraphOptions) -> float:
+    """The robust cost of anchors ``x`` with a zero calibration (e.g. the raw odometry)."""
+    prob = _Problem(x, odo, matches, opt)
+    v = np.concatenate([x.ravel(), [0.0, 0.0] if opt.calibrate else []])
+    return robust_cost(prob.residuals(v), opt.robust_scale)

@@ -1,0 +1,75 @@
+"""SE(2) helpers and the pose graph (pipeline.refine.se2, pipeline.refine.graph)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from pipeline.refine.graph import GraphOptions, MatchConstraints, Odometry, solve, sqrt_information
+from pipeline.refine.se2 import between, compose, inverse, transform_points
+
+
+def test_compose_inverse_between_agree() -> None:
+    a = np.array([1.0, 2.0, 0.5])
+    b = np.array([-0.3, 0.7, 2.9])
+    ab = compose(a, b)
+    np.testing.assert_allclose(between(a, ab), b, atol=1e-12)
+    assert -math.pi <= ab[2] < math.pi
+    np.testing.assert_allclose(compose(a, inverse(a)), [0.0, 0.0, 0.0], atol=1e-12)
+    x, y = transform_points(np.array([1.0, 0.0, math.pi / 2]), np.array([1.0]), np.array([0.0]))
+    assert x[0] == pytest.approx(1.0) and y[0] == pytest.approx(1.0)
+
+
+def square(n_side: int = 4) -> np.ndarray:
+    """Anchors around a 4 m square, 1 m apart, heading along the path."""
+    pts = []
+    for side in range(4):
+        yaw = side * math.pi / 2
+        cx, cy = [(0, 0), (4, 0), (4, 4), (0, 4)][side]
+        for k in range(n_side):
+            pts.append((cx + k * math.cos(yaw), cy + k * math.sin(yaw), yaw))
+    return np.array(pts)
+
+
+def opts(calibrate: bool) -> GraphOptions:
+    return GraphOptions(0.02, math.radians(0.5), calibrate, 0.1, math.radians(2.0), 3.0)
+
+
+def test_loop_closure_and_calibration_recover_a_biased_square() -> None:
+    truth = square()
+    rel = between(truth[:-1], truth[1:])
+    length = np.hypot(rel[:, 0], rel[:, 1])
+    # Odometry 5 % long and turning 1 degree per metre too far (the graph's own model).
+    b = math.radians(1.0)
+    c, s = np.cos(b * length / 2), np.sin(b * length / 2)
+    odo = np.column_stack([1.05 * (c * rel[:, 0] - s * rel[:, 1]),
+                           1.05 * (s * rel[:, 0] + c * rel[:, 1]), rel[:, 2] + b * length])
+    x0 = [truth[0]]
+    for d in odo:
+        x0.append(compose(x0[-1], d))
+    x0 = np.array(x0)
+    # Exact matches between every consecutive pair and one loop closure (last -> first).
+    i = np.r_[np.arange(15), 15]
+    j = np.r_[np.arange(1, 16), 0]
+    z = between(truth[i], truth[j])
+    u = np.repeat(sqrt_information(np.diag([0.05**2, 0.05**2, math.radians(2) ** 2]))[None], 16, 0)
+    sol = solve(x0, Odometry(odo, 1.05 * length), MatchConstraints(i, j, z, u), opts(True))
+    assert sol.cost_final < sol.cost_initial
+    np.testing.assert_allclose(sol.anchors[:, :2], truth[:, :2], atol=0.02)
+    assert sol.scale_error == pytest.approx(0.05, abs=0.01)
+    assert math.degrees(sol.heading_bias) == pytest.approx(1.0 * 1.05, abs=0.15)
+    assert sol.match_chi2.shape == (16,) and sol.match_chi2.max() < 1.0
+
+
+def test_a_wrong_loop_closure_has_a_large_chi2() -> None:
+    truth = square()
+    rel = between(truth[:-1], truth[1:])
+    odo = Odometry(rel, np.hypot(rel[:, 0], rel[:, 1]))
+    z = np.array([[2.0, 1.0, 0.5]])  # nothing like the truth's last -> first
+    u = sqrt_information(np.diag([0.05**2, 0.05**2, math.radians(2) ** 2]))[None]
+    sol = solve(truth.copy(), odo, MatchConstraints(np.array([15]), np.array([0]), z, u),
+                opts(False))
+    assert sol.match_chi2[0] > 16.0
+    np.testing.assert_allclose(sol.anchors[:, :2], truth[:, :2], atol=0.3)
