@@ -19,6 +19,7 @@ from pipeline.config import (
     GridConfig,
     MapperConfig,
     PoseSyncConfig,
+    PoseRefinementConfig,
     ScanConfig,
     dump_config,
     load_config,
@@ -31,6 +32,10 @@ _text = st.text(st.characters(blacklist_categories=("Cs",)), max_size=12)
 _name = _text.filter(bool)
 
 
+# A beam width: 0 (from the log) or in [0.5, 180) degrees.
+_fov = st.one_of(st.just(0.0), st.floats(0.5, 179))
+
+
 def _pos(hi: float = 1e3) -> st.SearchStrategy[float]:
     return st.floats(1e-6, hi, allow_nan=False)
 
@@ -39,7 +44,7 @@ def _pos(hi: float = 1e3) -> st.SearchStrategy[float]:
 def _configs(draw: st.DrawFn) -> Config:
     p_clamp_min = draw(st.floats(0.01, 0.49))
     mapper = MapperConfig(
-        method=draw(st.sampled_from(["andersone", "classic"])),
+        method=draw(st.sampled_from(["attribution", "andersone", "classic"])),
         sigma_d0=draw(_pos()),
         k_d=draw(st.floats(0, 10)),
         c_a=draw(_pos()),
@@ -89,15 +94,23 @@ def _configs(draw: st.DrawFn) -> Config:
     mounts = tuple(
         MountConfig(
             name=n, x=draw(st.floats(-5, 5)), y=draw(st.floats(-5, 5)),
-            yaw_deg=draw(st.floats(-180, 180)), fov_deg=draw(st.floats(0, 179)),
+            yaw_deg=draw(st.floats(-180, 180)), fov_deg=draw(_fov),
         )
         for n in names
     )
     sensors = SensorsConfig(
         preset=draw(st.sampled_from(["", "pioneer-p3dx", "udacity-8sonar"])),
-        fov_deg=draw(st.floats(0, 179)), mounts=mounts,
+        fov_deg=draw(_fov), mounts=mounts,
     )
-    return Config(mapper, grid, scans, pose_sync, inp, sensors).validate()
+    refine = PoseRefinementConfig(
+        enabled=draw(st.booleans()), match_submaps=draw(st.booleans()),
+        submap_travel_m=draw(_pos(10)), max_echo_range_m=draw(_pos(10)),
+        calibration_max_scale=draw(st.floats(0, 0.2)),
+    )
+    return Config(
+        mapper=mapper, grid=grid, scans=scans, pose_sync=pose_sync, pose_refinement=refine,
+        input=inp, sensors=sensors,
+    ).validate()
 
 
 @settings(max_examples=60, deadline=None)
