@@ -47,7 +47,12 @@ PoseTopicOpt = Annotated[
                  show_default="discovered by type"),
 ]
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")]
-LogArg = Annotated[Path, typer.Argument(help="Log file or bag directory.", show_default=False)]
+LogsArg = Annotated[
+    list[Path],
+    typer.Argument(help="Log file or bag directory; several files are one recording (split "
+                   "bags, sonar and odometry bags), read as one log in time order.",
+                   show_default=False),
+]
 
 
 def _version(value: bool) -> None:
@@ -109,7 +114,7 @@ def _load(
 @app.command()
 @handle_errors
 def run(
-    log: LogArg,
+    log: LogsArg,
     output: Annotated[Path, typer.Option("--output", "-o", help="Output directory (must not exist).")],
     config: ConfigOpt = None,
     format: FormatOpt = None,
@@ -155,6 +160,10 @@ def run(
       sonarmap run sample_logs/office/office.mcap -o out/office
 
       sonarmap run robot.bag -o out/robot --range-topic /sonar --pose-topic /odom
+
+      sonarmap run run_0.bag run_1.bag run_2.bag -o out/run
+
+      sonarmap run sonar.mcap odom.mcap -o out/robot
 
       sonarmap run log.csv -o out/log --config sonarmap.toml --method classic --force
 
@@ -220,7 +229,7 @@ def _fmt(v: Any) -> str:
 @app.command()
 @handle_errors
 def info(
-    log: LogArg,
+    log: LogsArg,
     config: ConfigOpt = None,
     format: FormatOpt = None,
     json_out: JsonOpt = False,
@@ -232,6 +241,8 @@ def info(
       sonarmap info robot.bag
 
       sonarmap info rosbag2_dir --json
+
+      sonarmap info run_0.bag run_1.bag
     """
     import dataclasses
 
@@ -257,7 +268,8 @@ def _info_table(li: Any) -> str:
         return f"{t:%Y-%m-%d %H:%M:%S}.{frac:09d} UTC ({sec}.{frac:09d})"
 
     lines = [
-        f"Files:        {li.path}",
+        f"Files:        {li.path}" if not li.files else f"Files:        {len(li.files)}",
+        *_file_lines(li),
         f"Format:       {li.format}",
         f"Duration:     {li.duration_s:.3f} s",
         f"Start:        {stamp(li.start_ns)}",
@@ -275,10 +287,18 @@ def _info_table(li: Any) -> str:
     return "\n".join(lines)
 
 
+def _file_lines(li: Any) -> list[str]:
+    """One line per file of a recording read from several files, in time order."""
+    from formats.ros.multi_source import span_text
+
+    return [f"  {f.path}  {span_text(f.start_ns, f.end_ns)}  {f.message_count} msgs"
+            for f in li.files]
+
+
 @app.command()
 @handle_errors
 def validate(
-    log: LogArg,
+    log: LogsArg,
     config: ConfigOpt = None,
     format: FormatOpt = None,
     range_topic: RangeTopicOpt = None,
@@ -294,6 +314,8 @@ def validate(
       sonarmap validate robot.bag
 
       sonarmap validate log.mcap --json
+
+      sonarmap validate sonar.bag odom.bag
     """
     from formats import open_log
     from pipeline.validate import validate_log

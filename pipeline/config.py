@@ -439,6 +439,8 @@ def _check_ranges(cfg: Config) -> None:
     need(not dup, "sensors.mounts", "has duplicate names", dup)
     if sc.preset:
         need(sc.preset in PRESETS, "sensors.preset", f"must be one of {sorted(PRESETS)}", sc.preset)
+    gap = cfg.input.max_file_gap_s
+    need(math.isfinite(gap) and gap >= 0, "input.max_file_gap_s", "must be >= 0", gap)
     csv = cfg.input.csv
     need(bool(csv.delimiter), "input.csv.delimiter", "must not be empty", csv.delimiter)
 

@@ -165,6 +165,7 @@ class RosLogReader:
             )
         notes += self._range_notes()
         notes += [w for w in self.source.warnings if w not in notes]
+        notes += getattr(self.source, "notes", [])  # several files: duplicates read once
         return LogInfo(
             path=str(self.path),
             format=self.format_name,
@@ -177,6 +178,8 @@ class RosLogReader:
             notes=notes,
             losses=list(self.source.warnings),
             bytes_lost=self.source.bytes_lost,
+            files=list(getattr(self.source, "files", [])),
+            duplicates_read_once=getattr(self.source, "duplicates_read_once", 0),
         )
 
     def batches(self, kinds: Sequence[Kind] = ALL_KINDS) -> Iterator[Batch]:
