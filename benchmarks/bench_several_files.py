@@ -24,7 +24,7 @@ from pathlib import Path
 if __package__ in (None, ""):  # run as a script: the repository root on the path
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.bench_end_to_end import LogSpec, RunFigures, cached_log, run_once  # noqa: E402
+from benchmarks.bench_end_to_end import LogSpec, RunFigures, cached_log, run_once
 
 
 def _cut(src: Path, parts: Sequence[tuple[Path, Callable[[str, int], bool]]]) -> None:

@@ -6,15 +6,12 @@ from __future__ import annotations
 
 import hashlib
 import json
-import sys
 from pathlib import Path
 
 import pyarrow.parquet as pq
 import pytest
-from typer.testing import CliRunner
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "formats" / "ros"))
 from split_logs import Accept, anything, before, split_mcap, split_ros1, split_ros2, topics
+from typer.testing import CliRunner
 
 from cli.app import app
 
