@@ -208,7 +208,7 @@ def _run_summary(result: Any) -> dict[str, Any]:
     m = result.metrics
     outputs = {p.name: str(p) for p in sorted(Path(result.out_dir).iterdir())
                if p.is_file() and not p.name.startswith(".")}
-    return json_ready({
+    summary: dict[str, Any] = json_ready({
         "out_dir": str(result.out_dir),
         "outputs": outputs,
         "input": {k: m.input[k] for k in ("path", "format", "duration_s") if k in m.input},
@@ -220,6 +220,7 @@ def _run_summary(result: Any) -> dict[str, Any]:
                                       "mapped_area_m2", "resolution_m")},
         "warnings": m.warnings,
     })
+    return summary
 
 
 def _fmt(v: Any) -> str:
@@ -249,7 +250,7 @@ def info(
     from formats import open_log
 
     cfg = _load(config, format=format)
-    with open_log(log, format, cfg) as reader:
+    with open_log(log, cfg) as reader:
         li = reader.info()
     if json_out:
         typer.echo(json.dumps(dataclasses.asdict(li) | {"duration_s": li.duration_s}, indent=2))
@@ -321,7 +322,7 @@ def validate(
     from pipeline.validate import validate_log
 
     cfg = _load(config, format=format, range_topics=range_topic, pose_topic=pose_topic)
-    with open_log(log, format, cfg) as reader:
+    with open_log(log, cfg) as reader:
         report = validate_log(reader, cfg)
     if json_out:
         typer.echo(json.dumps(report.to_dict(), indent=2))

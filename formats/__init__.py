@@ -2,7 +2,8 @@
 
 Entry point: :func:`open_log` returns a :class:`~formats.contract.LogReader` for any
 supported log. The format is detected from the content (magic bytes, a rosbag2
-``metadata.yaml``, a CSV header), not from the suffix; ``format=`` overrides the guess.
+``metadata.yaml``, a CSV header), not from the suffix; ``[input] format`` (``--format``)
+overrides the guess.
 The registry :data:`FORMATS` maps each format name to the function that opens it: an
 explicit table, no plugin discovery.
 """
@@ -15,15 +16,11 @@ from typing import TYPE_CHECKING
 
 from formats.contract import LogReader
 from formats.errors import FormatError
+from formats.magic import MCAP_MAGIC, ROS1_MAGIC, SQLITE_MAGIC, ZSTD_MAGIC
 from formats.options import ReaderOptions, ReaderSettings
 
 if TYPE_CHECKING:
     from formats.ros.source import MessageSource
-
-ROS1_MAGIC = b"#ROSBAG V2.0\n"
-MCAP_MAGIC = b"\x89MCAP0\r\n"
-SQLITE_MAGIC = b"SQLite format 3\x00"
-ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
 
 
 def _ros1_source(path: Path) -> MessageSource:
@@ -142,11 +139,10 @@ def detect_format(path: str | Path) -> str:
 
 
 def open_log(
-    path: str | Path | Sequence[str | Path],
-    format: str | None = None,
-    config: ReaderSettings | None = None,
+    path: str | Path | Sequence[str | Path], config: ReaderSettings | None = None
 ) -> LogReader:
-    """Open a log for reading; ``format`` (a key of FORMATS) overrides detection.
+    """Open a log for reading; ``config.input.format`` (a key of FORMATS) overrides
+    detection.
 
     Several paths are several files of one recording (split bags, separate sonar and
     odometry bags), read as one log: :class:`~formats.ros.multi_source.MultiSource`.
@@ -155,17 +151,17 @@ def open_log(
     if not isinstance(path, str | Path):
         paths = [Path(p) for p in path]
         if len(paths) != 1:
-            return _open_several(paths, format, cfg)
+            return _open_several(paths, cfg)
         path = paths[0]
     p = Path(path)
-    name = format or cfg.input.format or detect_format(p)
+    name = cfg.input.format or detect_format(p)
     if name not in FORMATS:
         raise FormatError(f"unknown format '{name}' (known: {', '.join(sorted(FORMATS))})", p)
     check_log_path(p)
     return FORMATS[name](p, cfg)
 
 
-def _open_several(paths: list[Path], format: str | None, cfg: ReaderSettings) -> LogReader:
+def _open_several(paths: list[Path], cfg: ReaderSettings) -> LogReader:
     """Several files of one recording as one log (ROS formats only; one format)."""
     from formats.ros.multi_source import MultiSource
     from formats.ros.reader import RosLogReader
@@ -179,7 +175,7 @@ def _open_several(paths: list[Path], format: str | None, cfg: ReaderSettings) ->
         if key in seen:
             raise FormatError(f"is given twice (as {seen[key]} and {p})", p)
         seen[key] = p
-    names = [format or cfg.input.format or detect_format(p) for p in paths]
+    names = [cfg.input.format or detect_format(p) for p in paths]
     for p, name in zip(paths, names, strict=True):
         if name not in FORMATS:
             raise FormatError(f"unknown format '{name}' (known: {', '.join(sorted(FORMATS))})", p)

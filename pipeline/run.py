@@ -89,7 +89,6 @@ def run(
     out_dir: str | Path,
     config: Config,
     *,
-    format: str | None = None,
     force: bool = False,
     compare_correction: bool = False,
     progress: Progress | None = None,
@@ -116,7 +115,7 @@ def run(
     t_start = time.perf_counter()
     with OutputDir(Path(out_dir), force=force, protect=tuple(paths)) as out:
         with timer.stage("ingest"):
-            reader = open_log(paths, format, config)
+            reader = open_log(paths, config)
         with reader:
             with timer.stage("ingest"):
                 found = None if progress is None else (lambda n: progress("reading", n, None))

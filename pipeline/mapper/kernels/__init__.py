@@ -1,7 +1,7 @@
 """Compiled kernels (numba, ``@njit(cache=True)``) for the mapper's per-scan and per-reading loops.
 
 Each module sits beside the numpy code it replaces, which stays as the readable reference
-the tests compare it with (``tests/mapper/test_kernels_*``):
+the tests compare it with (``tests/pipeline/mapper/test_kernels_*``):
 
 * :mod:`.cone` — a sonar cone (annular sector) as row spans, one reading at a time; the
   cell rule of :func:`pipeline.mapper.grid_raster.sector_spans`; every mapper's cones
