@@ -61,17 +61,20 @@ def main(argv: list[str] | None = None) -> int:
 
     t0 = time.perf_counter()
     shutil.rmtree(MUTANTS, ignore_errors=True)
-    subprocess.run([*MUTMUT, "run", NO_MUTANT], cwd=ROOT, check=False,
-                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    log = ROOT / "mutmut.log"  # mutmut's own output, for when something goes wrong
+    with log.open("w", encoding="utf-8") as out:
+        subprocess.run([*MUTMUT, "run", NO_MUTANT], cwd=ROOT, check=False, stdout=out,
+                       stderr=subprocess.STDOUT)
     names = sorted(all_mutants())
     if not names:
-        print("mutmut generated no mutants (see `mutmut run` output)", file=sys.stderr)
+        print(f"mutmut generated no mutants (its output: {log})", file=sys.stderr)
         return 1
     sample = sorted(random.Random(args.seed).sample(names, min(args.sample, len(names))))
     print(f"{len(names)} mutants generated; running {len(sample)} (seed {args.seed})",
           flush=True)
-    subprocess.run([*MUTMUT, "run", "--max-children", str(args.children), *sample],
-                   cwd=ROOT, check=False, stdout=subprocess.DEVNULL)
+    with log.open("a", encoding="utf-8") as out:
+        subprocess.run([*MUTMUT, "run", "--max-children", str(args.children), *sample],
+                       cwd=ROOT, check=False, stdout=out, stderr=subprocess.STDOUT)
     codes = all_mutants()
     verdict = {n: STATUS.get(codes.get(n), "other") for n in sample}  # type: ignore[arg-type]
     per_module: dict[str, Counter[str]] = {}
