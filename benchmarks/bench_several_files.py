@@ -8,7 +8,8 @@ cut it — by time into ``--splits`` consecutive files (``rosbag record --split`
 into a sonar and an odometry file (overlapping over the whole hour) — with the ``mcap``
 library (every message copied with its log time and bytes). Each is mapped by ``sonarmap
 run`` in a fresh process; the table gives wall seconds, the ingest stage's seconds (where
-the merge happens), peak RSS and whether ``map.pgm`` is byte-identical to the whole log's.
+the merge happens), the process's CPU seconds (other jobs on the machine inflate wall
+time, not these), peak RSS and whether ``map.pgm`` is byte-identical to the whole log's.
 The merge is lazy (one chunk per file in memory), so peak RSS should not grow with the
 number of files.
 """
@@ -105,11 +106,11 @@ def main(argv: list[str] | None = None) -> None:
                 for i, name in enumerate(cases)}
     print(f"# {seconds:g} s log, {figures['whole log, 1 file'].readings} readings; "
           f"median of {args.repeat}")
-    print("| input | wall (s) | ingest (s) | peak RSS (MiB) | map.pgm as the whole's |")
-    print("|---|---:|---:|---:|---|")
+    print("| input | wall (s) | CPU (s) | ingest (s) | peak RSS (MiB) | map.pgm as the whole's |")
+    print("|---|---:|---:|---:|---:|---|")
     for name, r in figures.items():
-        print(f"| {name} | {r.wall:.1f} | {r.stages['ingest']:.1f} | {r.rss_mb:.0f} | "
-              f"{'identical' if same[name] else 'DIFFERENT'} |")
+        print(f"| {name} | {r.wall:.1f} | {r.cpu:.1f} | {r.stages['ingest']:.1f} | "
+              f"{r.rss_mb:.0f} | {'identical' if same[name] else 'DIFFERENT'} |")
 
 
 if __name__ == "__main__":

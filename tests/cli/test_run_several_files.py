@@ -255,3 +255,10 @@ def test_validate_checks_the_recording_as_one_log(logs: dict[str, list[Path]]) -
     assert p["path"] == " + ".join(str(x) for x in sorted(logs["topic"]))
     assert p["sensors"] == w["sensors"]
     assert p["findings"] == w["findings"]
+
+
+@pytest.mark.parametrize("command", ["run", "info", "validate"])
+def test_help_says_a_log_may_be_several_files(command: str) -> None:
+    out = runner.invoke(app, [command, "--help"]).stdout
+    assert f"Usage: sonarmap {command} [OPTIONS] LOG...\n" in out
+    assert "several files are one recording" in " ".join(out.split())
