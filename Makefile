@@ -8,7 +8,7 @@ STAMP  := $(VENV)/.installed-stamp
 DEMO_LOG := sample_logs/office/office.mcap
 DEMO_OUT := demo_out/office
 
-.PHONY: setup demo test lint layers typecheck unit bench fuzz goldens samples compare clean
+.PHONY: setup demo test lint layers typecheck unit mutate bench fuzz goldens samples compare clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -c 'import sys; sys.exit("sonarmap needs Python 3.11+") if sys.version_info < (3, 11) else None'
@@ -51,6 +51,13 @@ bench: $(STAMP)
 # Thousands of mutated logs per format through every reader (about 12 minutes).
 fuzz: $(STAMP)
 	$(BIN)/python -m fuzz.run_fuzz --examples 1000 --values 300
+
+# Mutation testing of the mapper and the stages (mutmut; long: hours on 2 cores). Prints
+# the score; `mutmut results` lists the survivors, `mutmut show NAME` one of them.
+mutate: $(STAMP)
+	rm -rf mutants
+	$(BIN)/mutmut run --max-children 2
+	$(BIN)/mutmut export-cicd-stats && cat mutants/mutmut-cicd-stats.json
 
 # Refresh the regression goldens on purpose (review `git diff sample_logs/goldens` after).
 goldens: $(STAMP)

@@ -115,7 +115,7 @@ def log_reach(log: Path, cfg: Config) -> float | None:
     from formats.presets import PRESETS
     from pipeline.ingest import survey
 
-    with open_log(log, None, cfg) as reader:
+    with open_log(log, cfg) as reader:
         sv = survey(reader)
     sc = cfg.sensors
     found = [sv.ranges.max_range_m, sc.max_range]

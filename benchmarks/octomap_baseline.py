@@ -55,7 +55,7 @@ def octomap_probability(log: Path, config: Config) -> tuple[F64, GridSpec]:
     """OctoMap's occupancy probability on sonarmap's grid for ``log`` (NaN = unknown)."""
     import octomap
 
-    with open_log(log, None, config) as reader:
+    with open_log(log, config) as reader:
         sv, sensors, grid = prepare(reader, config)
         tree = octomap.OcTree(grid.resolution)
 

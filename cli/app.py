@@ -47,7 +47,12 @@ PoseTopicOpt = Annotated[
                  show_default="discovered by type"),
 ]
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")]
-LogArg = Annotated[Path, typer.Argument(help="Log file or bag directory.", show_default=False)]
+LogsArg = Annotated[
+    list[Path],
+    typer.Argument(help="Log file or bag directory; several files are one recording (split "
+                   "bags, sonar and odometry bags), read as one log in time order.",
+                   show_default=False),
+]
 
 
 def _version(value: bool) -> None:
@@ -109,7 +114,7 @@ def _load(
 @app.command()
 @handle_errors
 def run(
-    log: LogArg,
+    log: LogsArg,
     output: Annotated[Path, typer.Option("--output", "-o", help="Output directory (must not exist).")],
     config: ConfigOpt = None,
     format: FormatOpt = None,
@@ -156,6 +161,10 @@ def run(
 
       sonarmap run robot.bag -o out/robot --range-topic /sonar --pose-topic /odom
 
+      sonarmap run run_0.bag run_1.bag run_2.bag -o out/run
+
+      sonarmap run sonar.mcap odom.mcap -o out/robot
+
       sonarmap run log.csv -o out/log --config sonarmap.toml --method classic --force
 
       sonarmap run drifted.mcap -o out/drifted --refine-poses
@@ -199,7 +208,7 @@ def _run_summary(result: Any) -> dict[str, Any]:
     m = result.metrics
     outputs = {p.name: str(p) for p in sorted(Path(result.out_dir).iterdir())
                if p.is_file() and not p.name.startswith(".")}
-    return json_ready({
+    summary: dict[str, Any] = json_ready({
         "out_dir": str(result.out_dir),
         "outputs": outputs,
         "input": {k: m.input[k] for k in ("path", "format", "duration_s") if k in m.input},
@@ -211,6 +220,7 @@ def _run_summary(result: Any) -> dict[str, Any]:
                                       "mapped_area_m2", "resolution_m")},
         "warnings": m.warnings,
     })
+    return summary
 
 
 def _fmt(v: Any) -> str:
@@ -220,7 +230,7 @@ def _fmt(v: Any) -> str:
 @app.command()
 @handle_errors
 def info(
-    log: LogArg,
+    log: LogsArg,
     config: ConfigOpt = None,
     format: FormatOpt = None,
     json_out: JsonOpt = False,
@@ -232,13 +242,15 @@ def info(
       sonarmap info robot.bag
 
       sonarmap info rosbag2_dir --json
+
+      sonarmap info run_0.bag run_1.bag
     """
     import dataclasses
 
     from formats import open_log
 
     cfg = _load(config, format=format)
-    with open_log(log, format, cfg) as reader:
+    with open_log(log, cfg) as reader:
         li = reader.info()
     if json_out:
         typer.echo(json.dumps(dataclasses.asdict(li) | {"duration_s": li.duration_s}, indent=2))
@@ -257,7 +269,8 @@ def _info_table(li: Any) -> str:
         return f"{t:%Y-%m-%d %H:%M:%S}.{frac:09d} UTC ({sec}.{frac:09d})"
 
     lines = [
-        f"Files:        {li.path}",
+        f"Files:        {li.path}" if not li.files else f"Files:        {len(li.files)}",
+        *_file_lines(li),
         f"Format:       {li.format}",
         f"Duration:     {li.duration_s:.3f} s",
         f"Start:        {stamp(li.start_ns)}",
@@ -275,10 +288,18 @@ def _info_table(li: Any) -> str:
     return "\n".join(lines)
 
 
+def _file_lines(li: Any) -> list[str]:
+    """One line per file of a recording read from several files, in time order."""
+    from formats.ros.multi_source import span_text
+
+    return [f"  {f.path}  {span_text(f.start_ns, f.end_ns)}  {f.message_count} msgs"
+            for f in li.files]
+
+
 @app.command()
 @handle_errors
 def validate(
-    log: LogArg,
+    log: LogsArg,
     config: ConfigOpt = None,
     format: FormatOpt = None,
     range_topic: RangeTopicOpt = None,
@@ -294,12 +315,14 @@ def validate(
       sonarmap validate robot.bag
 
       sonarmap validate log.mcap --json
+
+      sonarmap validate sonar.bag odom.bag
     """
     from formats import open_log
     from pipeline.validate import validate_log
 
     cfg = _load(config, format=format, range_topics=range_topic, pose_topic=pose_topic)
-    with open_log(log, format, cfg) as reader:
+    with open_log(log, cfg) as reader:
         report = validate_log(reader, cfg)
     if json_out:
         typer.echo(json.dumps(report.to_dict(), indent=2))

@@ -2,45 +2,60 @@
 
 Entry point: :func:`open_log` returns a :class:`~formats.contract.LogReader` for any
 supported log. The format is detected from the content (magic bytes, a rosbag2
-``metadata.yaml``, a CSV header), not from the suffix; ``format=`` overrides the guess.
+``metadata.yaml``, a CSV header), not from the suffix; ``[input] format`` (``--format``)
+overrides the guess.
 The registry :data:`FORMATS` maps each format name to the function that opens it: an
 explicit table, no plugin discovery.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from formats.contract import LogReader
 from formats.errors import FormatError
+from formats.magic import MCAP_MAGIC, ROS1_MAGIC, SQLITE_MAGIC, ZSTD_MAGIC
 from formats.options import ReaderOptions, ReaderSettings
 
-ROS1_MAGIC = b"#ROSBAG V2.0\n"
-MCAP_MAGIC = b"\x89MCAP0\r\n"
-SQLITE_MAGIC = b"SQLite format 3\x00"
-ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"
+if TYPE_CHECKING:
+    from formats.ros.source import MessageSource
 
 
-def _open_ros1(path: Path, config: ReaderSettings) -> LogReader:
-    from formats.ros.reader import RosLogReader
+def _ros1_source(path: Path) -> MessageSource:
     from formats.ros.ros1bag import Ros1BagSource
 
-    return RosLogReader(Ros1BagSource(path), config)
+    return Ros1BagSource(path)
 
 
-def _open_ros2(path: Path, config: ReaderSettings) -> LogReader:
-    from formats.ros.reader import RosLogReader
+def _ros2_source(path: Path) -> MessageSource:
     from formats.ros.ros2bag import Ros2BagSource
 
-    return RosLogReader(Ros2BagSource(path), config)
+    return Ros2BagSource(path)
 
 
-def _open_mcap(path: Path, config: ReaderSettings) -> LogReader:
+def _mcap_source(path: Path) -> MessageSource:
     from formats.ros.mcap_source import McapSource
-    from formats.ros.reader import RosLogReader
 
-    return RosLogReader(McapSource(path), config)
+    return McapSource(path)
+
+
+#: The ROS formats: a message container each, read by one RosLogReader.
+SOURCES: dict[str, Callable[[Path], MessageSource]] = {
+    "ros1": _ros1_source,
+    "ros2": _ros2_source,
+    "mcap": _mcap_source,
+}
+
+
+def _open_ros(name: str) -> Callable[[Path, ReaderSettings], LogReader]:
+    def open_ros(path: Path, config: ReaderSettings) -> LogReader:
+        from formats.ros.reader import RosLogReader
+
+        return RosLogReader(SOURCES[name](path), config)
+
+    return open_ros
 
 
 def _open_csv(path: Path, config: ReaderSettings) -> LogReader:
@@ -50,9 +65,9 @@ def _open_csv(path: Path, config: ReaderSettings) -> LogReader:
 
 
 FORMATS: dict[str, Callable[[Path, ReaderSettings], LogReader]] = {
-    "ros1": _open_ros1,
-    "ros2": _open_ros2,
-    "mcap": _open_mcap,
+    "ros1": _open_ros("ros1"),
+    "ros2": _open_ros("ros2"),
+    "mcap": _open_ros("mcap"),
     "csv": _open_csv,
 }
 
@@ -123,12 +138,64 @@ def detect_format(path: str | Path) -> str:
     )
 
 
-def open_log(path: str | Path, format: str | None = None, config: ReaderSettings | None = None) -> LogReader:
-    """Open a log for reading; ``format`` (a key of FORMATS) overrides detection."""
-    p = Path(path)
+def open_log(
+    path: str | Path | Sequence[str | Path], config: ReaderSettings | None = None
+) -> LogReader:
+    """Open a log for reading; ``config.input.format`` (a key of FORMATS) overrides
+    detection.
+
+    Several paths are several files of one recording (split bags, separate sonar and
+    odometry bags), read as one log: :class:`~formats.ros.multi_source.MultiSource`.
+    """
     cfg = config if config is not None else ReaderOptions()
-    name = format or cfg.input.format or detect_format(p)
+    if not isinstance(path, str | Path):
+        paths = [Path(p) for p in path]
+        if len(paths) != 1:
+            return _open_several(paths, cfg)
+        path = paths[0]
+    p = Path(path)
+    name = cfg.input.format or detect_format(p)
     if name not in FORMATS:
         raise FormatError(f"unknown format '{name}' (known: {', '.join(sorted(FORMATS))})", p)
     check_log_path(p)
     return FORMATS[name](p, cfg)
+
+
+def _open_several(paths: list[Path], cfg: ReaderSettings) -> LogReader:
+    """Several files of one recording as one log (ROS formats only; one format)."""
+    from formats.ros.multi_source import MultiSource
+    from formats.ros.reader import RosLogReader
+
+    if not paths:
+        raise FormatError("no log given")
+    seen: dict[Path, Path] = {}
+    for p in paths:
+        check_log_path(p)
+        key = p.resolve()
+        if key in seen:
+            raise FormatError(f"is given twice (as {seen[key]} and {p})", p)
+        seen[key] = p
+    names = [cfg.input.format or detect_format(p) for p in paths]
+    for p, name in zip(paths, names, strict=True):
+        if name not in FORMATS:
+            raise FormatError(f"unknown format '{name}' (known: {', '.join(sorted(FORMATS))})", p)
+        if name != names[0]:
+            raise FormatError(
+                f"files of one recording must have one format: {paths[0]} is {names[0]}, "
+                f"{p} is {name}"
+            )
+        if name not in SOURCES:
+            raise FormatError(
+                f"is a {name} log: several files are read as one recording for ROS 1 bags, "
+                "ROS 2 bags and MCAP files; a CSV log is one file, or one directory with "
+                "ranges.csv and poses.csv ([input.csv] layout = 'set')", p,
+            )
+    sources: list[MessageSource] = []
+    try:
+        for p in paths:
+            sources.append(SOURCES[names[0]](p))
+    except BaseException:
+        for s in sources:
+            s.close()
+        raise
+    return RosLogReader(MultiSource(sources, max_gap_s=cfg.input.max_file_gap_s), cfg)

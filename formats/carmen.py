@@ -35,8 +35,8 @@ import numpy as np
 from formats.arrays import F64, I64
 from formats.contract import SensorMount
 from formats.errors import FormatError
+from formats.magic import GZIP_MAGIC
 
-GZIP_MAGIC = b"\x1f\x8b"
 DEFAULT_FOV_DEG = 180.0
 DEFAULT_LASER_MAX_M = 81.83  # SICK LMS "no return" value as CARMEN logs it
 # Message names of CARMEN's logger (carmen/src/logtools), used to recognise a CARMEN log.

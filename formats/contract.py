@@ -179,6 +179,16 @@ class TopicInfo:
     role: str = ""  # what sonarmap uses it for: 'range', 'pose', 'tf', 'tf_static', 'laser', ''
 
 
+@dataclass(frozen=True)
+class LogFile:
+    """One file of a recording read from several files: path, log-time span, messages."""
+
+    path: str
+    start_ns: int | None
+    end_ns: int | None
+    message_count: int
+
+
 @dataclass
 class LogInfo:
     """What a log holds: format, time span and topics, plus what sonarmap found in it."""
@@ -196,6 +206,11 @@ class LogInfo:
     # chunks): one line per loss, and the bytes lost; the rest is read and mapped.
     losses: list[str] = field(default_factory=list)
     bytes_lost: int = 0
+    # A recording read from several files (split bags, sonar and odometry bags): each
+    # file in time order; empty for a log in one file (or one bag directory).
+    files: list[LogFile] = field(default_factory=list)
+    # Of those: messages found in two files (same topic, log time and bytes), read once.
+    duplicates_read_once: int = 0
 
     @property
     def duration_s(self) -> float:

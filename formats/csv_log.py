@@ -66,8 +66,8 @@ from formats.contract import (
     make_range_batch,
 )
 from formats.errors import FormatError
-from formats.options import CsvConfig, MountConfig, ReaderSettings
-from formats.presets import PRESETS
+from formats.options import CsvConfig, ReaderSettings
+from formats.sensor_config import BeamLimits, sensor_setup
 
 CHUNK_BYTES = 4 << 20  # bytes of text per chunk (about 60 000 rows of a typical log)
 POSE_PARENT_FRAME = "odom"
@@ -82,34 +82,6 @@ _SINGLE = (("t", "x", "y", "yaw", "sensor", "range"), ("fov", "min_range", "max_
 _RANGES = (("t", "sensor", "range"), ("fov", "min_range", "max_range", "scan"))
 _POSES = (("t", "x", "y", "yaw"), ())
 _SENSORS = (("sensor", "x", "y", "yaw"), ("fov", "min_range", "max_range"))
-
-
-# --------------------------------------------------------------------------- config helpers
-
-
-def configured_limits(
-    config: ReaderSettings,
-) -> tuple[dict[str, tuple[float, float, float]], tuple[float, float, float]]:
-    """Beam limits from the configuration: ``({name: (fov rad, r_min m, r_max m)}, defaults)``.
-
-    Entries come from the ``[sensors] preset`` overridden by ``[[sensors.mounts]]`` of the
-    same name; a zero value means "not configured" and is NaN here.
-    """
-
-    def nz(v: float, scale: float = 1.0) -> float:
-        return v * scale if v > 0 else math.nan
-
-    entries: dict[str, MountConfig] = {}
-    if config.sensors.preset in PRESETS:
-        entries.update({m.name: m for m in PRESETS[config.sensors.preset]})
-    entries.update({m.name: m for m in config.sensors.mounts})
-    sc = config.sensors
-    defaults = (nz(sc.fov_deg, math.pi / 180), nz(sc.min_range), nz(sc.max_range))
-    per_name = {
-        name: (nz(m.fov_deg, math.pi / 180), nz(m.min_range), nz(m.max_range))
-        for name, m in entries.items()
-    }
-    return per_name, defaults
 
 
 # --------------------------------------------------------------------------- sniffing
@@ -566,7 +538,7 @@ class CsvLogReader:
         self._len_div = _LENGTH_DIV[c.length_unit]
         self._ang_mul = _ANGLE_MUL[c.angle_unit]
         self._no_echo = c.no_echo_value if c.no_echo_value >= 0 else math.nan
-        self._cfg_limits, self._default_limits = configured_limits(config)
+        self._sensor_setup = sensor_setup(config.sensors)
         self._log_limits: dict[str, tuple[float, float, float]] = {}
         self._mounts: dict[str, SensorMount] | None = None
         # A directory can only be a set of files: read it as one whatever `layout` says.
@@ -752,14 +724,8 @@ class CsvLogReader:
         """fov, r_min, r_max per sensor id where a row carries none (NaN = unknown)."""
         rows = []
         for name in self.sensor_names:
-            log = self._log_limits.get(name, (math.nan,) * 3)
-            cfg = self._cfg_limits.get(name, (math.nan,) * 3)
-            rows.append(
-                [
-                    next((v for v in (a, b, c) if not math.isnan(v)), math.nan)
-                    for a, b, c in zip(log, cfg, self._default_limits, strict=True)
-                ]
-            )
+            log = BeamLimits(*self._log_limits.get(name, (math.nan,) * 3))
+            rows.append(log.or_else(self._sensor_setup.configured_limits(name)).as_tuple())
         arr = np.array(rows, dtype=np.float64).reshape(-1, 3)
         return arr[:, 0].copy(), arr[:, 1].copy(), arr[:, 2].copy()
 

@@ -26,18 +26,15 @@ import shutil
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol, cast
+from typing import Any, cast
 
 import numpy as np
 import numpy.typing as npt
 
+from formats.angles import wrap_angle
 from formats.arrays import F64, I64
 from formats.contract import PoseBatch, RangeBatch, SensorMount
 from formats.errors import ConfigError, OutputError
-
-if TYPE_CHECKING:
-    from formats.map_types import GridSpec
-
 
 FORMATS: tuple[str, ...] = ("ros1", "ros2", "ros2-mcap", "mcap", "mcap-ros1", "csv", "csv-set")
 _COMPRESSION: dict[str, tuple[str, ...]] = {
@@ -505,7 +502,7 @@ def _pose_at(p: PoseBatch, t_ns: I64) -> tuple[F64, F64, F64]:
     tp = (p.t_ns[o] - base).astype(np.float64)
     t = (t_ns - base).astype(np.float64)
     yaw = np.interp(t, tp, np.unwrap(p.yaw[o]))
-    yaw = (yaw + math.pi) % (2 * math.pi) - math.pi
+    yaw = wrap_angle(yaw)
     return np.interp(t, tp, p.x[o]), np.interp(t, tp, p.y[o]), yaw
 
 
@@ -603,68 +600,3 @@ def _write_csv_set(c: LogContent, path: Path, fmt: str, compression: str) -> Non
         ["sensor", "x", "y", "yaw", "fov", "min_range", "max_range"],
         [list(col) for col in zip(*rows, strict=True)] if rows else [[] for _ in range(7)],
     )
-
-
-class StampedPoses(Protocol):
-    """Poses with stamps: ``t_ns`` (ns) and ``x``, ``y`` (m), ``yaw`` (rad)."""
-
-    @property
-    def t_ns(self) -> I64: ...
-    @property
-    def x(self) -> F64: ...
-    @property
-    def y(self) -> F64: ...
-    @property
-    def yaw(self) -> F64: ...
-
-
-_LOG_SUFFIXES = frozenset({".mcap", ".bag", ".db3", ".csv", ".txt"})
-
-
-def reference_paths(out_path: Path, kind: str) -> tuple[Path, Path, Path]:
-    """``<stem>.<kind>.yaml``, ``<stem>.<kind>.pgm`` and ``<stem>.truth.csv`` beside a log;
-    the stem is the name without its log suffix only (``sim_0.02_0.0.mcap`` →
-    ``sim_0.02_0.0``), so logs whose names differ after a dot do not share truth files."""
-    name = out_path.name
-    stem = name[: -len(out_path.suffix)] if out_path.suffix.lower() in _LOG_SUFFIXES else name
-    stem = stem or name
-    d = out_path.parent
-    return d / f"{stem}.{kind}.yaml", d / f"{stem}.{kind}.pgm", d / f"{stem}.truth.csv"
-
-
-def write_log_with_reference(
-    content: LogContent,
-    out_path: str | Path,
-    fmt: str,
-    *,
-    compression: str,
-    kind: str,
-    probability: np.ndarray,
-    grid: GridSpec,
-    trajectory: StampedPoses,
-) -> list[Path]:
-    """A log plus what it is scored against: the reference map (nav2 YAML + PGM, see
-    :func:`reference_paths`) and the trajectory CSV ``t,x,y,yaw`` (t as exact decimal
-    seconds, floats that round-trip exactly). Returns the paths, log first.
-
-    Refuses (OutputError) when any of them exists already, before writing anything.
-    """
-    from formats.writers.nav2_map import write_nav2_map
-
-    out = Path(out_path)
-    yaml_path, pgm_path, csv_path = reference_paths(out, kind)
-    for q in (out, yaml_path, pgm_path, csv_path):
-        if q.exists() or q.is_symlink():
-            raise OutputError("exists already, not overwriting", q)
-    log_path = write_log(content, out, fmt, compression=compression)
-    tp = trajectory
-    rows = [
-        f"{t},{x!r},{y!r},{a!r}"
-        for t, x, y, a in zip(
-            format_time_s(tp.t_ns), tp.x.tolist(), tp.y.tolist(), tp.yaw.tolist(), strict=True
-        )
-    ]
-    with csv_path.open("x", encoding="utf-8", newline="") as f:
-        f.write("t,x,y,yaw\n" + "\n".join(rows) + "\n")
-    write_nav2_map(yaml_path, probability, grid)
-    return [log_path, yaml_path, pgm_path, csv_path]

@@ -55,6 +55,11 @@ class InputConfig:
     range_topics: tuple[str, ...] = doc_field("range topics; empty = discover by type", default=())
     pose_topic: str = doc_field("pose topic ('/tf' for tf); '' = discover by type", default="")
     base_frame: str = doc_field("robot base frame (REP 105)", default="base_link")
+    max_file_gap_s: float = doc_field(
+        "a recording given as several files: the largest gap, s, between one file's end and "
+        "the next file's start (split bags follow each other, sonar/odometry bags overlap)",
+        default=10.0,
+    )
     csv: CsvConfig = field(default_factory=CsvConfig)
 
 

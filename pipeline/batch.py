@@ -39,6 +39,7 @@ from pathlib import Path
 from typing import Any
 
 from formats.errors import ConfigError, FormatError, InputError, OutputError, SonarmapError
+from formats.tables import markdown_table
 from pipeline.config import Config, config_from_dict, load_config
 
 log = logging.getLogger("sonarmap.batch")
@@ -562,24 +563,22 @@ def summary_markdown(rows: Sequence[LogOutcome]) -> str:
         f"{len(rows)} logs: {counts['ok']} mapped, {counts['skipped']} skipped (unchanged), "
         f"{counts['failed']} failed.",
         "",
-        "| log | status | duration (s) | readings | features | mean feature variance (m²) "
-        "| mapped area (m²) | wall (s) | path | error | warnings |",
-        "|---|---|--:|--:|--:|--:|--:|--:|---|---|---|",
     ]
-    for r in rows:
-        cells = [
+    header = ["log", "status", "duration (s)", "readings", "features",
+              "mean feature variance (m²)", "mapped area (m²)", "wall (s)", "path", "error",
+              "warnings"]
+    cells = [
+        [
             r.name, r.status, _fmt(r.duration_s, ".1f"), _fmt(r.readings, "d"),
             _fmt(r.features, "d"), _fmt(r.mean_feature_variance_m2, ".4g"),
             _fmt(r.mapped_area_m2, ".2f"), _fmt(r.seconds, ".2f"), r.path, r.error or "",
             r.warnings or "",
         ]
-        lines.append("| " + " | ".join(_md_cell(c) for c in cells) + " |")
+        for r in rows
+    ]
+    lines += markdown_table(header, cells, right=range(2, 8))
     return "\n".join(lines) + "\n"
 
 
 def _fmt(v: float | int | None, spec: str) -> str:
     return "" if v is None else format(v, spec)
-
-
-def _md_cell(text: str) -> str:
-    return text.replace("\\", "\\\\").replace("|", "\\|").replace("\n", " ")

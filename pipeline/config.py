@@ -6,7 +6,7 @@ sensor mounts. Each section is a frozen dataclass; each field's ``doc`` metadata
 comment ``sonarmap config`` prints. Loading validates names, types and ranges and raises
 :class:`~formats.errors.ConfigError` with one line naming the file and the key.
 
-TOML is parsed with the standard library's ``tomllib``: no code is executed.
+TOML is read by :func:`formats.toml_file.read_toml` (``tomllib``: no code is executed).
 """
 
 from __future__ import annotations
@@ -15,7 +15,6 @@ import dataclasses
 import hashlib
 import json
 import math
-import tomllib
 import types
 import typing
 from dataclasses import dataclass, field
@@ -25,6 +24,7 @@ from typing import Any, Literal
 from formats.errors import ConfigError
 from formats.options import FOV_MAX_DEG, FOV_MIN_DEG, InputConfig, SensorsConfig, doc_field
 from formats.presets import PRESETS
+from formats.toml_file import read_toml
 
 
 @dataclass(frozen=True)
@@ -243,7 +243,8 @@ class Config:
         return self
 
     def to_dict(self) -> dict[str, Any]:
-        return _to_plain(self)
+        plain: dict[str, Any] = _to_plain(self)
+        return plain
 
     def hash(self) -> str:
         """sha256 of the canonical JSON of the configuration (first 16 hex digits)."""
@@ -262,21 +263,13 @@ def load_config(path: str | Path | None) -> Config:
     if path is None:
         return Config().validate()
     p = Path(path)
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError as err:
-        raise ConfigError("configuration file not found", p) from err
-    except (OSError, UnicodeDecodeError) as err:
-        raise ConfigError(f"cannot read configuration: {err}", p) from err
-    except tomllib.TOMLDecodeError as err:
-        raise ConfigError(f"invalid TOML: {err}", p) from err
-    return config_from_dict(data, source=p)
+    return config_from_dict(read_toml(p, "configuration"), source=p)
 
 
 def config_from_dict(data: dict[str, Any], source: str | Path | None = None) -> Config:
     """Build a validated Config from plain data (as parsed from TOML)."""
     try:
-        cfg = _build(Config, data, "")
+        cfg: Config = _build(Config, data, "")
         return cfg.validate()
     except ConfigError as err:
         if source is not None and err.path is None:
@@ -445,6 +438,8 @@ def _check_ranges(cfg: Config) -> None:
     need(not dup, "sensors.mounts", "has duplicate names", dup)
     if sc.preset:
         need(sc.preset in PRESETS, "sensors.preset", f"must be one of {sorted(PRESETS)}", sc.preset)
+    gap = cfg.input.max_file_gap_s
+    need(math.isfinite(gap) and gap >= 0, "input.max_file_gap_s", "must be >= 0", gap)
     csv = cfg.input.csv
     need(bool(csv.delimiter), "input.csv.delimiter", "must not be empty", csv.delimiter)
 
@@ -520,6 +515,24 @@ def _dump_table(obj: Any, prefix: str, lines: list[str], comments: bool) -> None
             lines.append("")
 
 
+_TOML_ESCAPES = {'"': '\\"', "\\": "\\\\", "\b": "\\b", "\t": "\\t", "\n": "\\n", "\f": "\\f", "\r": "\\r"}
+
+
+def _toml_string(text: str) -> str:
+    """A TOML basic string: quotes, backslashes and control characters escaped, every
+    other character as itself (TOML's \\u escapes take no surrogate halves, so characters
+    beyond the BMP cannot be escaped the way JSON does)."""
+    out = []
+    for ch in text:
+        if ch in _TOML_ESCAPES:
+            out.append(_TOML_ESCAPES[ch])
+        elif ch < " " or ch == "\x7f":
+            out.append(f"\\u{ord(ch):04x}")
+        else:
+            out.append(ch)
+    return '"' + "".join(out) + '"'
+
+
 def _toml_value(v: Any) -> str:
     if isinstance(v, bool):
         return "true" if v else "false"
@@ -532,7 +545,7 @@ def _toml_value(v: Any) -> str:
     if isinstance(v, int):
         return str(v)
     if isinstance(v, str):
-        return json.dumps(v)
+        return _toml_string(v)
     if isinstance(v, tuple):
         return "[" + ", ".join(_toml_value(x) for x in v) + "]"
     raise TypeError(f"cannot write {v!r} as TOML")  # pragma: no cover

@@ -26,11 +26,10 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 
+from formats.angles import wrap_angle
+from formats.arrays import F64
 from formats.errors import ConfigError
-
-F64 = npt.NDArray[np.float64]
 
 
 @dataclass(frozen=True)
@@ -65,11 +64,6 @@ class DriftModel:
         return self
 
 
-def wrap(a: npt.ArrayLike) -> F64:
-    """Angles wrapped to [−π, π)."""
-    return np.asarray((np.asarray(a, dtype=np.float64) + np.pi) % (2 * np.pi) - np.pi)
-
-
 def apply_drift(
     x: F64, y: F64, yaw: F64, model: DriftModel, rng: np.random.Generator | None = None
 ) -> tuple[F64, F64, F64]:
@@ -85,7 +79,7 @@ def apply_drift(
     if model.is_zero or n < 2:
         return x.copy(), y.copy(), yaw.copy()
     dx, dy = np.diff(x), np.diff(y)
-    dyaw = wrap(np.diff(yaw))
+    dyaw = wrap_angle(np.diff(yaw))
     c, s = np.cos(yaw[:-1]), np.sin(yaw[:-1])
     lx, ly = c * dx + s * dy, -s * dx + c * dy  # the step in the robot frame
     ds = np.hypot(dx, dy)
@@ -98,9 +92,9 @@ def apply_drift(
         noise = rng.standard_normal((3, n - 1))
         lx = lx + noise[0] * model.noise_xy * np.sqrt(ds)
         ly = ly + noise[1] * model.noise_xy * np.sqrt(ds)
-        dyaw = dyaw + noise[2] * model.noise_yaw * np.sqrt(np.abs(wrap(np.diff(yaw))))
+        dyaw = dyaw + noise[2] * model.noise_yaw * np.sqrt(np.abs(wrap_angle(np.diff(yaw))))
     heading = yaw[0] + np.concatenate([[0.0], np.cumsum(dyaw)])
     c, s = np.cos(heading[:-1]), np.sin(heading[:-1])
     ox = x[0] + np.concatenate([[0.0], np.cumsum(c * lx - s * ly)])
     oy = y[0] + np.concatenate([[0.0], np.cumsum(s * lx + c * ly)])
-    return ox, oy, wrap(heading)
+    return ox, oy, wrap_angle(heading)

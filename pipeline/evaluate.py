@@ -46,6 +46,7 @@ import numpy.typing as npt
 from formats.arrays import F64, I8, B
 from formats.errors import ConfigError, FormatError, InputError
 from formats.map_types import GridSpec
+from formats.tables import text_table
 
 __all__ = [
     "RUN_FILES",
@@ -198,8 +199,7 @@ class Evaluation:
             te = dict(self.trajectory_error)
             te["alignment"] = tuple(te["alignment"])
             rows += TrajectoryError(**te).table_rows()
-        width = max(len(k) for k, _ in rows)
-        lines = [f"{k:<{width}}  {v}" for k, v in rows]
+        lines = text_table(None, rows)
         lines += [f"note: {n}" for n in self.notes]
         return "\n".join(lines)
 
@@ -240,8 +240,8 @@ def _positive(v: Any) -> float | None:
 def run_sensor_reach(run_dir: Path, metrics: dict[str, Any]) -> tuple[float | None, str]:
     """The run's largest sensor range, m, and where it came from.
 
-    Looked up in metrics.json (``input.max_range_m`` or a sensor row's ``max_range_m``, when
-    the run recorded them), then in config.toml (``[sensors] max_range``, the mounts'
+    Looked up in metrics.json (``input.max_range_m``, when the run recorded one), then in
+    config.toml (``[sensors] max_range``, the mounts'
     ``max_range`` and the preset's). Returns ``(None, "unknown")`` when neither has one:
     a range that came from the log itself is not recorded in config.toml.
     """
@@ -249,12 +249,6 @@ def run_sensor_reach(run_dir: Path, metrics: dict[str, Any]) -> tuple[float | No
     inp = metrics.get("input")
     if isinstance(inp, dict):
         found += [v for v in [_positive(inp.get("max_range_m"))] if v is not None]
-    sensors = metrics.get("sensors")
-    if isinstance(sensors, list):
-        found += [
-            v for row in sensors if isinstance(row, dict)
-            for v in [_positive(row.get("max_range_m"))] if v is not None
-        ]
     if found:
         return max(found), "metrics.json"
     cfg_path = run_dir / "config.toml"

@@ -13,8 +13,8 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
-import numpy.typing as npt
 
+from formats.arrays import I64, B
 from formats.contract import LogReader, MountBatch, PoseBatch, RangeBatch, SensorMount
 from formats.errors import InputError
 from pipeline.pose_sync import PoseTrack, PoseTrackBuilder
@@ -49,22 +49,39 @@ class RangeSummary:
         self.backwards += int(stamps.backwards(b).sum())
 
 
-class StampOrder:
-    """Header stamps going backwards, per sensor, in log order.
+def stamps_behind(t: I64, newest: int | None) -> tuple[B, I64, int | None]:
+    """The one meaning of "stamps going backwards": a stamp older than the running maximum
+    of the stamps before it (``newest``: the maximum of earlier batches, None if none).
 
-    A reading whose stamp is older than an earlier stamp of the same sensor jumped
-    backwards (clock reset, a replayed message): both passes flag the same readings, pass 1
-    counts them and pass 2 drops them (``dropped.stamp_backwards`` in metrics.json).
+    Returns the mask of such stamps, how far each is behind (ns, 0 where it is not) and the
+    running maximum after ``t``. One jump back followed by rising stamps that stay below
+    the earlier maximum flags every one of them: they are all older than a stamp already
+    seen.
+    """
+    if t.shape[0] == 0:
+        return np.zeros(0, dtype=bool), np.zeros(0, dtype=np.int64), newest
+    head = t[:1] if newest is None else np.array([newest], dtype=np.int64)
+    before = np.maximum.accumulate(np.r_[head, t[:-1]])  # max of all earlier stamps
+    behind = np.maximum(before - t, 0)
+    return behind > 0, behind, int(max(before[-1], t[-1]))
+
+
+class StampOrder:
+    """Header stamps going backwards (:func:`stamps_behind`), per sensor, in log order.
+
+    Both passes flag the same readings: pass 1 counts them and pass 2 drops them
+    (``dropped.stamp_backwards`` in metrics.json); ``sonarmap validate`` reports the same
+    count.
     """
 
     def __init__(self) -> None:
         self._last: dict[int, int] = {}
 
-    def backwards(self, b: RangeBatch) -> npt.NDArray[np.bool_]:
+    def backwards(self, b: RangeBatch) -> B:
         """Mask of the batch's readings that went backwards; updates the per-sensor state."""
         return self.steps_back(b) > 0
 
-    def steps_back(self, b: RangeBatch) -> npt.NDArray[np.int64]:
+    def steps_back(self, b: RangeBatch) -> I64:
         """How far (ns) each reading's stamp lies below the largest earlier stamp of its
         sensor (0 = not backwards); updates the per-sensor state. ``validate`` reports
         with the same rule the pipeline drops by."""
@@ -75,12 +92,10 @@ class StampOrder:
         ends = np.r_[starts[1:], len(sid)]
         for s, e in zip(starts.tolist(), ends.tolist(), strict=True):
             key = int(sid[s])
-            seg = t[s:e]
-            prev = self._last.get(key)
-            head = seg[:1] if prev is None else np.array([prev], dtype=np.int64)
-            before = np.maximum.accumulate(np.r_[head, seg[:-1]])  # max of all earlier stamps
-            out[order[s:e]] = np.maximum(before - seg, 0)
-            self._last[key] = int(max(before[-1], seg[-1]))
+            _, behind, newest = stamps_behind(t[s:e], self._last.get(key))
+            out[order[s:e]] = behind
+            if newest is not None:
+                self._last[key] = newest
         return out
 
 

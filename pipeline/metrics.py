@@ -55,15 +55,6 @@ def sha256_of(path: Path) -> str:
     return h.hexdigest()
 
 
-def feature_variance(cov_xx: np.ndarray, cov_xy: np.ndarray, cov_yy: np.ndarray) -> tuple[float, float]:
-    """The paper's metric (§7): mean trace(P)/2 and mean largest eigenvalue, m²."""
-    if cov_xx.size == 0:
-        return float("nan"), float("nan")
-    half_trace = 0.5 * (cov_xx + cov_yy)
-    major = half_trace + np.sqrt((0.5 * (cov_xx - cov_yy)) ** 2 + cov_xy**2)
-    return float(half_trace.mean()), float(major.mean())
-
-
 def map_cells(snapshot: MapSnapshot, occupied_thresh: float = 0.65, free_thresh: float = 0.196) -> dict[str, Any]:
     """Occupied/free/unknown cell counts with the nav2 thresholds, and mapped area (m²)."""
     p = snapshot.probability

@@ -24,8 +24,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from formats.angles import wrap_angle
 from formats.arrays import F64, I64
-from formats.contract import PoseBatch, SensorMount
+from formats.contract import PoseBatch
 
 # Reasons a reading has no pose (codes in PoseLookup.reason).
 POSE_OK = 0
@@ -286,11 +287,6 @@ class PoseLookup:
     reason: npt.NDArray[np.int8]
 
 
-def wrap_angle(a: npt.ArrayLike) -> F64:
-    """Angles wrapped to [−π, π)."""
-    return np.asarray((np.asarray(a, dtype=np.float64) + np.pi) % (2 * np.pi) - np.pi)
-
-
 def pose_gap_limit_s(configured_s: float, median_interval_s: float) -> float:
     """The pose gap limit in effect: ``configured_s`` when > 0, else AUTO_GAP_FACTOR ×
     the median pose interval within [AUTO_GAP_MIN_S, AUTO_GAP_MAX_S]."""
@@ -355,13 +351,3 @@ def sonar_geometry(
     oy = y + s * mount_x + c * mount_y
     return ox, oy, wrap_angle(yaw + mount_yaw)
 
-
-def mount_arrays(
-    mounts: Sequence[SensorMount | None],
-) -> tuple[F64, F64, F64, npt.NDArray[np.bool_]]:
-    """Per-sensor-id mount arrays (x, y, yaw) and which sensors have a mount."""
-    have = np.array([m is not None for m in mounts], dtype=bool)
-    mx = np.array([m.x if m else np.nan for m in mounts], dtype=np.float64)
-    my = np.array([m.y if m else np.nan for m in mounts], dtype=np.float64)
-    myaw = np.array([m.yaw if m else np.nan for m in mounts], dtype=np.float64)
-    return mx, my, myaw, have

@@ -28,7 +28,6 @@ of :class:`Tolerances`); :func:`tolerances_toml` prints the documented defaults.
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
@@ -37,6 +36,8 @@ import numpy as np
 
 from formats.errors import ConfigError, FormatError, InputError
 from formats.options import doc_field
+from formats.tables import text_table
+from formats.toml_file import read_toml
 
 __all__ = [
     "GOLDEN_EVALUATION",
@@ -83,14 +84,7 @@ def load_tolerances(path: str | Path | None) -> Tolerances:
     if path is None:
         return Tolerances()
     p = Path(path)
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError as err:
-        raise ConfigError("tolerances file not found", p) from err
-    except (OSError, UnicodeDecodeError) as err:
-        raise ConfigError(f"cannot read tolerances: {err}", p) from err
-    except tomllib.TOMLDecodeError as err:
-        raise ConfigError(f"invalid TOML: {err}", p) from err
+    data = read_toml(p, "tolerances")
     known = {f.name: f for f in fields(Tolerances)}
     unknown = sorted(set(data) - set(known))
     if unknown:
@@ -160,12 +154,7 @@ class Regression:
              ("ok" if r.ok else "REGRESSED") + (f" ({r.detail})" if r.detail else ""))
             for r in rows
         ]
-        widths = [max(len(row[i]) for row in [head, *body]) for i in range(4)]
-        lines = [
-            "  ".join(c.ljust(w) for c, w in zip(row[:4], widths, strict=True)) + "  " + row[4]
-            for row in [head, *body]
-        ]
-        lines.insert(1, "  ".join("-" * w for w in widths) + "  " + "-" * 6)
+        lines = text_table(head, body, rule=True)
         lines += [f"note: {n}" for n in self.notes]
         return "\n".join(lines)
 

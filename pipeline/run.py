@@ -17,7 +17,7 @@ import logging
 import math
 import time
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -40,7 +40,6 @@ from pipeline.metrics import (
     StageTimer,
     map_cells,
     peak_rss_mb,
-    sha256_of,
 )
 from pipeline.pose_sync import (
     POSE_OK,
@@ -51,6 +50,7 @@ from pipeline.pose_sync import (
     sonar_geometry,
 )
 from pipeline.reading_quality import REASONS
+from pipeline.run_input import input_section, log_label, log_paths
 from pipeline.run_warnings import run_warnings
 from pipeline.scans import ScanBuilder, ScanKeys
 from pipeline.sensors import SensorTable, beam_problem, resolve_sensors
@@ -85,11 +85,10 @@ class StreamState:
 
 
 def run(
-    log_path: str | Path,
+    log_path: str | Path | Sequence[str | Path],
     out_dir: str | Path,
     config: Config,
     *,
-    format: str | None = None,
     force: bool = False,
     compare_correction: bool = False,
     progress: Progress | None = None,
@@ -97,22 +96,26 @@ def run(
 ) -> RunResult:
     """Map one log into ``out_dir``. Raises SonarmapError subclasses on bad input.
 
+    ``log_path`` is a log file or bag directory, or a sequence of the files of one
+    recording (split bags, separate sonar and odometry bags), read as one log.
+
     ``force`` replaces a previous sonarmap output only (never the input's directory, the
     working directory or the user's files: :class:`~formats.writers.atomic.OutputDir`).
     ``on_complete(tmp_dir, metrics)`` may add files after the outputs are written and
     before the directory is committed (a batch's resume marker)."""
     from formats.writers.atomic import OutputDir
 
-    log_path = Path(log_path)
+    paths = log_paths(log_path)
+    label = log_label(paths)
     if compare_correction and config.mapper.method == "classic":
         raise ConfigError(
             "--compare-correction needs features: mapper.method 'attribution' or 'andersone'"
         )
     timer = StageTimer()
     t_start = time.perf_counter()
-    with OutputDir(Path(out_dir), force=force, protect=(log_path,)) as out:
+    with OutputDir(Path(out_dir), force=force, protect=tuple(paths)) as out:
         with timer.stage("ingest"):
-            reader = open_log(log_path, format, config)
+            reader = open_log(paths, config)
         with reader:
             with timer.stage("ingest"):
                 found = None if progress is None else (lambda n: progress("reading", n, None))
@@ -129,7 +132,7 @@ def run(
             drawn = _drawn_trajectory(sv.track)
             log.info(
                 "%s: %d readings from %d sensors, %d poses; grid %dx%d at %.3f m",
-                log_path, sv.ranges.count, len(sv.sensor_names), len(sv.track),
+                label, sv.ranges.count, len(sv.sensor_names), len(sv.track),
                 grid.width, grid.height, grid.resolution,
             )
             mappers: dict[str, Mapper] = {"main": make_mapper(config.mapper, grid)}
@@ -152,15 +155,15 @@ def run(
             except InputError as err:
                 if err.path is not None:
                     raise
-                raise InputError(err.reason, log_path) from err
+                raise InputError(err.reason, label) from err
         with timer.stage("mapping"):
             snapshots = {k: m.snapshot() for k, m in mappers.items()}
         if progress is not None:
             progress("writing", 0, None)  # the outputs: no reading count to show
-        metrics = _metrics(log_path, info, sv, sensors, mappers, snapshots, state, config)
+        metrics = _metrics(paths, info, sv, sensors, mappers, snapshots, state, config)
         metrics.pose_refinement = refinement
         # A map of (almost) nothing is an error, not an empty result with exit 0.
-        check_mapped_share(log_path, metrics.counts, metrics.dropped, state.max_pose_gap_s,
+        check_mapped_share(label, metrics.counts, metrics.dropped, state.max_pose_gap_s,
                            state.median_pose_interval_s, config)
         _write_outputs(out, config, sv, drawn, snapshots, metrics, timer, t_start,
                        odometry=odometry)
@@ -384,7 +387,7 @@ def _sync(
 
 
 def _metrics(
-    log_path: Path,
+    paths: list[Path],
     info: LogInfo,
     sv: Survey,
     sensors: SensorTable,
@@ -421,20 +424,8 @@ def _metrics(
             for label, key in (("with_correction", "main"), ("without_correction", "no_correction"))
         }
     metrics = RunMetrics(
-        input={
-            "path": str(log_path),
-            "name": log_path.name,
-            "sha256": sha256_of(log_path),
-            "format": info.format,
-            "duration_s": info.duration_s,
-            "start_ns": sv.ranges.t_min,
-            "end_ns": sv.ranges.t_max,
-            "max_range_m": sv.ranges.max_range_m,
-            # A damaged log is mapped from its intact part; what was lost is recorded.
-            "bytes_lost": info.bytes_lost,
-            "messages_recovered": info.message_count if info.losses else None,
-            "losses": list(info.losses),
-        },
+        input=input_section(paths, info, sv.ranges.t_min, sv.ranges.t_max,
+                            sv.ranges.max_range_m),
         run={
             "tool_version": __version__,
             "method": config.mapper.method,

@@ -1,17 +1,8 @@
-"""Sensor resolution: each sonar's mount and beam limits, from config, the log or a preset.
+"""Sensor resolution: each sonar's mount and beam limits, from the configuration and the log.
 
-Precedence, per sensor name (decided here, documented in the README):
-
-1. an explicit ``[[sensors.mounts]]`` entry of the same name;
-2. the log's own static transforms (``/tf_static``: ``base_link → sonar frame``, or a CSV
-   ``sensors.csv``);
-3. the ``[sensors] preset`` entry of the same name;
-4. a sensor whose frame *is* the base frame sits at the robot origin, facing forward.
-
-Beam limits (fov, r_min, r_max): a non-zero value in the sensor's config/preset entry
-overrides the log (for sensors whose messages carry wrong metadata); otherwise the value
-each reading carries; where the reading has none (NaN, e.g. CSV without those columns) the
-``[sensors]`` defaults. A sensor with no mount, or no beam width anywhere, is an
+The precedence is the one of :mod:`formats.sensor_config` (the one reading of
+``[sensors]``, documented there and in the README); this module applies it to the sensors a
+log has and the static mounts it carries. A sensor with readings and no mount is an
 :class:`~formats.errors.InputError`: a map built with a guessed geometry would be wrong.
 """
 
@@ -27,8 +18,8 @@ import numpy.typing as npt
 from formats.arrays import F64
 from formats.contract import RangeBatch, SensorMount
 from formats.errors import InputError
-from formats.options import FOV_MAX_DEG, FOV_MIN_DEG, MountConfig
-from formats.presets import PRESETS
+from formats.options import FOV_MAX_DEG, FOV_MIN_DEG
+from formats.sensor_config import sensor_setup
 from pipeline.config import Config
 
 
@@ -89,10 +80,6 @@ def _pick(override: F64, logged: F64, default: float) -> F64:
     return np.where(np.isnan(out), default, out)
 
 
-def _nz(v: float, scale: float = 1.0) -> float:
-    return v * scale if v > 0 else math.nan
-
-
 def resolve_sensors(
     sensor_names: Sequence[str],
     log_mounts: Mapping[str, SensorMount],
@@ -102,10 +89,7 @@ def resolve_sensors(
 ) -> SensorTable:
     """Resolve mounts and limits for every sensor id. ``used`` marks sensors that have
     readings; only those must have a mount."""
-    explicit = {m.name: m for m in config.sensors.mounts}
-    preset: dict[str, MountConfig] = (
-        {m.name: m for m in PRESETS[config.sensors.preset]} if config.sensors.preset else {}
-    )
+    setup = sensor_setup(config.sensors)
     base = config.input.base_frame
     n = len(sensor_names)
     mx, my, myaw = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
@@ -113,13 +97,14 @@ def resolve_sensors(
     sources: list[str] = []
     missing: list[str] = []
     for i, name in enumerate(sensor_names):
-        entry = explicit.get(name) or preset.get(name)
-        if name in explicit:
-            m, src = _mount_of(explicit[name]), "config"
+        entry = setup.entry(name)
+        m: SensorMount | None
+        if name in setup.explicit:
+            m, src = setup.explicit[name].mount, "config"
         elif name in log_mounts:
             m, src = log_mounts[name], "log"
-        elif name in preset:
-            m, src = _mount_of(preset[name]), f"preset:{config.sensors.preset}"
+        elif name in setup.preset:
+            m, src = setup.preset[name].mount, f"preset:{setup.preset_name}"
         elif name == base or name.lstrip("/") == base:
             m, src = SensorMount(0.0, 0.0, 0.0), "base_frame"
         else:
@@ -129,9 +114,7 @@ def resolve_sensors(
         if m is not None:
             mx[i], my[i], myaw[i] = m.x, m.y, m.yaw
         if entry is not None:
-            fov_o[i] = _nz(entry.fov_deg, math.pi / 180)
-            min_o[i] = _nz(entry.min_range)
-            max_o[i] = _nz(entry.max_range)
+            fov_o[i], min_o[i], max_o[i] = entry.limits.as_tuple()
         sources.append(src)
     if missing:
         shown = ", ".join(missing[:6]) + (" ..." if len(missing) > 6 else "")
@@ -139,7 +122,6 @@ def resolve_sensors(
             f"no mount for range sensor(s) {shown}: the log has no base_link→sensor transform; "
             f"add [[sensors.mounts]] entries or a [sensors] preset to the config"
         )
-    sc = config.sensors
     return SensorTable(
         names=tuple(sensor_names),
         mount_x=mx,
@@ -149,11 +131,7 @@ def resolve_sensors(
         fov_override=fov_o,
         min_override=min_o,
         max_override=max_o,
-        default_fov=_nz(sc.fov_deg, math.pi / 180),
-        default_min=_nz(sc.min_range),
-        default_max=_nz(sc.max_range),
+        default_fov=setup.defaults.fov,
+        default_min=setup.defaults.min_range,
+        default_max=setup.defaults.max_range,
     )
-
-
-def _mount_of(m: MountConfig) -> SensorMount:
-    return SensorMount(m.x, m.y, math.radians(m.yaw_deg))

@@ -30,13 +30,12 @@ from dataclasses import asdict, dataclass
 from typing import Any, Literal
 
 import numpy as np
-import numpy.typing as npt
 
+from formats.angles import wrap_angle
+from formats.arrays import F64, I64
 from formats.errors import ConfigError, InputError
-from pipeline.pose_sync import POSE_OK, PoseTrack, interpolate_poses, wrap_angle
+from pipeline.pose_sync import POSE_OK, PoseTrack, interpolate_poses
 
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
 RpeUnit = Literal["m", "frames"]
 
 

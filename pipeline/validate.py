@@ -49,6 +49,7 @@ import numpy.typing as npt
 
 from formats.contract import Kind, LogReader, MountBatch, PoseBatch, RangeBatch, SensorMount
 from formats.natural_order import natural_key
+from formats.tables import text_table
 from pipeline.config import Config
 from pipeline.ingest import StampOrder
 from pipeline.mapped_share import MIN_MAPPED_FRACTION
@@ -176,7 +177,7 @@ class ValidationReport:
         """A plain-text report for the terminal: findings, then a per-sensor table."""
         out = [f"Log: {self.path} ({self.format})", ""]
         if self.findings:
-            out += _table(
+            out += text_table(
                 ["SEVERITY", "CODE", "SENSOR", "MESSAGE"],
                 [[f.severity, f.code, f.sensor or "-", f.message] for f in self.findings],
             )
@@ -185,7 +186,7 @@ class ValidationReport:
         out.append("")
         names = list(REASONS.values())
         if self.sensors:
-            out += _table(
+            out += text_table(
                 ["SENSOR", "READINGS", *(n.upper() for n in names), "OUTSIDE_POSES", "MOUNT"],
                 [
                     [
@@ -211,18 +212,6 @@ class ValidationReport:
         return "\n".join(out)
 
 
-def _table(head: list[str], rows: list[list[str]], right: range | None = None) -> list[str]:
-    widths = [max(len(r[i]) for r in [head, *rows]) for i in range(len(head))]
-    right_cols = set(right or ())
-
-    def line(cells: list[str]) -> str:
-        parts = [
-            c.rjust(w) if i in right_cols else c.ljust(w)
-            for i, (c, w) in enumerate(zip(cells, widths, strict=True))
-        ]
-        return "  ".join(parts).rstrip()
-
-    return [line(head), *(line(r) for r in rows)]
 
 
 # --------------------------------------------------------------------------- running state

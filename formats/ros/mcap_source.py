@@ -23,9 +23,15 @@ import numpy as np
 import numpy.typing as npt
 
 from formats.errors import FormatError
-from formats.ros.source import Connection, Encoding, FileSource, RawBatch, SourceAccessors
-
-MAGIC = b"\x89MCAP0\r\n"
+from formats.magic import MCAP_MAGIC
+from formats.ros.source import (
+    Connection,
+    Encoding,
+    FileSource,
+    RawBatch,
+    SourceAccessors,
+    normalize_msgtype,
+)
 
 OP_HEADER = 0x01
 OP_FOOTER = 0x02
@@ -43,14 +49,6 @@ _MESSAGE_HEAD = 22  # channel_id u16, sequence u32, log_time u64, publish_time u
 _FOOTER_LEN = _RECORD_HEAD + 20
 # Top-level messages outside chunks are grouped into blocks of about this many bytes.
 _LOOSE_BLOCK_BYTES = 4 << 20
-
-
-def normalize_msgtype(name: str) -> str:
-    """ROS 2 style type name: ``'sensor_msgs/Range'`` → ``'sensor_msgs/msg/Range'``."""
-    parts = name.split("/")
-    if len(parts) == 2 and all(parts):
-        return f"{parts[0]}/msg/{parts[1]}"
-    return name
 
 
 def encoding_of(message_encoding: str) -> Encoding:
@@ -188,7 +186,8 @@ def _decompress(compression: str, data: bytes | memoryview, size: int) -> bytes 
     if compression == "lz4":
         import lz4.frame
 
-        return lz4.frame.decompress(bytes(data))
+        out: bytes = lz4.frame.decompress(bytes(data))
+        return out
     raise NotImplementedError(compression)
 
 
@@ -249,6 +248,12 @@ class McapSource(FileSource, SourceAccessors):
         self._open_file()
         self._connections = self._make_connections()
 
+    @property
+    def message_indexed(self) -> bool:
+        """Every block has Message Index records (a finalised file): channels are read
+        through them, without walking the records of chunks that lack the channel."""
+        return all(b.msg_index for b in self._blocks)
+
     # -- MessageSource -------------------------------------------------------------------
 
     def raw_batches(self, connection_ids: Collection[int]) -> Iterator[RawBatch]:
@@ -273,31 +278,31 @@ class McapSource(FileSource, SourceAccessors):
     def _open(self) -> None:
         if self._size == 0:
             raise FormatError("empty file (0 bytes), not an MCAP file", self.path)
-        head = self._read_at(0, len(MAGIC) + _RECORD_HEAD)
-        if not head.startswith(MAGIC[:5]):
+        head = self._read_at(0, len(MCAP_MAGIC) + _RECORD_HEAD)
+        if not head.startswith(MCAP_MAGIC[:5]):
             raise FormatError("not an MCAP file (bad magic bytes)", self.path)
-        if not head.startswith(MAGIC):
+        if not head.startswith(MCAP_MAGIC):
             raise FormatError(f"unsupported MCAP version {head[5:6]!r}", self.path)
-        if len(head) < len(MAGIC) + _RECORD_HEAD or head[len(MAGIC)] != OP_HEADER:
+        if len(head) < len(MCAP_MAGIC) + _RECORD_HEAD or head[len(MCAP_MAGIC)] != OP_HEADER:
             raise FormatError("truncated or corrupt MCAP header", self.path)
-        if len(MAGIC) + _RECORD_HEAD + _length(head, len(MAGIC)) > self._size:
+        if len(MCAP_MAGIC) + _RECORD_HEAD + _length(head, len(MCAP_MAGIC)) > self._size:
             raise FormatError("truncated within the MCAP header record", self.path)
         if not self._read_summary():
-            if self._read_at(self._size - len(MAGIC), len(MAGIC)) != MAGIC:
+            if self._read_at(self._size - len(MCAP_MAGIC), len(MCAP_MAGIC)) != MCAP_MAGIC:
                 self._warn("no end magic (file truncated or not closed): read by linear scan")
             self._scan()
         self._blocks.sort(key=lambda b: (b.start_ns, b.record_offset))
 
     def _read_summary(self) -> bool:
         """Use the summary section when the file is complete and indexed; False if not."""
-        if self._size < len(MAGIC) * 2 + _FOOTER_LEN:
+        if self._size < len(MCAP_MAGIC) * 2 + _FOOTER_LEN:
             return False
-        tail = self._read_at(self._size - len(MAGIC) - _FOOTER_LEN, _FOOTER_LEN + len(MAGIC))
-        if tail[-len(MAGIC) :] != MAGIC or tail[0] != OP_FOOTER:
+        tail = self._read_at(self._size - len(MCAP_MAGIC) - _FOOTER_LEN, _FOOTER_LEN + len(MCAP_MAGIC))
+        if tail[-len(MCAP_MAGIC) :] != MCAP_MAGIC or tail[0] != OP_FOOTER:
             return False
         summary_start, _summary_offset = struct.unpack_from("<QQ", tail, _RECORD_HEAD)
-        footer_at = self._size - len(MAGIC) - _FOOTER_LEN
-        if summary_start == 0 or not len(MAGIC) <= summary_start <= footer_at:
+        footer_at = self._size - len(MCAP_MAGIC) - _FOOTER_LEN
+        if summary_start == 0 or not len(MCAP_MAGIC) <= summary_start <= footer_at:
             return False
         data = self._read_at(summary_start, footer_at - summary_start)
         chunk_indexes: list[_Block] = []
@@ -369,7 +374,7 @@ class McapSource(FileSource, SourceAccessors):
     def _scan(self) -> None:
         """Linear scan of the data section: schemas, channels, chunks, loose messages."""
         f = self._file
-        pos = len(MAGIC)
+        pos = len(MCAP_MAGIC)
         loose: _Block | None = None
         counts: dict[int, int] = {}
         times: list[int] = []
@@ -391,7 +396,7 @@ class McapSource(FileSource, SourceAccessors):
                     f" file ends first; {self._size - pos} bytes lost"
                 )
                 break
-            if op in (OP_DATA_END, OP_FOOTER) or (op == OP_HEADER and pos > len(MAGIC)):
+            if op in (OP_DATA_END, OP_FOOTER) or (op == OP_HEADER and pos > len(MCAP_MAGIC)):
                 break
             if op == OP_CHUNK:
                 loose = None

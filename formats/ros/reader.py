@@ -14,7 +14,6 @@ sensor geometry: their mounts and beam limits come from the configuration.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 
@@ -29,11 +28,12 @@ from formats.contract import (
     MountBatch,
     PoseBatch,
     RangeBatch,
+    SensorMount,
     TopicInfo,
     make_range_batch,
 )
 from formats.errors import ConfigError, FormatError, TopicError
-from formats.options import MountConfig, ReaderOptions, ReaderSettings
+from formats.options import ReaderOptions, ReaderSettings
 from formats.ros import tf as tflib
 from formats.ros.columns import (
     LASER_TYPES,
@@ -43,6 +43,7 @@ from formats.ros.columns import (
     SONARARRAY_TYPES,
     TF_TYPES,
     Columns,
+    LaserScanColumns,
     PointColumns,
     PoseColumns,
     RangeColumns,
@@ -51,6 +52,7 @@ from formats.ros.columns import (
 )
 from formats.ros.decode import decode
 from formats.ros.source import Connection, MessageSource, RawBatch
+from formats.sensor_config import SensorRing, sensor_setup
 
 RING_TYPES = POINTCLOUD_TYPES | SONARARRAY_TYPES
 RANGE_SOURCE_TYPES = RANGE_TYPES | RING_TYPES
@@ -78,19 +80,6 @@ class _Selection:
     @property
     def pose_topic(self) -> str | None:
         return self.pose_topics[0] if self.pose_topics else None
-
-
-@dataclass
-class _Ring:
-    """Geometry of a sonar ring from the configuration, one entry per sonar (m, rad)."""
-
-    names: list[str]
-    x: npt.NDArray[np.float64]
-    y: npt.NDArray[np.float64]
-    fov: npt.NDArray[np.float64]
-    rmin: npt.NDArray[np.float64]
-    rmax: npt.NDArray[np.float64]
-    origin: str  # where the mounts came from, for messages
 
 
 @dataclass
@@ -165,6 +154,7 @@ class RosLogReader:
             )
         notes += self._range_notes()
         notes += [w for w in self.source.warnings if w not in notes]
+        notes += getattr(self.source, "notes", [])  # several files: duplicates read once
         return LogInfo(
             path=str(self.path),
             format=self.format_name,
@@ -177,6 +167,8 @@ class RosLogReader:
             notes=notes,
             losses=list(self.source.warnings),
             bytes_lost=self.source.bytes_lost,
+            files=list(getattr(self.source, "files", [])),
+            duplicates_read_once=getattr(self.source, "duplicates_read_once", 0),
         )
 
     def batches(self, kinds: Sequence[Kind] = ALL_KINDS) -> Iterator[Batch]:
@@ -193,7 +185,7 @@ class RosLogReader:
             raise TopicError(sel.range_error.reason, self.path)
         if "poses" in want and sel.pose_error is not None:
             raise TopicError(sel.pose_error.reason, self.path)
-        rings: dict[str, _Ring] = {}
+        rings: dict[str, SensorRing] = {}
         if "ranges" in want:
             for topic in sel.range_topics:
                 msgtype = self._topics[topic][0].msgtype
@@ -220,6 +212,58 @@ class RosLogReader:
             group.append(raw)
         if group:
             yield from self._convert_group(group, rings, state)
+
+    # ------------------------------------------------------------------ laser scans
+
+    def laser_topic(self, requested: str | None = None) -> str:
+        """The sensor_msgs/LaserScan topic: ``requested``, else the log's only one."""
+        conns = self._connections
+        lasers = sorted({c.topic for c in conns if c.msgtype in LASER_TYPES})
+        listing = ", ".join(sorted({f"{c.topic}:{c.msgtype}" for c in conns})) or "nothing"
+        if requested:
+            if requested not in lasers:
+                raise TopicError(
+                    f"laser topic {requested} is not a sensor_msgs/LaserScan topic of the "
+                    f"log; the log contains: {listing}",
+                    self.path,
+                )
+            return requested
+        if len(lasers) == 1:
+            return lasers[0]
+        if not lasers:
+            raise TopicError(
+                f"no sensor_msgs/LaserScan topic; the log contains: {listing}", self.path
+            )
+        raise TopicError(
+            f"several LaserScan topics ({', '.join(lasers)}): choose one with --laser-topic",
+            self.path,
+        )
+
+    def laser_columns(self, topic: str, max_scans: int | None = None) -> list[LaserScanColumns]:
+        """The decoded messages of a LaserScan topic, in log order; reading stops once
+        ``max_scans`` messages are in."""
+        parts: list[LaserScanColumns] = []
+        count = 0
+        gen = self.source.raw_batches([c.id for c in self._topics.get(topic, [])])
+        try:
+            for raw in gen:
+                cols = self._decode(raw)
+                assert isinstance(cols, LaserScanColumns)
+                parts.append(cols)
+                count += cols.stamp_ns.shape[0]
+                if max_scans is not None and count >= max_scans:
+                    break
+        finally:
+            close = getattr(gen, "close", None)
+            if close is not None:
+                close()
+        return parts
+
+    def static_mount(self, frame: str) -> SensorMount | None:
+        """The static transform base frame → ``frame`` from tf, None when there is none."""
+        self._prepass(need_frames=False)
+        assert self._links is not None
+        return tflib.static_mount(self._links, self.config.input.base_frame, frame.lstrip("/"))
 
     # ------------------------------------------------------------------ selection
 
@@ -330,41 +374,21 @@ class RosLogReader:
             self.sensor_names.append(name)
         return sid
 
-    def _ring(self, topic: str, msgtype: str) -> _Ring:
-        """Mount geometry of a PointCloud/SonarArray ring: [[sensors.mounts]] or preset."""
-        sc = self.config.sensors
-        mounts: tuple[MountConfig, ...] = sc.mounts
-        origin = "sensors.mounts"
-        if not mounts and sc.preset:
-            from formats.presets import PRESETS
-
-            mounts, origin = PRESETS[sc.preset], f"preset '{sc.preset}'"
-        if not mounts:
+    def _ring(self, topic: str, msgtype: str) -> SensorRing:
+        """Mount geometry of a PointCloud/SonarArray ring (see :mod:`formats.sensor_config`)."""
+        ring = sensor_setup(self.config.sensors).ring()
+        if ring is None:
             raise ConfigError(
                 f"topic {topic} is {msgtype}, which carries no sensor geometry: set "
                 "sensors.preset (e.g. 'pioneer-p3dx') or [[sensors.mounts]] (in ring order)",
                 self.path,
             )
-
-        def limit(own: float, default: float, scale: float = 1.0) -> float:
-            v = own if own > 0 else default
-            return v * scale if v > 0 else math.nan
-
-        deg = math.pi / 180.0
-        return _Ring(
-            names=[m.name for m in mounts],
-            x=np.array([m.x for m in mounts], np.float64),
-            y=np.array([m.y for m in mounts], np.float64),
-            fov=np.array([limit(m.fov_deg, sc.fov_deg, deg) for m in mounts], np.float64),
-            rmin=np.array([limit(m.min_range, sc.min_range) for m in mounts], np.float64),
-            rmax=np.array([limit(m.max_range, sc.max_range) for m in mounts], np.float64),
-            origin=origin,
-        )
+        return ring
 
     # ------------------------------------------------------------------ streaming
 
     def _convert_group(
-        self, group: list[RawBatch], rings: dict[str, _Ring], state: _PassState
+        self, group: list[RawBatch], rings: dict[str, SensorRing], state: _PassState
     ) -> Iterator[Batch]:
         ranges: list[RangeBatch] = []
         poses: dict[tuple[str, str], list[PoseBatch]] = {}
@@ -409,7 +433,7 @@ class RosLogReader:
     def _ring_batch(
         self,
         raw: RawBatch,
-        ring: _Ring,
+        ring: SensorRing,
         msg_index: npt.NDArray[np.int64],
         sonar: npt.NDArray[np.int64],
         stamp: npt.NDArray[np.int64],
@@ -428,15 +452,15 @@ class RosLogReader:
             lut[sonar],
             range_m,
             ring.fov[sonar],
-            ring.rmin[sonar],
-            ring.rmax[sonar],
+            ring.min_range[sonar],
+            ring.max_range[sonar],
             # One message carries a whole ring: it is one scan.
             scan_id=state.scan_counter + msg_index,
             record_t_ns=raw.log_time_ns[msg_index],
         )
 
     def _pointcloud_batch(
-        self, raw: RawBatch, cols: PointColumns, ring: _Ring, state: _PassState
+        self, raw: RawBatch, cols: PointColumns, ring: SensorRing, state: _PassState
     ) -> RangeBatch:
         """Point i of a message is sonar i; range = distance from its mount to the point."""
         per = cols.points_per_message
@@ -455,7 +479,7 @@ class RosLogReader:
         return batch
 
     def _sonararray_batch(
-        self, raw: RawBatch, cols: SonarArrayColumns, ring: _Ring, state: _PassState
+        self, raw: RawBatch, cols: SonarArrayColumns, ring: SensorRing, state: _PassState
     ) -> RangeBatch:
         """ranges[i] is sonar i; a value equal to the previous value of the same sonar is
         a republished stale reading (p2os), not a new measurement: dropped."""

@@ -29,13 +29,13 @@ import numpy as np
 import numpy.typing as npt
 
 from formats.errors import FormatError
+from formats.magic import ROS1_MAGIC
 from formats.options import ReaderOptions, ReaderSettings
-from formats.ros.source import Connection, FileSource, RawBatch
+from formats.ros.source import Connection, FileSource, RawBatch, normalize_msgtype
 
 if TYPE_CHECKING:
     from formats.ros.reader import RosLogReader
 
-MAGIC = b"#ROSBAG V2.0\n"
 
 OP_MSGDATA = 0x02
 OP_BAGHEADER = 0x03
@@ -87,14 +87,6 @@ class _ScanResult:
     chunks: list[_Chunk] = field(default_factory=list)
     end: int = 0  # end of the last intact record
     salvaged: int = 0  # messages recovered from a chunk cut off by the end of the file
-
-
-def normalize_msgtype(name: str) -> str:
-    """'sensor_msgs/Range' → 'sensor_msgs/msg/Range' (ROS 2 style); others unchanged."""
-    parts = name.split("/")
-    if len(parts) == 2 and parts[0] and parts[1]:
-        return f"{parts[0]}/msg/{parts[1]}"
-    return name
 
 
 def parse_header(data: bytes | memoryview) -> dict[str, bytes]:
@@ -206,8 +198,8 @@ class Ros1BagSource(FileSource):
     def _open(self) -> None:
         if self._size == 0:
             raise FormatError("empty file (0 bytes), not a ROS 1 bag", self.path)
-        head = self._read_at(0, len(MAGIC))
-        if head != MAGIC:
+        head = self._read_at(0, len(ROS1_MAGIC))
+        if head != ROS1_MAGIC:
             if head.startswith(b"#ROSBAG V"):
                 version = head[9:].split(b"\n")[0].decode("ascii", "replace")
                 raise FormatError(
@@ -215,7 +207,7 @@ class Ros1BagSource(FileSource):
                 )
             raise FormatError("not a ROS 1 bag (no '#ROSBAG V2.0' magic line)", self.path)
         try:
-            header, _data, end = self._record_at(len(MAGIC))
+            header, _data, end = self._record_at(len(ROS1_MAGIC))
             if _op(header) != OP_BAGHEADER:
                 raise _Corrupt("first record is not the bag header")
             index_pos = _u64(header, "index_pos")

@@ -26,8 +26,8 @@ import numpy as np
 import yaml
 
 from formats.errors import FormatError
-from formats.ros.mcap_source import McapSource, normalize_msgtype
-from formats.ros.source import Connection, Encoding, RawBatch, SourceAccessors
+from formats.ros.mcap_source import McapSource
+from formats.ros.source import Connection, Encoding, RawBatch, SourceAccessors, normalize_msgtype
 
 _STORAGE_SUFFIXES = {".db3": "sqlite3", ".mcap": "mcap"}
 # Rows fetched from sqlite per batch: bounded memory whatever the bag size.

@@ -64,6 +64,15 @@ class RawBatch:
         return self.buffer[o : o + int(self.lengths[i])].tobytes()
 
 
+def normalize_msgtype(name: str) -> str:
+    """ROS 2 style type name: ``'sensor_msgs/Range'`` → ``'sensor_msgs/msg/Range'``;
+    anything else unchanged."""
+    parts = name.split("/")
+    if len(parts) == 2 and all(parts):
+        return f"{parts[0]}/msg/{parts[1]}"
+    return name
+
+
 class SourceAccessors:
     """The MessageSource accessors, over the state a source fills in while opening:
     ``_connections`` (by id, in id order), ``_start``/``_end`` (log time, ns) and

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from formats.angles import wrap_angle
 from formats.arrays import F64, I64
 from formats.contract import PoseBatch, SensorMount
 from formats.ros.columns import TransformColumns
@@ -42,11 +43,6 @@ class Link:
 def yaw_from_quaternion(qx: F64, qy: F64, qz: F64, qw: F64) -> F64:
     """Yaw (rad) of quaternions: atan2(2(wz + xy), 1 − 2(y² + z²))."""
     return np.arctan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
-
-
-def wrap_angle(a: F64) -> F64:
-    """Angles wrapped to [−π, π) (rad)."""
-    return (np.asarray(a, np.float64) + np.pi) % (2.0 * np.pi) - np.pi
 
 
 def compose(a: Pose2, b: Pose2) -> Pose2:

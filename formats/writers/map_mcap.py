@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from formats.arrays import F64
 from formats.map_types import FeatureTable, GridSpec
 from formats.writers.atomic import atomic_open
 from formats.writers.cdr_sequence import sequence_cdr
@@ -89,8 +90,6 @@ _RAMP = np.array(
         [0.993, 0.906, 0.144],
     ]
 )
-
-F64 = npt.NDArray[np.float64]
 
 
 @cache

@@ -80,7 +80,8 @@ def _reduce_max(prob: npt.NDArray[np.float32], block: int) -> npt.NDArray[np.flo
     padded[:h, :w] = prob
     blocks = padded.reshape(hp // block, block, wp // block, block)
     # fmax-reduce instead of nanmax: no "All-NaN slice" warnings, NaN only if all NaN.
-    return np.fmax.reduce(np.fmax.reduce(blocks, axis=3), axis=1)
+    reduced: npt.NDArray[np.float32] = np.fmax.reduce(np.fmax.reduce(blocks, axis=3), axis=1)
+    return reduced
 
 
 def _grey_rgb(prob: npt.NDArray[np.float32]) -> npt.NDArray[np.uint8]:

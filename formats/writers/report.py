@@ -26,6 +26,7 @@ from typing import Any
 
 from formats.errors import OutputError
 from formats.map_types import FeatureTable
+from formats.tables import markdown_table
 from formats.writers.atomic import atomic_write_text
 from formats.writers.report_charts import sigma_histogram, svg_hbars, svg_histogram
 from formats.writers.report_text import (
@@ -175,20 +176,6 @@ def _html_warnings(summary: Summary) -> str:
     return f'<div class="warnings"><strong>Warnings</strong><ul>{items}</ul></div>'
 
 
-# -- Markdown ----------------------------------------------------------------------------
-
-
-def _md_cell(text: str) -> str:
-    return text.replace("\\", "\\\\").replace("|", "\\|").replace("\n", " ")
-
-
-def _md_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
-    lines = ["| " + " | ".join(_md_cell(h) for h in header) + " |"]
-    lines.append("|" + "|".join(" --- " for _ in header) + "|")
-    lines += ["| " + " | ".join(_md_cell(c) for c in r) + " |" for r in rows]
-    return lines
-
-
 # -- the documents -----------------------------------------------------------------------
 
 
@@ -299,7 +286,7 @@ def write_reports(
 
     # ---- Markdown
     m: list[str] = [f"# {title}", "", "## Summary", ""]
-    m += _md_table(["", ""], summary.rows)
+    m += markdown_table(["", ""], summary.rows)
     m.append("")
     if summary.warnings:
         m += ["**Warnings**", ""] + [f"- {w}" for w in summary.warnings]
@@ -315,28 +302,28 @@ def write_reports(
                            for cap, img in images.items()), ""]
         if differences:
             m += ["Differences:", ""] + [f"- {d}" for d in differences] + [""]
-        m += _md_table(["", *comp_cols], comp_rows)
+        m += markdown_table(["", *comp_cols], comp_rows)
     if ev is not None:
         scalars, tables, notes = ev
         m += ["", "## Evaluation", ""]
-        m += _md_table(["", "value"], scalars)
+        m += markdown_table(["", "value"], scalars)
         for sub, header, rows in tables:
-            m += ["", f"### {sub}", "", *_md_table(header, rows)]
+            m += ["", f"### {sub}", "", *markdown_table(header, rows)]
         if notes:
             m += [""] + [f"- {n}" for n in notes]
     m += ["", "## Feature uncertainty", "", f"{len(features):,} features by σ_major.", ""]
-    m += _md_table(["σ_major (m)", "features"], hist_rows) if hist_rows else ["_no features_"]
+    m += markdown_table(["σ_major (m)", "features"], hist_rows) if hist_rows else ["_no features_"]
     m += ["", "## Readings per sensor", ""]
-    m += (_md_table(["sensor", "readings"], [[k, f"{v:,}"] for k, v in per_sensor])
+    m += (markdown_table(["sensor", "readings"], [[k, f"{v:,}"] for k, v in per_sensor])
           if per_sensor else ["_none_"])
     m += ["", "## Dropped readings by reason", ""]
-    m += (_md_table(["reason", "readings"], [[k, f"{v:,}"] for k, v in drops_labelled])
+    m += (markdown_table(["reason", "readings"], [[k, f"{v:,}"] for k, v in drops_labelled])
           if drops else ["No reading was dropped."])
     m += ["", "## Details"]
     for sec, sec_rows in details:
-        m += ["", f"### {sec}", "", *_md_table(["", ""], sec_rows)]
+        m += ["", f"### {sec}", "", *markdown_table(["", ""], sec_rows)]
     if sensors:
-        m += ["", "### Sensors", "", *_md_table(sensor_header, sensors)]
+        m += ["", "### Sensors", "", *markdown_table(sensor_header, sensors)]
     m += ["", f"_{timing_note}_", ""]
 
     atomic_write_text(out_dir / "report.html", "\n".join(h))

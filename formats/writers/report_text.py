@@ -126,6 +126,9 @@ def format_value(key: str, value: Any) -> str:
         return format_number(float(value))
     if isinstance(value, Sequence):
         return ", ".join(format_value("", v) for v in value)
+    if isinstance(value, Mapping):  # an entry of a list (a file of the input)
+        return "(" + ", ".join(f"{label(str(k))} {format_value(str(k), v)}"
+                               for k, v in value.items()) + ")"
     return str(value)
 
 
@@ -160,6 +163,14 @@ def _quality(evaluation: Mapping[str, Any]) -> str | None:
     return f"{text} against {truth}" if truth else text
 
 
+def _file_text(f: Mapping[str, Any]) -> str:
+    """One file of a recording: ``a.bag (2023-11-14 22:13:20.000 UTC to …, 5,001 messages)``."""
+    start, end = f.get("start_ns"), f.get("end_ns")
+    span = (f"{format_stamp(start)} to {format_stamp(end)}, "
+            if isinstance(start, int) and isinstance(end, int) else "")
+    return f"{f.get('name', f.get('path', ''))} ({span}{int(f.get('messages', 0)):,} messages)"
+
+
 def summarise(metrics: Mapping[str, Any], evaluation: Mapping[str, Any] | None = None) -> Summary:
     """The summary block of a run's metrics (metrics.json without timing)."""
     inp = metrics.get("input", {})
@@ -171,6 +182,9 @@ def summarise(metrics: Mapping[str, Any], evaluation: Mapping[str, Any] | None =
     rows: list[tuple[str, str]] = []
     fmt = f" ({inp['format']})" if inp.get("format") else ""
     rows.append(("Log", f"{name}{fmt}"))
+    files = inp.get("files")
+    if isinstance(files, Sequence) and files:  # one recording in several files
+        rows.append(("Files", "; ".join(_file_text(f) for f in files if isinstance(f, Mapping))))
     if "duration_s" in inp:
         span = format_duration(float(inp["duration_s"]))
         if isinstance(inp.get("start_ns"), int):

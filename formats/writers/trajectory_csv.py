@@ -16,11 +16,9 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from formats.arrays import F64, I64
 from formats.errors import FormatError, InputError
 from formats.writers.atomic import atomic_write_text
-
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
 
 COLUMNS = ("t", "x", "y", "yaw")
 

@@ -24,13 +24,12 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from formats.arrays import F64, I64
 from formats.errors import FormatError, InputError
 from formats.writers.atomic import atomic_open
 
 __all__ = ["Trajectory", "read_trajectory_tum", "write_trajectory_tum"]
 
-I64 = npt.NDArray[np.int64]
-F64 = npt.NDArray[np.float64]
 
 _BLOCK = 50_000  # poses formatted at a time (hours of odometry stay small in memory)
 _NS = 1_000_000_000

@@ -6,7 +6,8 @@ or :class:`ClassicMapper` by ``config.method``; all follow the :class:`Mapper` p
 Module map: ``attribution`` (§9) with ``cone_kernels`` (its compiled cone loops),
 ``reading_features`` (eqs. 1-4), ``feature_set`` (eqs. 5-8 + spatial index),
 ``free_space`` (§3), ``correction`` (§4), ``occupancy`` (§5), ``grid_raster`` (shapes →
-cells), ``andersone`` / ``classic`` (the mappers); ``kernels`` (the compiled per-scan loops, numba,
+cells), ``andersone`` / ``classic`` (the mappers), ``scan_group`` (groups of scans joined
+and classified once for the compiled mappers); ``kernels`` (the compiled per-scan loops, numba,
 compared with the numpy modules above, which stay as the readable reference), and
 ``feature_store`` (the feature set the kernels work on).
 """

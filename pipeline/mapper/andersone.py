@@ -13,7 +13,7 @@ run per scan in machine code), and the numpy reference (``reference=True``:
 :mod:`~pipeline.mapper.feature_set`, :mod:`~pipeline.mapper.free_space`,
 :mod:`~pipeline.mapper.correction`), which states the method readably. Both prepare what
 does not depend on the map state (reading classes, reading features, cone geometry) with
-numpy, for up to ``_GROUP`` scans at once.
+numpy, for groups of scans at once (:mod:`~pipeline.mapper.scan_group`).
 
 The particle generator is ``np.random.Generator(np.random.PCG64(config.seed))``, drawn from
 in scan order (the kernels draw from the same generator with numpy's algorithms), so the
@@ -23,7 +23,6 @@ same scans and configuration give the same state, bit for bit.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import fields
 
 import numpy as np
 
@@ -31,38 +30,17 @@ from pipeline.config import MapperConfig
 from pipeline.mapper.correction import correct_features
 from pipeline.mapper.feature_set import FeatureSet
 from pipeline.mapper.feature_store import FeatureStore
-from pipeline.mapper.free_space import cone_table, free_radius, free_space_scans
+from pipeline.mapper.free_space import free_space_scans
 from pipeline.mapper.kernels import andersone_scans
 from pipeline.mapper.kernels.ellipse import occupied_cells
 from pipeline.mapper.occupancy import FreeLayer, final_probability, occupied_layer
-from pipeline.mapper.reading_features import (
-    ReadingFeatures,
-    classify_scan,
-    count_readings,
-    reading_features,
-)
+from pipeline.mapper.reading_features import ReadingFeatures, reading_features
+from pipeline.mapper.scan_group import ScanGroup, scan_groups
 from pipeline.mapper.types import I64, B, FeatureTable, GridSpec, MapperCounters, MapSnapshot, Scan
-
-# Scans whose stateless work (classification, reading features, cone geometry) is done in
-# one vectorised pass: enough to amortise the numpy call overhead, small enough to keep
-# the pass's temporaries small (measured: 64 is as fast as 256, whose one-hour run peaked
-# 25 MB higher with the numpy reference).
-_GROUP = 64
 
 # The kernels' counters array, in its order (kernels.correction.CREATED..CELLS_FREED).
 _KERNEL_COUNTERS = ("features_created", "features_merged", "features_corrected",
                     "features_deleted", "features_protected", "features_split", "cells_freed")
-
-
-def concat_scans(scans: Sequence[Scan]) -> tuple[Scan, I64]:
-    """The scans' readings as one Scan, and the row bounds: scan k is ``b[k]:b[k + 1]``."""
-    sizes = [len(s) for s in scans]
-    bounds = np.zeros(len(scans) + 1, dtype=np.int64)
-    np.cumsum(sizes, out=bounds[1:])
-    if len(scans) == 1:
-        return scans[0], bounds
-    cat = Scan(*(np.concatenate([getattr(s, f.name) for s in scans]) for f in fields(Scan)))
-    return cat, bounds
 
 
 class AndersoneMapper:
@@ -94,29 +72,25 @@ class AndersoneMapper:
 
     def integrate_many(self, scans: Sequence[Scan]) -> None:
         """Add scans in order; the same state as :meth:`integrate` on each, bit for bit."""
-        for g in range(0, len(scans), _GROUP):
-            group = scans[g : g + _GROUP]
-            if group:
-                self._integrate_group(group)
+        for group in scan_groups(scans, self.config):
+            self.integrate_group(group)
 
-    def _integrate_group(self, scans: Sequence[Scan]) -> None:
-        cat, bounds = concat_scans(scans)
-        codes = classify_scan(cat, self.config)
-        count_readings(codes, self.counters)
-        self.counters.scans += len(scans) - 1  # count_readings counted one scan
+    def integrate_group(self, group: ScanGroup) -> None:
+        """Add a prepared group of scans in order (:mod:`~pipeline.mapper.scan_group`)."""
+        group.count(self.counters)
+        cat, bounds, codes = group.cat, group.bounds, group.codes
         feats = reading_features(cat, codes, self.config)
         fcut = np.searchsorted(feats.row, bounds)
         if self.reference:
             self._reference_group(cat, bounds, codes, feats, fcut)
         else:
-            self._kernel_group(cat, bounds, codes, feats, fcut)
+            self._kernel_group(group, feats, fcut)
 
-    def _kernel_group(self, cat: Scan, bounds: I64, codes: np.ndarray, feats: ReadingFeatures,
-                      fcut: I64) -> None:
+    def _kernel_group(self, group: ScanGroup, feats: ReadingFeatures, fcut: I64) -> None:
         cfg, g = self.config, self.grid
         assert isinstance(self.features, FeatureStore)
-        rows, cones, up_down = cone_table(cat, free_radius(cat, codes, cfg))
-        ccut = np.searchsorted(rows, bounds)
+        rows, cones, up_down = group.free_cones
+        ccut = np.searchsorted(rows, group.bounds)
         self.features.reserve(len(feats))
         counts = np.zeros(len(_KERNEL_COUNTERS), dtype=np.int64)
         andersone_scans.integrate_scans(

@@ -20,8 +20,13 @@ cell than a sparse one), so no threshold is tuned to one log's reading density. 
 occupied take the free layer's probability from their free count (eq. 11 per reading, with
 its clamps); cells with no free observation are unknown.
 
-Memory is the three float32 evidence grids and the paper's feature set: nothing grows with
-the log's length (the pipeline streams the log once per pass).
+Pass 0 shares each group of scans' classification and free cones with the paper's mapper
+(:mod:`~pipeline.mapper.scan_group`) and counts cones and arcs per row span, not per cell
+(row difference grids, summed once when pass 1 begins).
+
+Memory is the three float32 evidence grids (and pass 0's two int32 difference grids) and
+the paper's feature set: nothing grows with the log's length (the pipeline streams the
+log once per pass).
 """
 
 from __future__ import annotations
@@ -32,14 +37,23 @@ import numpy as np
 
 from pipeline import reading_quality as rq
 from pipeline.config import MapperConfig
-from pipeline.mapper.andersone import AndersoneMapper, concat_scans
-from pipeline.mapper.cone_kernels import attribute_echoes, count_arcs, count_free, empty_grid
-from pipeline.mapper.free_space import free_radius
+from pipeline.mapper.andersone import AndersoneMapper
+from pipeline.mapper.cone_kernels import (
+    attribute_echoes,
+    count_arcs,
+    count_free,
+    empty_grid,
+    empty_span_counts,
+    span_counts,
+)
+from pipeline.mapper.free_space import cone_table
 from pipeline.mapper.occupancy import logit
-from pipeline.mapper.reading_features import classify_scan, distance_sigma
+from pipeline.mapper.reading_features import distance_sigma
+from pipeline.mapper.scan_group import ScanGroup, scan_groups
 from pipeline.mapper.types import (
     F32,
     F64,
+    I32,
     B,
     FeatureTable,
     GridSpec,
@@ -62,13 +76,26 @@ class AttributionMapper:
         self.free: F32 = empty_grid(grid.shape)
         self.arcs: F32 = empty_grid(grid.shape)
         self.hits: F32 = empty_grid(grid.shape)
+        # Pass 0 counts spans in row difference grids; begin_pass(1) sums them into
+        # ``free`` and ``arcs``.
+        self._free_diff: I32 | None = empty_span_counts(grid.shape)
+        self._arc_diff: I32 | None = empty_span_counts(grid.shape)
         self.pass_index = 0
 
     def begin_pass(self, index: int) -> None:
         """Start pass ``index`` (0: evidence, 1: attribution) over the same scans."""
         if index not in (0, 1):
             raise ValueError(f"the attribution method has passes 0 and 1, not {index}")
+        if index == 1:
+            self._settle_counts()
         self.pass_index = index
+
+    def _settle_counts(self) -> None:
+        """Add pass 0's span counts to ``free`` and ``arcs`` (once)."""
+        if self._free_diff is not None and self._arc_diff is not None:
+            self.free += span_counts(self._free_diff)
+            self.arcs += span_counts(self._arc_diff)
+            self._free_diff = self._arc_diff = None
 
     def integrate(self, scan: Scan) -> None:
         """Add one scan to the current pass."""
@@ -76,33 +103,35 @@ class AttributionMapper:
 
     def integrate_many(self, scans: Sequence[Scan]) -> None:
         """Add scans in order to the current pass."""
-        if not scans:
-            return
+        for group in scan_groups(scans, self.config):
+            self._integrate_group(group)
+
+    def _integrate_group(self, group: ScanGroup) -> None:
+        g, cfg = self.grid, self.config
         if self.pass_index == 0:
-            self.paper.integrate_many(scans)
-        cat, _ = concat_scans(scans)
-        codes = classify_scan(cat, self.config)
-        echo = codes == rq.OK
-        d: F64 = np.where(echo, cat.range_m, 0.0)
-        band = np.maximum(
-            self.config.attr_band_sigmas * distance_sigma(d, self.config),
-            0.5 * self.grid.resolution,
-        )
-        g = self.grid
-        geometry = (cat.origin_x, cat.origin_y, cat.alpha, 0.5 * cat.fov)
+            # The paper's mapper and the free counts share the group's classes and cones.
+            self.paper.integrate_group(group)
+            _, cones, up_down = group.free_cones
+            assert self._free_diff is not None
+            count_free(cones, up_down, g.origin_x, g.origin_y, g.resolution, self._free_diff)
+        cat = group.cat
+        d: F64 = np.where(group.codes == rq.OK, cat.range_m, 0.0)
+        band = np.maximum(cfg.attr_band_sigmas * distance_sigma(d, cfg), 0.5 * g.resolution)
+        rows, arcs, up_down = cone_table(cat, np.where(d > 0.0, d + band, 0.0))
+        r_inner = np.maximum(d - band, 0.0)[rows]
         if self.pass_index == 0:
-            radius = free_radius(cat, codes, self.config)
-            count_free(*geometry, radius, g.origin_x, g.origin_y, g.resolution, self.free)
-            count_arcs(*geometry, d, band, g.origin_x, g.origin_y, g.resolution, self.arcs)
+            assert self._arc_diff is not None
+            count_arcs(arcs, up_down, r_inner, g.origin_x, g.origin_y, g.resolution,
+                       self._arc_diff)
         else:
             self.counters.echoes_unattributed += int(attribute_echoes(
-                *geometry, d, band, g.origin_x, g.origin_y, g.resolution, self.free,
-                self.arcs, self.config.attr_candidate_ratio, self.config.attr_dilution,
-                self.hits,
+                arcs, up_down, r_inner, g.origin_x, g.origin_y, g.resolution, self.free,
+                self.arcs, cfg.attr_candidate_ratio, cfg.attr_dilution, self.hits,
             ))
 
     def occupied(self) -> B:
         """Cells whose attributed echo weight beats their free count (the linear test)."""
+        self._settle_counts()
         hits = self.hits
         positive = hits[hits > 0]
         scale = float(np.median(positive)) if positive.size else 0.0

@@ -25,17 +25,14 @@ import numpy as np
 
 from pipeline import reading_quality as rq
 from pipeline.config import MapperConfig
-from pipeline.mapper.andersone import concat_scans
 from pipeline.mapper.feature_set import empty_table
 from pipeline.mapper.free_space import cone_spans, cone_table, free_radius
 from pipeline.mapper.grid_raster import span_cells
 from pipeline.mapper.kernels.classic_scans import classic_scans
 from pipeline.mapper.occupancy import logit
 from pipeline.mapper.reading_features import classify_scan, count_readings
+from pipeline.mapper.scan_group import ScanGroup, scan_groups
 from pipeline.mapper.types import F32, B, FeatureTable, GridSpec, MapperCounters, MapSnapshot, Scan
-
-# Scans whose classification and cone geometry numpy prepares at once for the kernel.
-_GROUP = 64
 
 
 class ClassicMapper:
@@ -74,17 +71,13 @@ class ClassicMapper:
                 else:
                     self._integrate_reference(scan)
             return
-        for g in range(0, len(scans), _GROUP):
-            group = scans[g : g + _GROUP]
-            if group:
-                self._integrate_group(group)
+        for group in scan_groups(scans, self.config):
+            self._integrate_group(group)
 
-    def _integrate_group(self, scans: Sequence[Scan]) -> None:
+    def _integrate_group(self, group: ScanGroup) -> None:
         """The kernel over a group: classification and cone geometry by numpy for the group."""
-        cat, bounds = concat_scans(scans)
-        codes = classify_scan(cat, self.config)
-        count_readings(codes, self.counters)
-        self.counters.scans += len(scans) - 1  # count_readings counted one scan
+        group.count(self.counters)
+        cat, bounds, codes = group.cat, group.bounds, group.codes
         half_w = 0.5 * self.thickness
         outer = free_radius(cat, codes, self.config, margin=np.full(len(cat), -half_w))
         rows, cones, up_down = cone_table(cat, outer)

@@ -1,14 +1,14 @@
-"""Compiled per-reading loops over the cells of sonar cones and echo arcs (numba).
+"""Compiled per-reading loops of the attribution method (§9) over sonar cones and echo arcs.
 
-A reading's cone is the sector of half-angle ``hf`` around the beam axis ``alpha`` from the
-sonar origin; a cell belongs to a shape when its *centre* does (the GridSpec convention of
-:mod:`pipeline.mapper.grid_raster`): bearing test ``dot(p, axis) ≥ |p|·cos(hf)`` (half-angles
-are clamped just below 90°), distance test strict at the outer radius of a free cone and
-inclusive on both sides of an echo's arc band.
+Cones and arcs are rasterised by the mappers' one cone rasteriser,
+:mod:`pipeline.mapper.kernels.cone` (the cell rule of
+:func:`pipeline.mapper.grid_raster.sector_spans`: a cell belongs to a shape when its centre
+does), from the table :func:`pipeline.mapper.free_space.cone_table` builds: ``cones[k]`` =
+``(ox, oy, r_outer, sin e1, cos e1, sin e2, cos e2)``, ``up_down[k]`` = whether the wedge
+holds +90° / −90°. The free cones are the andersone mapper's own cones, cell for cell. An
+echo's arc is the annular sector ``r_inner ≤ dist ≤ r_outer`` (``d ∓ band``).
 
-Each row of a shape is visited over the columns of its outer disk's chord clipped to the
-shape's bounding box, so the work is proportional to the shape's area, not its box. Loops
-run in reading order and add in that order, so results are deterministic.
+Loops run in reading order and add in that order, so results are deterministic.
 """
 
 from __future__ import annotations
@@ -16,185 +16,80 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import numpy.typing as npt
 from numba import njit
 
-from pipeline.mapper.types import F32, F64
-
-_MAX_HALF_BEAM = 0.5 * math.pi - 1e-9
-
-
-@njit(cache=True, inline="always")
-def _row_range(
-    oy: float, a: float, hf: float, r: float, y0: float, res: float, n_rows: int
-) -> tuple[int, int]:
-    """Rows whose centres may lie in the sector (origin y ``oy``, radius ``r``)."""
-    lo = min(0.0, r * math.sin(a - hf), r * math.sin(a + hf))
-    hi = max(0.0, r * math.sin(a - hf), r * math.sin(a + hf))
-    if abs((0.5 * math.pi - a + math.pi) % (2 * math.pi) - math.pi) <= hf:
-        hi = r
-    if abs((-0.5 * math.pi - a + math.pi) % (2 * math.pi) - math.pi) <= hf:
-        lo = -r
-    r0 = max(math.floor((oy + lo - y0) / res - 0.5), 0)
-    r1 = min(math.ceil((oy + hi - y0) / res - 0.5), n_rows - 1)
-    return r0, r1
-
-
-@njit(cache=True, inline="always")
-def _wedge(a: float, hf: float) -> tuple[float, float, float, float]:
-    """sin and cos of the cone's two edges ``a − hf`` and ``a + hf``."""
-    return math.sin(a - hf), math.cos(a - hf), math.sin(a + hf), math.cos(a + hf)
-
-
-@njit(cache=True, inline="always")
-def _col_range(
-    ox: float, dy: float, lo: float, hi: float, s1: float, c1: float, s2: float, c2: float,
-    x0: float, res: float, n_cols: int,
-) -> tuple[int, int]:
-    """Columns of one row (centre offset ``dy`` from the origin) whose centres may lie in
-    ``[lo, hi]`` (x offsets from the origin) and inside the wedge between the edges
-    (``s1·dx ≤ c1·dy`` and ``s2·dx ≥ c2·dy``), widened by one cell each side; the callers
-    test every cell exactly, so the widening only guards the rounding of the bounds."""
-    if s1 > 0.0:
-        hi = min(hi, c1 * dy / s1)
-    elif s1 < 0.0:
-        lo = max(lo, c1 * dy / s1)
-    elif c1 * dy < 0.0:
-        return 0, -1
-    if s2 > 0.0:
-        lo = max(lo, c2 * dy / s2)
-    elif s2 < 0.0:
-        hi = min(hi, c2 * dy / s2)
-    elif c2 * dy > 0.0:
-        return 0, -1
-    if lo > hi:
-        return 0, -1
-    c0 = max(math.floor((ox + lo - x0) / res - 0.5), 0)
-    c1_ = min(math.ceil((ox + hi - x0) / res - 0.5), n_cols - 1)
-    return c0, c1_
-
-
-@njit(cache=True, inline="always")
-def _inside(dx: float, dy: float, ca: float, sa: float, cos2: float) -> bool:
-    """Whether the offset lies within the half-angle whose squared cosine is ``cos2``
-    (half-angles below 90°): ``dot ≥ |p|·cos(hf)`` without a square root."""
-    dot = dx * ca + dy * sa
-    return dot >= 0.0 and dot * dot >= (dx * dx + dy * dy) * cos2
+from pipeline.mapper.kernels.cone import (
+    cone_row_span,
+    cone_rows,
+    edge_sector_spans,
+    max_sector_spans,
+)
+from pipeline.mapper.types import F32, F64, I32, B
 
 
 @njit(cache=True)
-def count_free(
-    ox: F64, oy: F64, alpha: F64, half_fov: F64, radius: F64,
-    x0: float, y0: float, res: float, counts: F32,
-) -> int:
-    """Add 1 to ``counts`` at every cell of every reading's free cone (centre strictly
-    within ``radius``); readings with ``radius ≤ 0`` clear nothing. Returns the cells added."""
-    n_rows, n_cols = counts.shape
+def count_free(cones: F64, up_down: B, gx: float, gy: float, res: float, diff: I32) -> int:
+    """Count every cell of every cone once more (one count per reading, not per scan) in
+    the row difference grid ``diff`` (:func:`empty_span_counts`); returns the cells added."""
+    height, width = diff.shape[0], diff.shape[1] - 1
     total = 0
-    for i in range(ox.shape[0]):
-        r = radius[i]
-        if not r > 0.0:
-            continue
-        hf = min(max(half_fov[i], 0.0), _MAX_HALF_BEAM)
-        ca, sa = math.cos(alpha[i]), math.sin(alpha[i])
-        cos2 = math.cos(hf) ** 2
-        s1, c1, s2, c2 = _wedge(alpha[i], hf)
-        r2 = r * r
-        r0, r1 = _row_range(oy[i], alpha[i], hf, r, y0, res, n_rows)
+    for i in range(cones.shape[0]):
+        ox, oy, radius = cones[i, 0], cones[i, 1], cones[i, 2]
+        s1, c1, s2, c2 = cones[i, 3], cones[i, 4], cones[i, 5], cones[i, 6]
+        r0, r1 = cone_rows(oy, radius, s1, s2, up_down[i, 0], up_down[i, 1], gy, res, height)
         for row in range(r0, r1 + 1):
-            dy = y0 + (row + 0.5) * res - oy[i]
-            if dy * dy >= r2:
-                continue
-            h = math.sqrt(r2 - dy * dy)
-            c0, c1_ = _col_range(ox[i], dy, -h, h, s1, c1, s2, c2, x0, res, n_cols)
-            for col in range(c0, c1_ + 1):
-                dx = x0 + (col + 0.5) * res - ox[i]
-                if dx * dx + dy * dy >= r2 or not _inside(dx, dy, ca, sa, cos2):
-                    continue
-                counts[row, col] += 1.0
-                total += 1
+            a, b = cone_row_span(ox, oy, radius, s1, c1, s2, c2, row, gx, gy, res, width)
+            if b >= a:
+                diff[row, a] += 1
+                diff[row, b + 1] -= 1
+                total += b - a + 1
     return total
 
 
 @njit(cache=True)
-def _arc_cells(
-    ox: float, oy: float, a: float, half_fov: float, d: float, band: float,
-    x0: float, y0: float, res: float, n_rows: int, n_cols: int,
-    rows: npt.NDArray[np.int64], cols: npt.NDArray[np.int64],
-) -> int:
-    """Write the cells of one echo's arc (in the cone, distance within ``d ± band``,
-    inclusive) into ``rows``/``cols``, row by row; returns how many."""
-    ro = d + band
-    ri = max(d - band, 0.0)
-    ro2, ri2 = ro * ro, ri * ri
-    hf = min(max(half_fov, 0.0), _MAX_HALF_BEAM)
-    ca, sa = math.cos(a), math.sin(a)
-    cos2 = math.cos(hf) ** 2
-    s1, c1, s2, c2 = _wedge(a, hf)
-    r0, r1 = _row_range(oy, a, hf, ro, y0, res, n_rows)
-    n = 0
-    for row in range(r0, r1 + 1):
-        dy = y0 + (row + 0.5) * res - oy
-        if dy * dy > ro2:
-            continue
-        h = math.sqrt(ro2 - dy * dy)
-        inner = math.sqrt(ri2 - dy * dy) if dy * dy < ri2 else 0.0
-        # The annulus's row: [-h, -inner] and [inner, h] (one interval when inner = 0).
-        for side in range(2):
-            lo, hi = (-h, -inner) if side == 0 else (inner, h)
-            if inner == 0.0 and side == 1:
-                break
-            if inner == 0.0:
-                hi = h
-            c0, c1_ = _col_range(ox, dy, lo, hi, s1, c1, s2, c2, x0, res, n_cols)
-            for col in range(c0, c1_ + 1):
-                dx = x0 + (col + 0.5) * res - ox
-                d2 = dx * dx + dy * dy
-                if d2 > ro2 or d2 < ri2 or not _inside(dx, dy, ca, sa, cos2):
-                    continue
-                rows[n] = row
-                cols[n] = col
-                n += 1
-    return n
+def _reach_cells(cones: F64, res: float) -> int:
+    """Cells across the bounding box of the table's largest cone."""
+    reach = 0.0
+    for i in range(cones.shape[0]):
+        reach = max(reach, cones[i, 2])
+    return 2 * math.ceil(reach / res) + 3
+
+
+@njit(cache=True)
+def _span_buffers(cones: F64, res: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Span buffers large enough for the widest arc of the table."""
+    size = max_sector_spans(_reach_cells(cones, res) * res, res)
+    return (np.empty(size, dtype=np.int64), np.empty(size, dtype=np.int64),
+            np.empty(size, dtype=np.int64))
 
 
 @njit(cache=True, inline="always")
-def _arc_buffer(d: F64, band: F64, res: float) -> int:
-    """Cells enough for the largest arc's bounding box."""
-    reach = 0.0
-    for i in range(d.shape[0]):
-        if d[i] > 0.0:
-            reach = max(reach, d[i] + band[i])
-    k = 2 * math.ceil(reach / res) + 3
-    return k * k
+def _arc_spans(cones: F64, up_down: B, r_inner: F64, i: int, gx: float, gy: float,
+               res: float, width: int, height: int, rows: np.ndarray, c0s: np.ndarray,
+               c1s: np.ndarray) -> int:
+    return edge_sector_spans(cones[i, 0], cones[i, 1], cones[i, 3], cones[i, 4], cones[i, 5],
+                             cones[i, 6], up_down[i, 0], up_down[i, 1], r_inner[i],
+                             cones[i, 2], gx, gy, res, width, height, rows, c0s, c1s)
 
 
 @njit(cache=True)
-def count_arcs(
-    ox: F64, oy: F64, alpha: F64, half_fov: F64, d: F64, band: F64,
-    x0: float, y0: float, res: float, counts: F32,
-) -> None:
-    """Add 1 to ``counts`` at every cell of every echo's arc: in the cone, at a distance
-    within ``d ± band`` of the origin (inclusive). Readings with ``d ≤ 0`` have no arc."""
-    n_rows, n_cols = counts.shape
-    size = _arc_buffer(d, band, res)
-    rows = np.empty(size, dtype=np.int64)
-    cols = np.empty(size, dtype=np.int64)
-    for i in range(ox.shape[0]):
-        if not d[i] > 0.0:
-            continue
-        n = _arc_cells(ox[i], oy[i], alpha[i], half_fov[i], d[i], band[i], x0, y0, res,
-                       n_rows, n_cols, rows, cols)
+def count_arcs(cones: F64, up_down: B, r_inner: F64, gx: float, gy: float, res: float,
+               diff: I32) -> None:
+    """Count every cell of every echo's arc (``r_inner[k]`` to ``cones[k, 2]``) once more in
+    the row difference grid ``diff`` (:func:`empty_span_counts`)."""
+    height, width = diff.shape[0], diff.shape[1] - 1
+    rows, c0s, c1s = _span_buffers(cones, res)
+    for i in range(cones.shape[0]):
+        n = _arc_spans(cones, up_down, r_inner, i, gx, gy, res, width, height, rows, c0s, c1s)
         for k in range(n):
-            counts[rows[k], cols[k]] += 1.0
+            diff[rows[k], c0s[k]] += 1
+            diff[rows[k], c1s[k] + 1] -= 1
 
 
 @njit(cache=True)
-def attribute_echoes(
-    ox: F64, oy: F64, alpha: F64, half_fov: F64, d: F64, band: F64,
-    x0: float, y0: float, res: float,
-    free: F32, arcs: F32, candidate_ratio: float, dilution: float, hits: F32,
-) -> int:
+def attribute_echoes(cones: F64, up_down: B, r_inner: F64, gx: float, gy: float, res: float,
+                     free: F32, arcs: F32, candidate_ratio: float, dilution: float,
+                     hits: F32) -> int:
     """Spread each echo over the cells of its arc that may have produced it; returns the
     echoes with no such cell.
 
@@ -202,32 +97,45 @@ def attribute_echoes(
     ``free > candidate_ratio · arcs`` (it was seen free more often, by that factor, than
     echo arcs cover it). Each of the ``n`` candidates gets ``1 / n**dilution`` of the echo.
     """
-    n_rows, n_cols = hits.shape
-    size = _arc_buffer(d, band, res)
-    rows = np.empty(size, dtype=np.int64)
-    cols = np.empty(size, dtype=np.int64)
+    height, width = hits.shape
+    rows, c0s, c1s = _span_buffers(cones, res)
+    size = _reach_cells(cones, res) ** 2
+    cand_r = np.empty(size, dtype=np.int64)
+    cand_c = np.empty(size, dtype=np.int64)
     lost = 0
-    for i in range(ox.shape[0]):
-        if not d[i] > 0.0:
-            continue
-        n = _arc_cells(ox[i], oy[i], alpha[i], half_fov[i], d[i], band[i], x0, y0, res,
-                       n_rows, n_cols, rows, cols)
+    for i in range(cones.shape[0]):
+        n = _arc_spans(cones, up_down, r_inner, i, gx, gy, res, width, height, rows, c0s, c1s)
         m = 0
         for k in range(n):  # keep the candidates, in arc order
-            r, c = rows[k], cols[k]
-            if free[r, c] <= candidate_ratio * arcs[r, c]:
-                rows[m] = r
-                cols[m] = c
-                m += 1
+            r = rows[k]
+            for c in range(c0s[k], c1s[k] + 1):
+                if free[r, c] <= candidate_ratio * arcs[r, c]:
+                    cand_r[m] = r
+                    cand_c[m] = c
+                    m += 1
         if m == 0:
             lost += 1
             continue
         w = 1.0 / float(m) ** dilution
         for k in range(m):
-            hits[rows[k], cols[k]] += w
+            hits[cand_r[k], cand_c[k]] += w
     return lost
 
 
 def empty_grid(shape: tuple[int, int]) -> F32:
     """A zeroed float32 evidence grid."""
     return np.zeros(shape, dtype=np.float32)
+
+
+def empty_span_counts(shape: tuple[int, int]) -> I32:
+    """A zeroed row difference grid for :func:`count_free` / :func:`count_arcs`: a span
+    ``c0..c1`` of a row adds 1 at ``c0`` and −1 at ``c1 + 1`` (one spare column), so a count
+    costs per span, not per cell; :func:`span_counts` turns it into counts per cell."""
+    return np.zeros((shape[0], shape[1] + 1), dtype=np.int32)
+
+
+def span_counts(diff: I32) -> F32:
+    """Counts per cell of a row difference grid (its running sum along each row), float32
+    as the evidence grids; ``diff`` is overwritten. Exact up to 2**24 counts per cell."""
+    np.cumsum(diff, axis=1, dtype=np.int32, out=diff)
+    return diff[:, :-1].astype(np.float32)

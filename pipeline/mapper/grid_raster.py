@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from formats.angles import wrap_angle
 from pipeline.mapper.types import F64, I64, B, GridSpec
 
 # Beams of half-width ≥ 90° would need the union, not the intersection, of two half-planes;
@@ -39,11 +40,6 @@ class Spans:
 
     def cell_count(self) -> int:
         return int((self.c1 - self.c0 + 1).sum())
-
-
-def wrap_angle(a: F64) -> F64:
-    """Angles wrapped to [−π, π), rad."""
-    return np.mod(a + np.pi, 2.0 * np.pi) - np.pi
 
 
 def expand_ranges(start: I64, stop: I64) -> tuple[I64, I64]:
@@ -105,7 +101,7 @@ def sector_spans(
     """Cells of circular sectors: centre within ``radius`` (m, strict) of the origin ``(ox, oy)``
     and within ``half_beam`` (rad) of the axis angle ``alpha`` (rad), one sector per element.
 
-    The wedge ``|wrap(bearing − α)| ≤ β/2`` is the intersection of two half-planes bounded
+    The wedge ``|wrap_angle(bearing − α)| ≤ β/2`` is the intersection of two half-planes bounded
     by the cone edges ``e1 = α − β/2`` and ``e2 = α + β/2``:
     ``cross(e1, p) ≥ 0`` and ``cross(p, e2) ≥ 0``; each clips the row's disk chord.
     """

@@ -48,14 +48,11 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 
+from formats.arrays import F64, I64
 from pipeline.drift import DriftModel, apply_drift
 from pipeline.refine.echoes import Echoes
 from pipeline.refine.se2 import transform_points
-
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
 
 MAX_ECHOES = 8_000  # echoes used for the sharpness (evenly thinned beyond)
 MAX_ECHOES_SCAN = 2_000  # ... in the first, binned scan over the whole bias range

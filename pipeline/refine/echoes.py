@@ -16,15 +16,12 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 
+from formats.arrays import F64, I64
 from formats.contract import LogReader
 from pipeline.ingest import ordered_ranges
 from pipeline.pose_sync import POSE_OK, PoseTrack, interpolate_poses
 from pipeline.sensors import SensorTable
-
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
 
 ARC_SAMPLES = 7
 

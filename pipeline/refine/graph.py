@@ -29,10 +29,9 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from pipeline.refine.se2 import between, wrap
-
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
+from formats.angles import wrap_angle
+from formats.arrays import F64, I64
+from pipeline.refine.se2 import between
 
 
 @dataclass(frozen=True)
@@ -115,7 +114,7 @@ class _Problem:
     def residuals(self, v: F64) -> F64:
         x, k, b = self.unpack(v)
         parts = [np.array([(x[0, 0] - self.first[0]) / 1e-3, (x[0, 1] - self.first[1]) / 1e-3,
-                           float(wrap(x[0, 2] - self.first[2])) / math.radians(0.01)])]
+                           float(wrap_angle(x[0, 2] - self.first[2])) / math.radians(0.01)])]
         if self.n > 1:
             rel = between(x[:-1], x[1:])
             d, length = self.odo.delta, self.odo.length
@@ -123,12 +122,12 @@ class _Problem:
             c, s = np.cos(turn), np.sin(turn)
             px = (c * d[:, 0] - s * d[:, 1]) / (1 + k)
             py = (s * d[:, 0] + c * d[:, 1]) / (1 + k)
-            e = np.column_stack([rel[:, 0] - px, rel[:, 1] - py, wrap(rel[:, 2] - (d[:, 2] - b * length))])
+            e = np.column_stack([rel[:, 0] - px, rel[:, 1] - py, wrap_angle(rel[:, 2] - (d[:, 2] - b * length))])
             parts.append((e * self.w_odo).ravel())
         if len(self.matches):
             m = self.matches
             rel = between(x[m.i], x[m.j])
-            e = np.column_stack([rel[:, :2] - m.z[:, :2], wrap(rel[:, 2] - m.z[:, 2])])
+            e = np.column_stack([rel[:, :2] - m.z[:, :2], wrap_angle(rel[:, 2] - m.z[:, 2])])
             parts.append(np.einsum("mab,mb->ma", m.u, e).ravel())
         if self.opt.calibrate:
             parts.append(np.array([k / self.opt.prior_scale, b / self.opt.prior_bias]))
@@ -161,7 +160,7 @@ class _Problem:
         if not len(m):
             return np.zeros(0)
         rel = between(x[m.i], x[m.j])
-        e = np.column_stack([rel[:, :2] - m.z[:, :2], wrap(rel[:, 2] - m.z[:, 2])])
+        e = np.column_stack([rel[:, :2] - m.z[:, :2], wrap_angle(rel[:, 2] - m.z[:, 2])])
         r = np.einsum("mab,mb->ma", m.u, e)
         return np.asarray((r * r).sum(axis=1))
 
@@ -184,7 +183,7 @@ def solve(x0: F64, odo: Odometry, matches: MatchConstraints, opt: GraphOptions) 
     )
     x, k, b = prob.unpack(res.x)
     x = x.copy()
-    x[:, 2] = wrap(x[:, 2])
+    x[:, 2] = wrap_angle(x[:, 2])
     return Solution(x, k, b, cost0, robust_cost(prob.residuals(res.x), opt.robust_scale),
                     int(res.nfev), prob.match_chi2(res.x))
 

@@ -28,9 +28,9 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from pipeline.refine.se2 import wrap
+from formats.angles import wrap_angle
+from formats.arrays import F64
 
-F64 = npt.NDArray[np.float64]
 F32 = npt.NDArray[np.float32]
 
 
@@ -190,7 +190,7 @@ def match(
                 best_pose = np.array([cand_x[k[0]], cand_y[k[1]], th])
         pose = best_pose
         sxy, syaw = sxy / 2, syaw / 2
-    pose[2] = float(wrap(pose[2]))
+    pose[2] = float(wrap_angle(pose[2]))
     final = float(field.sample(
         pose[0] + math.cos(pose[2]) * qx - math.sin(pose[2]) * qy,
         pose[1] + math.sin(pose[2]) * qx + math.cos(pose[2]) * qy,

@@ -35,8 +35,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 
+from formats.angles import wrap_angle
+from formats.arrays import F64, I64
 from pipeline.config import PoseRefinementConfig
 from pipeline.drift import DriftModel, apply_drift
 from pipeline.pose_sync import POSE_OK, PoseTrack, interpolate_poses
@@ -51,11 +52,8 @@ from pipeline.refine.graph import (
     sqrt_information,
 )
 from pipeline.refine.matcher import LikelihoodField, Match, SearchWindow, match
-from pipeline.refine.se2 import between, compose, inverse, transform_points, wrap
+from pipeline.refine.se2 import between, compose, inverse, transform_points
 from pipeline.refine.submaps import Submap, build_submaps, path_length_at
-
-F64 = npt.NDArray[np.float64]
-I64 = npt.NDArray[np.int64]
 
 
 @dataclass(frozen=True)
@@ -225,7 +223,7 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
     ct = [np.interp(tt.astype(np.float64), t_anchor.astype(np.float64), corr[:, k])
           for k in range(3)]
     out = compose(np.column_stack(ct), np.column_stack([cx, cy, cyaw]))
-    rx, ry, ryaw = out[:, 0].copy(), out[:, 1].copy(), wrap(out[:, 2])
+    rx, ry, ryaw = out[:, 0].copy(), out[:, 1].copy(), wrap_angle(out[:, 2])
     metrics.update({
         "matches_accepted": seq_ok - rejected_seq,
         "matches_rejected": seq_rejected + rejected_seq,
@@ -246,7 +244,7 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
 
 def _moved(x0: F64, y0: F64, a0: F64, x1: F64, y1: F64, a1: F64) -> dict[str, float]:
     d = np.hypot(x1 - x0, y1 - y0)
-    da = np.degrees(np.abs(wrap(a1 - a0)))
+    da = np.degrees(np.abs(wrap_angle(a1 - a0)))
     return {
         "moved_mean_m": float(d.mean()) if d.size else 0.0,
         "moved_max_m": float(d.max()) if d.size else 0.0,

@@ -9,12 +9,8 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-F64 = npt.NDArray[np.float64]
-
-
-def wrap(a: npt.ArrayLike) -> F64:
-    """Angles wrapped to [−π, π)."""
-    return np.asarray((np.asarray(a, dtype=np.float64) + np.pi) % (2 * np.pi) - np.pi)
+from formats.angles import wrap_angle
+from formats.arrays import F64
 
 
 def compose(a: npt.ArrayLike, b: npt.ArrayLike) -> F64:
@@ -26,7 +22,7 @@ def compose(a: npt.ArrayLike, b: npt.ArrayLike) -> F64:
         [
             a[..., 0] + c * b[..., 0] - s * b[..., 1],
             a[..., 1] + s * b[..., 0] + c * b[..., 1],
-            wrap(a[..., 2] + b[..., 2]),
+            wrap_angle(a[..., 2] + b[..., 2]),
         ],
         axis=-1,
     )
@@ -37,7 +33,7 @@ def inverse(a: npt.ArrayLike) -> F64:
     a = np.asarray(a, dtype=np.float64)
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     return np.stack(
-        [-c * a[..., 0] - s * a[..., 1], s * a[..., 0] - c * a[..., 1], wrap(-a[..., 2])], axis=-1
+        [-c * a[..., 0] - s * a[..., 1], s * a[..., 0] - c * a[..., 1], wrap_angle(-a[..., 2])], axis=-1
     )
 
 
@@ -47,7 +43,7 @@ def between(a: npt.ArrayLike, b: npt.ArrayLike) -> F64:
     b = np.asarray(b, dtype=np.float64)
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     dx, dy = b[..., 0] - a[..., 0], b[..., 1] - a[..., 1]
-    return np.stack([c * dx + s * dy, -s * dx + c * dy, wrap(b[..., 2] - a[..., 2])], axis=-1)
+    return np.stack([c * dx + s * dy, -s * dx + c * dy, wrap_angle(b[..., 2] - a[..., 2])], axis=-1)
 
 
 def transform_points(pose: npt.ArrayLike, px: F64, py: F64) -> tuple[F64, F64]:

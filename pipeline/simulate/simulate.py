@@ -24,11 +24,12 @@ import numpy.typing as npt
 from formats.arrays import F64, I32, I64
 from formats.contract import PoseBatch, SensorMount, make_range_batch
 from formats.errors import ConfigError
-from formats.log_writers import LogContent, reference_paths, write_log_with_reference
+from formats.log_writers import LogContent
 from formats.options import MountConfig
 from formats.presets import PRESETS
 from pipeline.config import MapperConfig
 from pipeline.drift import DriftModel, apply_drift
+from pipeline.log_with_reference import reference_paths, write_log_with_reference
 from pipeline.simulate.sonar import SonarRing, add_sensor_errors, firing_schedule, true_ranges
 from pipeline.simulate.trajectory import (
     Trajectory,

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from formats.angles import wrap_angle
 from formats.arrays import F64, I64
 from formats.errors import ConfigError
 
@@ -72,7 +73,7 @@ def plan_motion(waypoints: npt.ArrayLike, speed: float, turn_rate: float) -> Mot
     d = np.diff(wp, axis=0)
     heading = np.arctan2(d[:, 1], d[:, 0])
     # Shortest rotation between consecutive legs, accumulated into an unwrapped yaw.
-    turn = (np.diff(heading) + math.pi) % (2 * math.pi) - math.pi
+    turn = wrap_angle(np.diff(heading))
     yaw_leg = heading[0] + np.concatenate([[0.0], np.cumsum(turn)])
     legs = wp.shape[0] - 1
     # Knots: start, then per leg an arrival, and between legs the end of a turn.
@@ -109,11 +110,6 @@ def sample_trajectory(plan: MotionPlan, rate_hz: float, start_ns: int) -> Trajec
         rel = np.append(rel, np.int64(end_ns))
     x, y, yaw = plan.pose_at(rel / 1e9)
     return Trajectory(rel + np.int64(start_ns), x, y, wrap_angle(yaw))
-
-
-def wrap_angle(a: npt.ArrayLike) -> F64:
-    """Angles wrapped to [−π, π), rad."""
-    return (np.asarray(a, dtype=np.float64) + math.pi) % (2 * math.pi) - math.pi
 
 
 def load_waypoints(path: str | Path) -> F64:

@@ -9,7 +9,6 @@ probability grid that simulated maps are compared with.
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -20,6 +19,7 @@ import numpy.typing as npt
 from formats.arrays import F32, F64
 from formats.errors import ConfigError
 from formats.map_types import GridSpec
+from formats.toml_file import read_toml
 
 # Rasterising samples each segment this many times per cell: a segment that clips a cell
 # corner by less than resolution/8 may leave that cell free (documented approximation).
@@ -124,14 +124,7 @@ def load_world(path: str | Path) -> World:
         nav2 = load_nav2_map(p)
         world = world_from_occupancy(np.asarray(nav2.classes), nav2.grid)
         return World(world.segments, world.circles, name=p.stem, bounds=world.bounds)
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError as err:
-        raise ConfigError("world file not found", p) from err
-    except (OSError, UnicodeDecodeError) as err:
-        raise ConfigError(f"cannot read world file: {err}", p) from err
-    except tomllib.TOMLDecodeError as err:
-        raise ConfigError(f"invalid TOML: {err}", p) from err
+    data = read_toml(p, "world")
     try:
         return world_from_dict(data, default_name=p.stem)
     except ConfigError as err:

@@ -49,9 +49,20 @@ def _dead_pid() -> int:
 @pytest.mark.skipif(not LOG.is_file(), reason="sample log missing")
 def test_sigkill_at_random_moments(tmp_path: Path) -> None:
     """Runs with --force into one OUT, each killed at a seeded random moment (start-up,
-    reading, mapping, writing, replacing); then one run that completes and cleans up."""
+    reading, mapping, writing, replacing); then one run that completes and cleans up.
+
+    The moments are fractions of a complete run timed on this machine first, so that the
+    kills land across the run on a fast laptop and on a loaded CI runner alike; the first
+    is early enough that it always lands before the output is in place."""
+    timed = tmp_path / "timed" / "OUT"
+    timed.parent.mkdir()
+    t0 = time.perf_counter()
+    proc = _start(timed)
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, err.decode()
+    whole = time.perf_counter() - t0
     rnd = random.Random(7)
-    delays = [rnd.uniform(0.3, 3.0) for _ in range(3)]
+    delays = [whole * f for f in (0.1, rnd.uniform(0.3, 0.7), rnd.uniform(0.7, 1.0))]
     out = tmp_path / "OUT"
     complete = 0
     for delay in delays:
@@ -60,7 +71,7 @@ def test_sigkill_at_random_moments(tmp_path: Path) -> None:
         proc.send_signal(signal.SIGKILL)
         proc.wait(timeout=60)
         complete += _assert_absent_or_complete(out)
-        leftovers = [p.name for p in tmp_path.iterdir() if p.name != "OUT"]
+        leftovers = [p.name for p in tmp_path.iterdir() if p.name not in ("OUT", "timed")]
         assert all(n.startswith((".OUT.tmp-", ".OUT.old-")) for n in leftovers), leftovers
     assert complete < len(delays)  # at least one kill landed before the output was in place
     res = subprocess.run(
@@ -69,7 +80,7 @@ def test_sigkill_at_random_moments(tmp_path: Path) -> None:
     )
     assert res.returncode == 0, res.stderr
     assert _assert_absent_or_complete(out)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["OUT"]  # stale siblings removed
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["OUT", "timed"]  # stale ones removed
 
 
 def test_stale_temp_siblings_of_dead_runs_are_removed(tmp_path: Path) -> None:

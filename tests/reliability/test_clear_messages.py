@@ -12,10 +12,10 @@ import pytest
 from typer.testing import CliRunner
 
 from cli.app import app
-from formats.log_writers import reference_paths
 from fuzz.harness import ROOT
 from pipeline.batch import find_logs, read_manifest
 from pipeline.config import Config
+from pipeline.log_with_reference import reference_paths
 
 
 def _run_error(*args: str) -> str:

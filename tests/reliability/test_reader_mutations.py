@@ -1,6 +1,6 @@
 """Mutation testing of every reader: truncations, corrupted length fields, hypothesis-drawn
 mutations. Property (fuzz/harness.py): records or a one-line FormatError/TopicError naming
-the file; nothing else, within 5 s, in memory bounded by the file size."""
+the file; nothing else, within 5 s of CPU time, in memory bounded by the file size."""
 
 from __future__ import annotations
 

@@ -1,10 +1,11 @@
 """Compiled kernels (numba, ``@njit(cache=True)``) for the mapper's per-scan and per-reading loops.
 
 Each module sits beside the numpy code it replaces, which stays as the readable reference
-the tests compare it with (``tests/mapper/test_kernels_*``):
+the tests compare it with (``tests/pipeline/mapper/test_kernels_*``):
 
 * :mod:`.cone` — a sonar cone (annular sector) as row spans, one reading at a time; the
-  cell rule of :func:`pipeline.mapper.grid_raster.sector_spans`.
+  cell rule of :func:`pipeline.mapper.grid_raster.sector_spans`; every mapper's cones
+  (the attribution method's loops, :mod:`pipeline.mapper.cone_kernels`, use it too).
 * :mod:`.ellipse` — covariance ellipses as row spans; the occupied layer (§5).
 * :mod:`.free_space` — a scan's free-space scan as a window mask; the free-layer update.
 * :mod:`.feature_index` — the feature set's storage, hash grid and Kalman merge (§2).

@@ -17,9 +17,11 @@ Use from numba code::
         ...
 
 with buffers of at least :func:`max_sector_spans` ``(r_outer, res)`` entries. The lower
-level :func:`cone_edges`, :func:`cone_rows` and :func:`cone_row_span` take the edges'
-sines and cosines precomputed (the andersone kernel takes them from numpy, so its cones
-match the numpy reference on any CPU).
+level :func:`edge_sector_spans`, :func:`cone_rows` and :func:`cone_row_span` take the edges'
+sines and cosines precomputed (the mappers take them from numpy's
+``grid_raster.cone_edges``, so their cones match the numpy reference on any CPU). This is
+the mappers' one cone rasteriser: the andersone free space, the classic grid and the
+attribution method's cones and echo arcs (:mod:`pipeline.mapper.cone_kernels`) all use it.
 """
 
 from __future__ import annotations
@@ -130,12 +132,38 @@ def sector_spans(ox: float, oy: float, alpha: float, half_fov: float, r_inner: f
                  rows: np.ndarray, c0s: np.ndarray, c1s: np.ndarray) -> int:
     """Write the spans of the sector ``r_inner ≤ dist < r_outer``, ``|bearing − α| ≤ β/2``
     (module doc for the exact rule) into ``rows, c0s, c1s``; returns how many, by row."""
-    n = 0
     if not r_outer > 0.0:
         return 0
     s1, c1, s2, c2, up, down = cone_edges(alpha, half_fov)
+    return edge_sector_spans(ox, oy, s1, c1, s2, c2, up, down, r_inner, r_outer, gx, gy, res,
+                             width, height, rows, c0s, c1s)
+
+
+@njit(cache=True)
+def edge_sector_spans(ox: float, oy: float, s1: float, c1: float, s2: float, c2: float,
+                      up: bool, down: bool, r_inner: float, r_outer: float, gx: float,
+                      gy: float, res: float, width: int, height: int, rows: np.ndarray,
+                      c0s: np.ndarray, c1s: np.ndarray) -> int:
+    """:func:`sector_spans` with the edges' sines and cosines given (:func:`cone_edges`, or
+    numpy's ``grid_raster.cone_edges``)."""
+    n = 0
+    if not r_outer > 0.0:
+        return 0
     r0, r1 = cone_rows(oy, r_outer, s1, s2, up, down, gy, res, height)
     rin2 = r_inner * r_inner if r_inner > 0.0 else 0.0
+    if rin2 > 0.0:
+        # Only rows the annulus part reaches: its y extent is set by the four corners
+        # (radii × edges) and ±r_outer when the wedge holds ±90°. One row of margin on
+        # each side: the rows visited compute their spans as before, so skipping rows
+        # that cannot hold a cell changes nothing.
+        lo_y = min(min(r_inner * s1, r_inner * s2), min(r_outer * s1, r_outer * s2))
+        hi_y = max(max(r_inner * s1, r_inner * s2), max(r_outer * s1, r_outer * s2))
+        if up:
+            hi_y = r_outer
+        if down:
+            lo_y = -r_outer
+        r0 = max(r0, math.ceil(((oy + lo_y) - gy) / res - 0.5) - 1)
+        r1 = min(r1, math.floor(((oy + hi_y) - gy) / res - 0.5) + 1)
     for row in range(r0, r1 + 1):
         a, b = cone_row_span(ox, oy, r_outer, s1, c1, s2, c2, row, gx, gy, res, width)
         if a > b:
