@@ -420,9 +420,9 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.drifted:
         with tempfile.TemporaryDirectory(prefix="sonarmap-drift-") as tmp:
-            rows = drifted_comparison(args.keep if args.keep is not None else Path(tmp),
-                                      args.tolerance, tuple(args.cases), args.config)
-        print(drift_markdown(rows))
+            drift_rows = drifted_comparison(args.keep if args.keep is not None else Path(tmp),
+                                            args.tolerance, tuple(args.cases), args.config)
+        print(drift_markdown(drift_rows))
         return 0
 
     from formats.errors import SonarmapError

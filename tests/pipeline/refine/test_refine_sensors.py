@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -36,8 +37,8 @@ LAYOUTS = {
 }
 
 
-def refined_errors(layout: str, tmp: Path, max_scale: float
-                   ) -> tuple[float, float, dict[str, object]]:
+def drifted_run(layout: str, tmp: Path) -> tuple[Any, Any, Poses2D]:
+    """The layout's drifted log: its odometry track, its echoes and the true trajectory."""
     from formats import open_log
     from pipeline.config import Config
     from pipeline.run import prepare
@@ -52,30 +53,38 @@ def refined_errors(layout: str, tmp: Path, max_scale: float
     with open_log(log, cfg) as reader:
         sv, sensors, _ = prepare(reader, cfg)
         echoes = collect_echoes(reader, sv.track, sensors, eps_max=cfg.mapper.eps_max,
-                                max_echo_range_m=3.0, arc_fraction=1.0, time_offset_ns=0,
+                                max_echo_range_m=3.0, arc_fraction=0.8, time_offset_ns=0,
                                 max_gap_ns=10**9)
-    ref = refine_track(sv.track, echoes, PoseRefinementConfig(
-        enabled=True, calibration_max_scale=max_scale))
     truth = Poses2D(sim.true_poses.t_ns, sim.true_poses.x, sim.true_poses.y, sim.true_poses.yaw)
-    tr = sv.track
+    return sv.track, echoes, truth
+
+
+def refined_errors(run: tuple[Any, Any, Poses2D], max_scale: float
+                   ) -> tuple[float, float, dict[str, Any]]:
+    """ATE (m) of the odometry and of the refined track, and refinement's metrics."""
+    track, echoes, truth = run
+    ref = refine_track(track, echoes, PoseRefinementConfig(
+        enabled=True, calibration_max_scale=max_scale))
+    t = np.asarray(track.t_ns)
 
     def ate(x: np.ndarray, y: np.ndarray, yaw: np.ndarray) -> float:
-        return trajectory_error(Poses2D(np.asarray(tr.t_ns), x, y, yaw), truth).ate_rmse_m
+        return trajectory_error(Poses2D(t, x, y, yaw), truth).ate_rmse_m
 
-    return (ate(np.asarray(tr.x), np.asarray(tr.y), np.asarray(tr.yaw)),
+    return (ate(np.asarray(track.x), np.asarray(track.y), np.asarray(track.yaw)),
             ate(ref.x, ref.y, ref.yaw), ref.metrics)
 
 
 @pytest.mark.parametrize("layout", sorted(LAYOUTS))
 def test_refinement_finds_the_drift_with_each_sensor_layout(layout: str, tmp_path: Path) -> None:
     # The default: the heading bias alone (the scale error stays in the trajectory).
-    before, after, metrics = refined_errors(layout, tmp_path, 0.0)
+    run = drifted_run(layout, tmp_path)
+    before, after, metrics = refined_errors(run, 0.0)
     assert before > 0.15
     assert after < before / 2, (before, after)
     assert metrics["search_heading_bias_deg_per_m"] == pytest.approx(0.8, abs=0.2)
     assert metrics["search_scale_error"] == 0.0
     # With the scale searched too (calibration_max_scale > 0) the rest of the error goes.
-    _, scaled, metrics = refined_errors(layout, tmp_path, 0.05)
+    _, scaled, metrics = refined_errors(run, 0.05)
     assert scaled < before / 4, (before, scaled)
     assert metrics["search_heading_bias_deg_per_m"] == pytest.approx(0.8, abs=0.2)
     assert metrics["search_scale_error"] == pytest.approx(0.03, abs=0.015)
@@ -89,6 +98,6 @@ def test_the_inverse_drift_model_undoes_the_drift() -> None:
     x, y, yaw = 2 * np.cos(t / 4), 1.5 * np.sin(t / 3), t / 5
     yaw = np.arctan2(np.gradient(y), np.gradient(x))
     ox, oy, oyaw = apply_drift(x, y, yaw, DriftModel(0.03, 0.8))
-    cx, cy, cyaw = Calibration(0.03, math.radians(0.8)).correct(ox, oy, oyaw)
+    cx, cy, _ = Calibration(0.03, math.radians(0.8)).correct(ox, oy, oyaw)
     np.testing.assert_allclose(cx, x, atol=1e-9)
     np.testing.assert_allclose(cy, y, atol=1e-9)
