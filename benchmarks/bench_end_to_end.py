@@ -22,6 +22,7 @@ import argparse
 import dataclasses
 import json
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -121,6 +122,7 @@ class RunFigures:
     stages: dict[str, float]
     readings: int
     rss_mb: float
+    cpu: float = 0.0  # the child's user + system seconds (other jobs inflate wall, not this)
 
 
 # The child runs the real CLI entry point, then reports its own peak RSS (VmHWM). Not
@@ -143,10 +145,13 @@ def run_once(log: Path, out: Path, extra: tuple[str, ...] = ()) -> RunFigures:
     """``sonarmap run log -o out --force --quiet`` in a fresh process, timed."""
     cmd = [sys.executable, "-c", _CHILD, "run", str(log), "-o", str(out), "--force", "--quiet",
            *extra]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                           text=True)
     wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime
     metrics = json.loads((out / "metrics.json").read_text(encoding="utf-8"))
     timing = metrics["timing"]
     hwm = [ln.split()[1] for ln in proc.stderr.splitlines() if ln.startswith("VmHWM_KB")]
@@ -156,6 +161,7 @@ def run_once(log: Path, out: Path, extra: tuple[str, ...] = ()) -> RunFigures:
         stages={k: float(timing["stage_seconds"].get(k, 0.0)) for k in STAGES},
         readings=int(metrics["counts"]["readings"]),
         rss_mb=rss,
+        cpu=cpu,
     )
 
 
@@ -208,23 +214,27 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
             rows.append((frac, median_run(log, Path(tmp) / f"out_{frac:g}", args.repeat)))
         print(f"\nsonarmap run, {base.world} world, 16-sonar ring at {RING_HZ:g} Hz, MCAP "
               f"{base.compression}; median of {args.repeat} run(s)")
-        head = f"{'log':>8} {'readings':>9} {'wall s':>7} {'readings/s':>10} {'RSS MB':>7}  "
+        head = (f"{'log':>8} {'readings':>9} {'wall s':>7} {'CPU s':>6} {'readings/s':>10} "
+                f"{'RSS MB':>7}  ")
         print(head + "  ".join(f"{k:>8}" for k in (*STAGES, "out+start")))
         for frac, r in rows:
             sh = stage_shares(r)
             print(
-                f"{frac:>7g}x {r.readings:>9} {r.wall:>7.2f} {r.readings / r.wall:>10.0f} "
+                f"{frac:>7g}x {r.readings:>9} {r.wall:>7.2f} {r.cpu:>6.2f} "
+                f"{r.readings / r.wall:>10.0f} "
                 f"{r.rss_mb:>7.0f}  " + "  ".join(f"{100 * v:>7.1f}%" for v in sh.values())
             )
             figures[f"wall {frac:g}x s"] = r.wall
+            figures[f"cpu {frac:g}x s"] = r.cpu
             figures[f"readings {frac:g}x"] = r.readings
             figures[f"rss {frac:g}x MB"] = r.rss_mb
             for k, v in sh.items():
                 figures[f"share {k} {frac:g}x"] = v
         one = dict(rows).get(1.0)
         if one is not None:
-            print(f"1x: {one.wall:.2f} s wall (target < 15 s), "
-                  f"{one.readings / one.wall:.0f} readings/s")
+            print(f"1x: {one.wall:.2f} s wall, {one.cpu:.2f} s CPU (target < 8 s), "
+                  f"{one.readings / one.wall:.0f} readings/s; load average "
+                  f"{os.getloadavg()[0]:.1f}")
             lo_frac, lo = rows[0]
             if lo_frac < 1.0:
                 growth = (one.wall / lo.wall) / (1.0 / lo_frac)
@@ -236,6 +246,7 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
                 long_log = cached_log(long_spec)
                 big = run_once(long_log, Path(tmp) / "out_long")
                 figures[f"wall {args.rss_factor:g}x s"] = big.wall
+                figures[f"cpu {args.rss_factor:g}x s"] = big.cpu
                 figures[f"rss {args.rss_factor:g}x MB"] = big.rss_mb
                 figures["rss growth"] = big.rss_mb / one.rss_mb
                 print(f"peak RSS 1x {one.rss_mb:.0f} MB -> {args.rss_factor:g}x "

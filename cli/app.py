@@ -51,7 +51,7 @@ LogsArg = Annotated[
     list[Path],
     typer.Argument(help="Log file or bag directory; several files are one recording (split "
                    "bags, sonar and odometry bags), read as one log in time order.",
-                   show_default=False),
+                   show_default=False, metavar="LOG..."),
 ]
 
 

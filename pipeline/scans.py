@@ -17,14 +17,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 
 from formats.arrays import I64
 from formats.errors import InputError
 from pipeline.config import ScanConfig
-from pipeline.mapper.types import Scan
+from pipeline.mapper.types import SCAN_FIELDS, Scan
 from pipeline.pose_sync import PoseTrack
 
 
@@ -82,18 +82,13 @@ class _Rows:
     scan: Scan
 
     def take(self, idx: slice) -> _Rows:
-        return _Rows(self.key[idx], Scan(*(getattr(self.scan, f.name)[idx] for f in fields(Scan))))
+        return _Rows(self.key[idx], self.scan.take(idx))
 
     @staticmethod
     def concat(a: _Rows, b: _Rows) -> _Rows:
         return _Rows(
             np.concatenate([a.key, b.key]),
-            Scan(
-                *(
-                    np.concatenate([getattr(a.scan, f.name), getattr(b.scan, f.name)])
-                    for f in fields(Scan)
-                )
-            ),
+            Scan(*[np.concatenate([getattr(a.scan, n), getattr(b.scan, n)]) for n in SCAN_FIELDS]),
         )
 
 
@@ -117,7 +112,7 @@ class ScanBuilder:
         last = int(starts[-1])
         for a, b in zip(starts[:-1].tolist(), starts[1:].tolist(), strict=True):
             self.count += 1
-            yield rows.take(slice(a, b)).scan
+            yield rows.scan.take(slice(a, b))
         self._carry = rows.take(slice(last, None))
 
     def flush(self) -> Iterator[Scan]:

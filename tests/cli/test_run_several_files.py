@@ -6,15 +6,12 @@ from __future__ import annotations
 
 import hashlib
 import json
-import sys
 from pathlib import Path
 
 import pyarrow.parquet as pq
 import pytest
+from split_logs import Accept, anything, before, split_mcap, split_ros1, split_ros2, topics
 from typer.testing import CliRunner
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "formats" / "ros"))
-from split_logs import anything, before, split_mcap, split_ros1, topics
 
 from cli.app import app
 
@@ -35,10 +32,16 @@ def logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[Path]]:
                                   (d / "rec_1.mcap", anything())])
     split_mcap(d / "whole.mcap", [(d / "odom.mcap", topics("/odom")),
                                   (d / "sonar.mcap", anything())])
+    # Two recorders of one /sonar topic (even and odd sonars), overlapping all along.
+    split_mcap(d / "whole.mcap", [(d / "even.mcap", _odd_sonar(False)),
+                                  (d / "odd.mcap", anything())], chunk_size=64 * 1024)
     split_ros1(OFFICE / "office.bag", [(d / "whole.bag", first_40s)])
     split_ros1(d / "whole.bag", [(d / "rec_0.bag", before(T0 + 13 * S)),
                                  (d / "rec_1.bag", before(T0 + 26 * S)),
                                  (d / "rec_2.bag", anything())])
+    split_ros2(OFFICE / "office_ros2", [(d / "whole_ros2", first_40s)])
+    split_ros2(d / "whole_ros2", [(d / "ros2_sonar", topics("/sonar", "/tf_static")),
+                                  (d / "ros2_odom", anything())])
     # Another recording of the same robot, a minute later.
     split_mcap(d / "rec_1.mcap", [(d / "later.mcap", anything())], shift_ns=60 * S)
     # The odometry recorded on the topic name the sonar has in the other file.
@@ -48,11 +51,29 @@ def logs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, list[Path]]:
         "whole_mcap": [d / "whole.mcap"],
         "time": [d / "rec_1.mcap", d / "rec_0.mcap"],  # named out of order on purpose
         "topic": [d / "sonar.mcap", d / "odom.mcap"],
+        "sensors": [d / "even.mcap", d / "odd.mcap"],
         "whole_bag": [d / "whole.bag"],
         "ros1_split": [d / "rec_0.bag", d / "rec_1.bag", d / "rec_2.bag"],
+        "whole_ros2": [d / "whole_ros2"],
+        "ros2_topic": [d / "ros2_sonar", d / "ros2_odom"],  # bag directories
         "later": [d / "rec_0.mcap", d / "later.mcap"],
         "clash": [d / "sonar.mcap", d / "odom_on_sonar.mcap"],
     }
+
+
+def _odd_sonar(odd: bool) -> Accept:
+    """Accept the /sonar messages of odd (or even) numbered sonars, and all others."""
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+
+    def accept(topic: str, t: int, data: bytes) -> bool:
+        if topic != "/sonar":
+            return True
+        frame = store.deserialize_cdr(data, "sensor_msgs/msg/Range").header.frame_id
+        return (int(frame.rsplit("_", 1)[1]) % 2 == 1) == odd
+
+    return accept
 
 
 def _rename_topic(path: Path, old: str, new: str) -> None:
@@ -86,10 +107,11 @@ def _run(paths: list[Path], out: Path) -> None:
 @pytest.fixture(scope="module")
 def runs(logs: dict[str, list[Path]], tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     d = tmp_path_factory.mktemp("runs")
-    for name in ("whole_mcap", "time", "topic", "whole_bag", "ros1_split"):
+    names = ("whole_mcap", "time", "topic", "sensors", "whole_bag", "ros1_split", "whole_ros2",
+             "ros2_topic")
+    for name in names:
         _run(logs[name], d / name)
-    return {name: d / name for name in ("whole_mcap", "time", "topic", "whole_bag",
-                                        "ros1_split")}
+    return {name: d / name for name in names}
 
 
 def _metrics(run: Path) -> dict:
@@ -97,7 +119,9 @@ def _metrics(run: Path) -> dict:
 
 
 @pytest.mark.parametrize(("parts", "whole"), [("time", "whole_mcap"), ("topic", "whole_mcap"),
-                                              ("ros1_split", "whole_bag")])
+                                              ("sensors", "whole_mcap"),
+                                              ("ros1_split", "whole_bag"),
+                                              ("ros2_topic", "whole_ros2")])
 def test_the_parts_of_a_recording_map_to_the_bytes_of_the_whole(
     runs: dict[str, Path], parts: str, whole: str
 ) -> None:
@@ -231,3 +255,10 @@ def test_validate_checks_the_recording_as_one_log(logs: dict[str, list[Path]]) -
     assert p["path"] == " + ".join(str(x) for x in sorted(logs["topic"]))
     assert p["sensors"] == w["sensors"]
     assert p["findings"] == w["findings"]
+
+
+@pytest.mark.parametrize("command", ["run", "info", "validate"])
+def test_help_says_a_log_may_be_several_files(command: str) -> None:
+    out = runner.invoke(app, [command, "--help"]).stdout
+    assert f"Usage: sonarmap {command} [OPTIONS] LOG...\n" in out
+    assert "several files are one recording" in " ".join(out.split())

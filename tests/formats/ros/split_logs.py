@@ -83,3 +83,29 @@ def anything() -> Accept:
 
 def topics(*names: str) -> Accept:
     return lambda topic, t, data: topic in names
+
+
+def split_ros2(src: Path, parts: Sequence[tuple[Path, Accept]]) -> None:
+    """Copy ``src``'s messages into rosbag2 directories (sqlite3, same definitions)."""
+    from rosbags.rosbag2 import Reader, Writer
+
+    writers = [Writer(path, version=9) for path, _ in parts]
+    conns: list[dict[int, Any]] = [{} for _ in parts]
+    for w in writers:
+        w.open()
+    try:
+        with Reader(src) as reader:
+            for conn, t, data in reader.messages():
+                for k, (_, accept) in enumerate(parts):
+                    if not accept(conn.topic, t, data):
+                        continue
+                    if conn.id not in conns[k]:
+                        conns[k][conn.id] = writers[k].add_connection(
+                            conn.topic, conn.msgtype, msgdef=conn.msgdef.data,
+                            rihs01=conn.digest,
+                            offered_qos_profiles=conn.ext.offered_qos_profiles)
+                    writers[k].write(conns[k][conn.id], t, data)
+                    break
+    finally:
+        for w in writers:
+            w.close()
