@@ -14,12 +14,13 @@ import pytest
 
 from formats.options import MountConfig
 from formats.presets import PRESETS
+from formats.writers.trajectory_tum import Trajectory
 from pipeline.config import PoseRefinementConfig
 from pipeline.drift import DriftModel, apply_drift
 from pipeline.refine import collect_echoes, refine_track
 from pipeline.simulate import SimOptions, simulate, write_simulation
 from pipeline.simulate.world import world_from_dict
-from pipeline.trajectory_error import Poses2D, trajectory_error
+from pipeline.trajectory_error import trajectory_error
 
 WORLD = {
     "polygon": [{"points": [[0, 0], [10, 0], [10, 6], [0, 6]]}],
@@ -37,7 +38,7 @@ LAYOUTS = {
 }
 
 
-def drifted_run(layout: str, tmp: Path) -> tuple[Any, Any, Poses2D]:
+def drifted_run(layout: str, tmp: Path) -> tuple[Any, Any, Trajectory]:
     """The layout's drifted log: its odometry track, its echoes and the true trajectory."""
     from formats import open_log
     from pipeline.config import Config
@@ -55,11 +56,11 @@ def drifted_run(layout: str, tmp: Path) -> tuple[Any, Any, Poses2D]:
         echoes = collect_echoes(reader, sv.track, sensors, eps_max=cfg.mapper.eps_max,
                                 max_echo_range_m=3.0, arc_fraction=0.8, time_offset_ns=0,
                                 max_gap_ns=10**9)
-    truth = Poses2D(sim.true_poses.t_ns, sim.true_poses.x, sim.true_poses.y, sim.true_poses.yaw)
+    truth = Trajectory(sim.true_poses.t_ns, sim.true_poses.x, sim.true_poses.y, sim.true_poses.yaw)
     return sv.track, echoes, truth
 
 
-def refined_errors(run: tuple[Any, Any, Poses2D], max_scale: float
+def refined_errors(run: tuple[Any, Any, Trajectory], max_scale: float
                    ) -> tuple[float, float, dict[str, Any]]:
     """ATE (m) of the odometry and of the refined track, and refinement's metrics."""
     track, echoes, truth = run
@@ -68,7 +69,7 @@ def refined_errors(run: tuple[Any, Any, Poses2D], max_scale: float
     t = np.asarray(track.t_ns)
 
     def ate(x: np.ndarray, y: np.ndarray, yaw: np.ndarray) -> float:
-        return trajectory_error(Poses2D(t, x, y, yaw), truth).ate_rmse_m
+        return trajectory_error(Trajectory(t, x, y, yaw), truth).ate_rmse_m
 
     return (ate(np.asarray(track.x), np.asarray(track.y), np.asarray(track.yaw)),
             ate(ref.x, ref.y, ref.yaw), ref.metrics)
