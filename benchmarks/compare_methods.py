@@ -42,20 +42,20 @@ import sys
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
 
 import numpy as np
 
 from pipeline.config import Config, load_config
+from pipeline.methods import Method
 
 REPO = Path(__file__).resolve().parents[1]
 LOG_SUFFIXES = {".mcap", ".bag", ".db3", ".csv", ".txt", ".zst"}
 
-METHODS: tuple[tuple[str, Literal["attribution", "andersone", "classic"], bool], ...] = (
-    ("attribution", "attribution", True),
-    ("with_correction", "andersone", True),
-    ("without_correction", "andersone", False),
-    ("classic", "classic", True),
+METHODS: tuple[tuple[str, Method, bool], ...] = (
+    ("attribution", Method.ATTRIBUTION, True),
+    ("with_correction", Method.ANDERSONE, True),
+    ("without_correction", Method.ANDERSONE, False),
+    ("classic", Method.CLASSIC, True),
 )
 LABELS = {
     "attribution": "sonarmap default (echo attribution)",

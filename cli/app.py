@@ -13,6 +13,7 @@ import typer
 
 from cli.errors import EXIT_FAILURE, handle_errors
 from cli.help_words import use_words
+from pipeline.methods import Method
 
 if TYPE_CHECKING:
     from pipeline.config import Config
@@ -82,7 +83,7 @@ def _load(
     format: str | None = None,
     range_topics: list[str] | None = None,
     pose_topic: str | None = None,
-    method: str | None = None,
+    method: Method | None = None,
     resolution: float | None = None,
     refine_poses: bool = False,
 ) -> Config:
@@ -100,8 +101,8 @@ def _load(
     if pose_topic:
         inp = dataclasses.replace(inp, pose_topic=pose_topic)
     mapper = cfg.mapper
-    if method:
-        mapper = dataclasses.replace(mapper, method=method)  # type: ignore[arg-type]
+    if method is not None:
+        mapper = dataclasses.replace(mapper, method=method)
     grid = cfg.grid
     if resolution is not None:
         grid = dataclasses.replace(grid, resolution=resolution)
@@ -121,9 +122,9 @@ def run(
     range_topic: RangeTopicOpt = None,
     pose_topic: PoseTopicOpt = None,
     method: Annotated[
-        str | None,
+        Method | None,
         typer.Option(
-            "--method", "-m", metavar="METHOD",
+            "--method", "-m", metavar="METHOD", case_sensitive=True,
             help="attribution (echo attribution, the best maps), andersone (the paper's "
             "method as published) or classic (log-odds grid).",
             show_default="[mapper] method, attribution",
@@ -171,10 +172,6 @@ def run(
     """
     from pipeline.run import run as run_pipeline
 
-    if method is not None and method not in ("attribution", "andersone", "classic"):
-        raise typer.BadParameter(
-            "must be 'attribution', 'andersone' or 'classic'", param_hint="--method"
-        )
     cfg = _load(config, format=format, range_topics=range_topic, pose_topic=pose_topic,
                 method=method, resolution=resolution, refine_poses=refine_poses)
     if quiet or json_out:

@@ -36,11 +36,15 @@ import traceback
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from formats.errors import ConfigError, FormatError, InputError, OutputError, SonarmapError
 from formats.tables import markdown_table
 from pipeline.config import Config, config_from_dict, load_config
+from pipeline.metrics_schema import finite, read_metrics
+
+if TYPE_CHECKING:
+    from pipeline.metrics import RunMetrics
 
 log = logging.getLogger("sonarmap.batch")
 
@@ -322,23 +326,28 @@ def _map_one_checked(
 
     outcome: list[LogOutcome] = []
 
-    def add_marker(tmp_dir: Path, m: Any) -> None:
+    def add_marker(tmp_dir: Path, _: RunMetrics) -> None:
+        # The row holds what the run wrote: its metrics.json, read through the schema.
+        m = read_metrics(tmp_dir / "metrics.json")
+        inp, counts = m.get("input", {}), m.get("counts", {})
         row = LogOutcome(
             path=str(path),
             name=name,
             status="ok",
-            duration_s=_num(m.input.get("duration_s")),
-            readings=int(m.counts["readings"]),
-            features=int(m.counts["features"]),
-            mean_feature_variance_m2=_num(m.paper_metric.get("mean_feature_variance_m2")),
-            mapped_area_m2=_num(m.map.get("mapped_area_m2")),
-            warnings="; ".join(m.warnings) or None,
+            duration_s=finite(inp.get("duration_s")),
+            readings=counts["readings"],
+            features=counts["features"],
+            mean_feature_variance_m2=finite(
+                m.get("paper_metric", {}).get("mean_feature_variance_m2")
+            ),
+            mapped_area_m2=finite(m.get("map", {}).get("mapped_area_m2")),
+            warnings="; ".join(m.get("warnings", [])) or None,
         )
         marker_data = {
             "marker_version": MARKER_VERSION,
-            "input_sha256": m.input["sha256"],
+            "input_sha256": inp["sha256"],
             "config_hash": config_hash,
-            "tool_version": m.run.get("tool_version"),
+            "tool_version": m.get("run", {}).get("tool_version"),
             "row": {k: v for k, v in asdict(row).items()
                     if k not in ("path", "status", "error", "seconds")},
         }
@@ -349,14 +358,6 @@ def _map_one_checked(
     # output of this log is ever replaced, never an input or the user's files.
     run(path, final, cfg, force=True, on_complete=add_marker)
     return outcome[0]
-
-
-def _num(v: Any) -> float | None:
-    """A finite float, else None (NaN metrics of a log without features)."""
-    if v is None:
-        return None
-    f = float(v)
-    return f if f == f and abs(f) != float("inf") else None
 
 
 def read_marker(run_dir: Path) -> dict[str, Any] | None:

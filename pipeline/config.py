@@ -12,6 +12,7 @@ TOML is read by :func:`formats.toml_file.read_toml` (``tomllib``: no code is exe
 from __future__ import annotations
 
 import dataclasses
+import enum
 import hashlib
 import json
 import math
@@ -25,16 +26,17 @@ from formats.errors import ConfigError
 from formats.options import FOV_MAX_DEG, FOV_MIN_DEG, InputConfig, SensorsConfig, doc_field
 from formats.presets import PRESETS
 from formats.toml_file import read_toml
+from pipeline.methods import Method
 
 
 @dataclass(frozen=True)
 class MapperConfig:
     """Parameters of the mapping method (ALGORITHM.md), with its documented defaults."""
 
-    method: Literal["attribution", "andersone", "classic"] = doc_field(
+    method: Method = doc_field(  # noqa: RUF009 - doc_field is dataclasses.field with a doc
         "mapping method: 'attribution' (echo attribution, §9; the default), 'andersone' "
         "(the paper's, §1-5) or 'classic' (log-odds baseline, §8)",
-        default="attribution",
+        default=Method.ATTRIBUTION,
     )
     sigma_d0: float = doc_field("σ_d0, distance uncertainty at zero range, m (eq. 2)", default=0.01)
     k_d: float = doc_field("k_d, growth of distance uncertainty with range (eq. 2)", default=0.01)
@@ -299,6 +301,11 @@ def _coerce(tp: Any, value: Any, key: str) -> Any:
         if value not in allowed:
             raise ConfigError(f"'{key}' must be one of {list(allowed)}, got {value!r}")
         return value
+    if isinstance(tp, type) and issubclass(tp, enum.Enum):
+        names = [m.value for m in tp]
+        if not isinstance(value, str) or value not in names:
+            raise ConfigError(f"'{key}' must be one of {names}, got {value!r}")
+        return tp(value)
     if origin is tuple:
         args = typing.get_args(tp)
         if not isinstance(value, list):

@@ -47,6 +47,7 @@ from formats.arrays import F64, I8, B
 from formats.errors import ConfigError, FormatError, InputError
 from formats.map_types import GridSpec
 from formats.tables import text_table
+from pipeline.metrics_schema import Metrics, finite, read_metrics
 
 __all__ = [
     "RUN_FILES",
@@ -54,7 +55,6 @@ __all__ = [
     "evaluate_maps",
     "evaluate_run",
     "load_trajectory_xy",
-    "read_metrics",
     "resample_classes",
     "run_sensor_reach",
 ]
@@ -207,37 +207,7 @@ class Evaluation:
 # --------------------------------------------------------------------------- inputs
 
 
-def read_metrics(path: Path) -> dict[str, Any]:
-    """A run's metrics.json as a dict; InputError if missing, FormatError if unreadable."""
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError as err:
-        raise InputError("run directory has no metrics.json", path) from err
-    except (OSError, UnicodeDecodeError) as err:
-        raise FormatError(f"cannot read metrics: {err}", path) from err
-    try:
-        doc = json.loads(text)
-    except json.JSONDecodeError as err:
-        raise FormatError(f"not valid JSON: {err}", path) from err
-    if not isinstance(doc, dict):
-        raise FormatError("metrics is not a JSON object", path)
-    return doc
-
-
-def _finite(v: Any) -> float | None:
-    """``v`` as a float if it is a finite JSON number, else None (JSON null, text, ...)."""
-    if isinstance(v, bool) or not isinstance(v, int | float):
-        return None
-    f = float(v)
-    return f if math.isfinite(f) else None
-
-
-def _positive(v: Any) -> float | None:
-    f = _finite(v)
-    return f if f is not None and f > 0 else None
-
-
-def run_sensor_reach(run_dir: Path, metrics: dict[str, Any]) -> tuple[float | None, str]:
+def run_sensor_reach(run_dir: Path, metrics: Metrics) -> tuple[float | None, str]:
     """The run's largest sensor range, m, and where it came from.
 
     Looked up in metrics.json (``input.max_range_m``, when the run recorded one), then in
@@ -245,12 +215,9 @@ def run_sensor_reach(run_dir: Path, metrics: dict[str, Any]) -> tuple[float | No
     ``max_range`` and the preset's). Returns ``(None, "unknown")`` when neither has one:
     a range that came from the log itself is not recorded in config.toml.
     """
-    found: list[float] = []
-    inp = metrics.get("input")
-    if isinstance(inp, dict):
-        found += [v for v in [_positive(inp.get("max_range_m"))] if v is not None]
-    if found:
-        return max(found), "metrics.json"
+    logged = finite(metrics.get("input", {}).get("max_range_m"))
+    if logged is not None and logged > 0:
+        return logged, "metrics.json"
     cfg_path = run_dir / "config.toml"
     if not cfg_path.is_file():
         return None, "unknown"
@@ -590,8 +557,7 @@ def evaluate_run(
     traj_err = None
     if truth_trajectory is not None:
         traj_err = _trajectory_error(run_dir, Path(truth_trajectory), rpe_delta, rpe_unit)
-    pm = metrics.get("paper_metric")
-    mean_var = _finite(pm.get("mean_feature_variance_m2")) if isinstance(pm, dict) else None
+    mean_var = finite(metrics.get("paper_metric", {}).get("mean_feature_variance_m2"))
     if mean_var is None:
         notes += ("metrics.json has no mean feature variance",)
     return Evaluation(

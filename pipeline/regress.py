@@ -30,7 +30,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -38,6 +38,7 @@ from formats.errors import ConfigError, FormatError, InputError
 from formats.options import doc_field
 from formats.tables import text_table
 from formats.toml_file import read_toml
+from pipeline.metrics_schema import Metrics, read_metrics
 
 __all__ = [
     "GOLDEN_EVALUATION",
@@ -176,18 +177,19 @@ def _show(v: Any) -> str:
 # --------------------------------------------------------------------------- comparisons
 
 
-def _get(doc: dict[str, Any], section: str, key: str, path: Path) -> Any:
-    sec = doc.get(section)
-    if not isinstance(sec, dict) or key not in sec:
-        raise FormatError(f"metrics have no {section}.{key}", path)
-    return sec[key]
+def _count(doc: Metrics, key: Literal["features", "readings_used"], path: Path) -> int:
+    counts = doc.get("counts", {})
+    if key not in counts:
+        raise FormatError(f"metrics have no counts.{key}", path)
+    return counts[key]
 
 
-def _count(doc: dict[str, Any], section: str, key: str, path: Path) -> int:
-    v = _get(doc, section, key, path)
-    if isinstance(v, bool) or not isinstance(v, int):
-        raise FormatError(f"metrics {section}.{key} is not an integer: {v!r}", path)
-    return v
+def _variance(doc: Metrics, path: Path) -> float | None:
+    paper = doc.get("paper_metric", {})
+    if "mean_feature_variance_m2" not in paper:
+        raise FormatError("metrics have no paper_metric.mean_feature_variance_m2", path)
+    v = paper["mean_feature_variance_m2"]
+    return None if v is None else float(v)
 
 
 def _relative_row(
@@ -285,8 +287,6 @@ def regress(
     InputError when either directory lacks metrics.json or map.yaml; FormatError when a
     file is unreadable.
     """
-    from pipeline.evaluate import read_metrics
-
     run_dir, golden_dir = Path(run_dir), Path(golden_dir)
     tol = tolerances or Tolerances()
     for d, what in ((run_dir, "run"), (golden_dir, "golden")):
@@ -303,23 +303,14 @@ def regress(
     f1 = _f1_row(run_dir, golden_dir, tol, notes)
     if f1 is not None:
         rows.append(f1)
-    g_feat = _count(gold, "counts", "features", gold_path)
-    c_feat = _count(cur, "counts", "features", cur_path)
+    g_feat = _count(gold, "features", gold_path)
+    c_feat = _count(cur, "features", cur_path)
     rows.append(_relative_row("features", g_feat, c_feat, tol.features_rel))
-
-    def variance(doc: dict[str, Any], path: Path) -> float | None:
-        v = _get(doc, "paper_metric", "mean_feature_variance_m2", path)
-        if v is None:
-            return None
-        if isinstance(v, bool) or not isinstance(v, int | float):
-            raise FormatError(f"metrics mean_feature_variance_m2 is not a number: {v!r}", path)
-        return float(v)
-
-    rows.append(_relative_row("mean_feature_variance_m2", variance(gold, gold_path),
-                              variance(cur, cur_path), tol.mean_feature_variance_rel))
+    rows.append(_relative_row("mean_feature_variance_m2", _variance(gold, gold_path),
+                              _variance(cur, cur_path), tol.mean_feature_variance_rel))
     rows += _compare_maps(run_dir / "map.yaml", golden_dir / "map.yaml", tol)
-    g_used = _count(gold, "counts", "readings_used", gold_path)
-    c_used = _count(cur, "counts", "readings_used", cur_path)
+    g_used = _count(gold, "readings_used", gold_path)
+    c_used = _count(cur, "readings_used", cur_path)
     rows.append(RegressionRow(
         "readings_used", g_used, c_used,
         "exact" if tol.readings_used_abs == 0 else f"±{tol.readings_used_abs}",
@@ -328,10 +319,8 @@ def regress(
     ))
 
     # Context, not verdicts: a different input or configuration explains a regression.
-    for section, key, what in (("input", "sha256", "input log"), ("run", "config_hash",
-                                                                   "configuration")):
-        g_v = (gold.get(section) or {}).get(key)
-        c_v = (cur.get(section) or {}).get(key)
-        if g_v != c_v:
-            notes.append(f"{what} differs from the golden's ({section}.{key})")
+    if gold.get("input", {}).get("sha256") != cur.get("input", {}).get("sha256"):
+        notes.append("input log differs from the golden's (input.sha256)")
+    if gold.get("run", {}).get("config_hash") != cur.get("run", {}).get("config_hash"):
+        notes.append("configuration differs from the golden's (run.config_hash)")
     return Regression(str(run_dir), str(golden_dir), tuple(rows), tuple(notes))

@@ -35,6 +35,7 @@ from pipeline.ingest import Survey, ordered_ranges, survey
 from pipeline.mapped_share import check_mapped_share, mapped_readings
 from pipeline.mapper import Mapper, make_mapper
 from pipeline.mapper.types import MapSnapshot, Scan
+from pipeline.methods import Method
 from pipeline.metrics import (
     RunMetrics,
     StageTimer,
@@ -107,7 +108,7 @@ def run(
 
     paths = log_paths(log_path)
     label = log_label(paths)
-    if compare_correction and config.mapper.method == "classic":
+    if compare_correction and config.mapper.method == Method.CLASSIC:
         raise ConfigError(
             "--compare-correction needs features: mapper.method 'attribution' or 'andersone'"
         )

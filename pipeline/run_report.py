@@ -14,7 +14,7 @@ from typing import Any
 
 from formats.writers.features_parquet import read_features
 from formats.writers.report import COMPARISON_LABELS, write_reports
-from pipeline.evaluate import read_metrics
+from pipeline.metrics_schema import read_metrics
 
 __all__ = ["COMPARISON_IMAGES", "write_run_reports"]
 

@@ -21,18 +21,19 @@ from pipeline.mapper.attribution import AttributionMapper
 from pipeline.mapper.classic import ClassicMapper
 from pipeline.mapper.protocol import Mapper
 from pipeline.mapper.types import GridSpec
+from pipeline.methods import Method
 
 __all__ = ["AndersoneMapper", "AttributionMapper", "ClassicMapper", "Mapper", "make_mapper"]
 
 
 def make_mapper(config: MapperConfig, grid: GridSpec) -> Mapper:
-    """The mapper named by ``config.method`` ('attribution', 'andersone' or 'classic')."""
-    if config.method == "attribution":
+    """The mapper named by ``config.method`` (a :class:`~pipeline.methods.Method`)."""
+    if config.method == Method.ATTRIBUTION:
         return AttributionMapper(config, grid)
-    if config.method == "classic":
+    if config.method == Method.CLASSIC:
         return ClassicMapper(config, grid)
-    if config.method == "andersone":
+    if config.method == Method.ANDERSONE:
         return AndersoneMapper(config, grid)
     raise ConfigError(
-        f"'mapper.method' must be 'attribution', 'andersone' or 'classic', got {config.method!r}"
+        f"'mapper.method' must be one of {[m.value for m in Method]}, got {config.method!r}"
     )

@@ -48,6 +48,8 @@ def test_runner_smoke_prints_every_section(tmp_path: Path) -> None:
         assert ("x octomap" in row[4]) == has_octomap
     # End to end: the 20 s log of 16 sonars at 10 Hz, every stage share, shares sum to 100 %.
     assert "sonarmap run, 1x log (3200 readings, MCAP zstd)" in by_case
+    assert by_case["sonarmap run, 1x log (3200 readings, MCAP zstd)"][4].endswith(" s CPU")
+    assert "; CPU " in by_case["0.5x log (1600 readings)"][4]
     shares = [float(r[2]) for r in rows if r[1].startswith("share: ")]
     assert len(shares) == 5 and sum(shares) == pytest.approx(100.0, abs=0.1)
     assert "0.5x log (1600 readings)" in by_case
@@ -58,7 +60,26 @@ def test_runner_smoke_prints_every_section(tmp_path: Path) -> None:
     assert by_case["2 workers"][4].endswith("x of 1 worker")
     text = results.read_text(encoding="utf-8")
     assert text.startswith("# Benchmark results") and "Machine: " in text
+    assert "load average" in text.splitlines()[2]
     assert "| mapper | 320 readings, paper's method (correction on) |" in text
+
+
+def test_cost_growth_table_splits_the_default_method(capsys: pytest.CaptureFixture[str]) -> None:
+    from benchmarks import bench_cost_growth
+    from pipeline.mapper.andersone import AndersoneMapper
+
+    original = AndersoneMapper.integrate_group
+    bench_cost_growth.main(["--firings", "40", "--repeat", "1"])
+    assert AndersoneMapper.integrate_group is original  # the timer is removed again
+    rows = [line.split("|")[1:-1] for line in capsys.readouterr().out.splitlines()
+            if line.startswith("| ") and "---" not in line][1:]
+    assert [r[0].strip() for r in rows] == [
+        "resolution 0.1 m", "resolution 0.05 m", "resolution 0.025 m", "beam 15 deg",
+        "beam 30 deg", "beam 60 deg", "match_distance 0.3 m", "match_distance 0.05 m"]
+    for r in rows:
+        total, paper, own, classic, features = (float(c) for c in r[1:])
+        assert total > 0 and 0 < paper <= total and own == pytest.approx(total - paper, abs=0.011)
+        assert classic > 0 and features > 0
 
 
 def test_benchmark_log_is_deterministic_and_cached(

@@ -15,6 +15,7 @@ import pytest
 
 from cli.app import app
 from formats.writers.nav2_map import load_nav2_map
+from pipeline.methods import Method
 
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLES = ROOT / "sample_logs"
@@ -253,7 +254,11 @@ def test_classic_method_has_no_features(runner, tmp_path):
 
 def test_usage_errors_exit_2(runner, tmp_path):
     assert _run(runner, ["run"]).exit_code == 2
-    assert _run(runner, ["run", "x", "-o", str(tmp_path / "o"), "--method", "magic"]).exit_code == 2
+    bad = _run(runner, ["run", "x", "-o", str(tmp_path / "o"), "--method", "magic"])
+    assert bad.exit_code == 2
+    # The choices are the config's: one definition (pipeline.methods.Method).
+    assert "'magic' is not one of 'attribution', 'andersone', 'classic'" in bad.output
+    assert [m.value for m in Method] == ["attribution", "andersone", "classic"]
     assert _run(runner, ["frobnicate"]).exit_code == 2
 
 

@@ -6,6 +6,7 @@ import pytest
 
 from formats.errors import ConfigError
 from pipeline.config import Config, config_from_dict, dump_config, load_config
+from pipeline.methods import Method
 
 
 def test_defaults_are_the_documented_ones():
@@ -31,6 +32,20 @@ def test_dump_round_trips_through_toml(tmp_path):
     again = load_config(p)
     assert again == cfg and again.hash() == cfg.hash()
     assert tomllib.loads(dump_config(Config()))["mapper"]["method"] == "attribution"
+
+
+def test_method_is_the_one_typed_choice():
+    assert Config().mapper.method is Method.ATTRIBUTION
+    for m in Method:
+        cfg = config_from_dict({"mapper": {"method": m.value}})
+        assert cfg.mapper.method is m
+        # What the hash, the dump and metrics.json see is the plain name.
+        assert cfg.to_dict()["mapper"]["method"] == m.value
+        assert f'method = "{m.value}"' in dump_config(cfg).splitlines()
+    for bad in ("Classic", "", 3):
+        with pytest.raises(ConfigError, match=r"'mapper.method' must be one of "
+                           r"\['attribution', 'andersone', 'classic'\], got "):
+            config_from_dict({"mapper": {"method": bad}})
 
 
 @pytest.mark.parametrize(

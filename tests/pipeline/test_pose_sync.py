@@ -248,3 +248,16 @@ def test_pose_track_running_maximum_carries_across_batches():
     tr = builder.finish()
     assert tr.t_ns.tolist() == [0, 10 * S, 11 * S, 12 * S]
     assert (tr.backwards, tr.duplicates) == (2, 1)
+
+
+def test_bulk_bounds_join_pieces_across_track_blocks():
+    # More poses than one block (65,536): the piece a block starts with continues the
+    # previous block's last piece, so the glitch in the first block stays an outlier.
+    n = 140_000
+    t = np.arange(n, dtype=np.int64) * (S // 20)
+    x = np.arange(n) * 1e-4
+    x[5000:5003] = 2000.0  # three poses 2 km away and back
+    tr = build_pose_track([PoseBatch(t, x, np.zeros(n), np.zeros(n), "odom", "base_link")])
+    box, left_out = tr.bulk_bounds()
+    assert left_out == 3
+    assert box == (0.0, 0.0, pytest.approx((n - 1) * 1e-4), 0.0)

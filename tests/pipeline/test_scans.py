@@ -92,3 +92,10 @@ def test_one_push_yields_every_complete_scan():
     assert b.count == 3
     assert [s.t_ns.tolist() for s in b.push(np.full(1, -1), _readings([S]))] == [[S // 2]]
     assert [s.t_ns.tolist() for s in b.flush()] == [[S]] and b.count == 5
+
+
+def test_a_one_nanosecond_window_keys_every_stamp_apart():
+    t0 = 7 * S + 50_000_000
+    keys = ScanKeys(ScanConfig(policy="time", window_s=1e-9), _track_from(7.05))
+    t = t0 + np.arange(4, dtype=np.int64)
+    assert keys.keys(t, np.full(4, -1)).tolist() == [0, 1, 2, 3]

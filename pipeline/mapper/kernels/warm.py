@@ -12,13 +12,14 @@ import time
 from pipeline.config import MapperConfig
 from pipeline.mapper import make_mapper
 from pipeline.mapper.synthetic import ring_scans, room_grid
+from pipeline.methods import Method
 
 
 def warm() -> float:
     """Map a few synthetic scans with every compiled path; returns the seconds it took."""
     t0 = time.perf_counter()
     scans = ring_scans(4)
-    for method in ("attribution", "andersone", "classic"):
+    for method in Method:
         mapper = make_mapper(MapperConfig(method=method), room_grid(0.1))
         for index in range(mapper.passes):
             mapper.begin_pass(index)

@@ -267,3 +267,27 @@ def test_load_boundary_values(tmp_path: Path) -> None:
     _write_yaml(tmp_path / "hi.yaml", "hi.pgm", occupied_thresh=1.5, free_thresh=1.2)
     hi = load_nav2_map(tmp_path / "hi.yaml")
     assert hi.classes.tolist() == [[0, 0]]  # black (occ 1.0) is below 1.2: free, not occupied
+
+
+def test_pgm_value_above_maxval_is_named(tmp_path: Path) -> None:
+    (tmp_path / "over.pgm").write_bytes(b"P2\n2 1\n100\n0 101\n")
+    _write_yaml(tmp_path / "over.yaml", "over.pgm")
+    with pytest.raises(FormatError, match=r"over\.pgm: PGM value above maxval 100$"):
+        load_nav2_map(tmp_path / "over.yaml")
+
+
+def test_non_finite_grid_numbers_are_refused_by_name(tmp_path: Path) -> None:
+    bad = GridSpec(origin_x=float("nan"), origin_y=0.0, resolution=0.05, width=4, height=3)
+    with pytest.raises(ValueError, match=r"^origin_x must be finite, got nan$"):
+        write_nav2_map(tmp_path / "m.yaml", np.zeros(GRID.shape, np.float32), bad)
+    assert not (tmp_path / "m.yaml").exists()
+
+
+def test_32_bit_integer_image_reads_as_16_bit_grey(tmp_path: Path) -> None:
+    # Mode "I" (32-bit samples, here a TIFF) is scaled by 65535 like 16-bit PNGs: 32768 is
+    # mid-grey (unknown in trinary), not clipped to white by an 8-bit conversion.
+    Image.fromarray(np.array([[0, 32768, 65535]], dtype=np.int32), mode="I").save(tmp_path / "i.tif")
+    with Image.open(tmp_path / "i.tif") as img:
+        assert img.mode == "I"
+    _write_yaml(tmp_path / "i.yaml", "i.tif")
+    assert load_nav2_map(tmp_path / "i.yaml").classes.tolist() == [[1, -1, 0]]

@@ -17,7 +17,7 @@ from evaluate_helpers import (
     write_truth,
 )
 
-from formats.errors import ConfigError, InputError
+from formats.errors import ConfigError, FormatError, InputError
 from formats.map_types import GridSpec
 from pipeline.evaluate import evaluate_run
 from pipeline.regress import (
@@ -133,6 +133,21 @@ def test_incomplete_directories_are_input_errors(tmp_path: Path) -> None:
         regress(run, golden)
     with pytest.raises(InputError, match="run directory not found"):
         regress(tmp_path / "nothing", golden)
+
+
+def test_golden_metrics_without_a_compared_key_are_a_format_error(tmp_path: Path) -> None:
+    doc = metrics_doc()
+    del doc["counts"]["readings_used"]
+    golden = write_run(tmp_path / "golden", metrics=doc)
+    run = write_run(tmp_path / "run")
+    with pytest.raises(FormatError, match=r"metrics have no counts.readings_used") as err:
+        regress(run, golden)
+    assert err.value.path == str(golden / "metrics.json")
+    doc = metrics_doc()
+    doc["counts"]["features"] = "3"
+    write_run(tmp_path / "run", metrics=doc)
+    with pytest.raises(FormatError, match=r"metrics counts.features is not an integer: '3'"):
+        regress(tmp_path / "run", golden)
 
 
 def test_notes_name_a_different_input(tmp_path: Path) -> None:

@@ -195,3 +195,18 @@ def test_counters_count_readings_once_and_unexplained_echoes() -> None:
     assert c.echoes_unattributed == 0
     snap = m.snapshot()
     assert snap.occupied.any()  # one echo, nothing contradicts it: its arc is occupied
+
+
+def test_cells_no_cone_reached_stay_unknown() -> None:
+    m = make_mapper(CFG, GRID)
+    scan = build_scan([2.0])  # one echo 2 m along +x from the origin, 30° beam
+    for index in range(m.passes):
+        m.begin_pass(index)
+        m.integrate(scan)
+    snap = m.snapshot()
+    x, _ = cell_centres(GRID)
+    behind = x < -0.5  # behind the sonar: no cone reaches these cells
+    assert np.isnan(snap.probability[behind]).all() and not snap.observed[behind].any()
+    seen = snap.observed & ~snap.occupied
+    assert seen.any() and (snap.probability[seen] < 0.5).all()  # the cone before the echo
+    assert int(snap.observed.sum()) < GRID.width * GRID.height // 20

@@ -235,3 +235,34 @@ def test_block_merge_equals_one_reading_at_a_time(seed: int) -> None:
     assert tab.first_seen_ns.tolist() == [f[4] for f in ref]
     assert tab.last_seen_ns.tolist() == [f[5] for f in ref]
     assert max(tab.merges) >= 5  # the fixture does chain many readings into one feature
+
+
+def test_a_map_without_features_has_an_empty_table_of_typed_columns() -> None:
+    import dataclasses
+
+    from pipeline.mapper import make_mapper
+
+    grid = GridSpec(-1.0, -1.0, 0.05, 40, 40)
+    for method in ("andersone", "classic"):  # classic never has features
+        table = make_mapper(MapperConfig(method=method), grid).snapshot().features
+        assert len(table) == 0
+        for f in dataclasses.fields(table):
+            col = getattr(table, f.name)
+            assert isinstance(col, np.ndarray) and col.shape == (0,), (method, f.name)
+            floats = f.name in ("x", "y", "cov_xx", "cov_xy", "cov_yy")
+            assert col.dtype == (np.float64 if floats else np.int64), (method, f.name)
+
+
+def test_feature_stamps_keep_epoch_nanoseconds() -> None:
+    from mapper_helpers import build_scan
+
+    from pipeline.mapper import make_mapper
+
+    t = 1_700_000_000_123_456_789  # not a float64: 2**53 < t
+    m = make_mapper(MapperConfig(method="andersone"), GridSpec(-3.0, -3.0, 0.05, 120, 120))
+    m.begin_pass(0)
+    m.integrate(build_scan([2.0, 2.5], alpha=[0.0, 1.0], t_ns=t))
+    table = m.snapshot().features
+    assert len(table) == 2
+    assert table.first_seen_ns.dtype == table.last_seen_ns.dtype == np.int64
+    assert table.first_seen_ns.tolist() == table.last_seen_ns.tolist() == [t, t]
