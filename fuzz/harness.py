@@ -38,7 +38,8 @@ class Target:
     ``log`` is what is opened (a file, or a bag/CSV directory); ``member`` the mutated
     file relative to the log's directory ('' = the log file itself); ``walker`` the
     structure walker of that file ('ros1', 'mcap', 'sqlite' or ''); ``text`` selects the
-    CSV row mutations.
+    CSV row mutations. ``companions``: intact files opened with it as one recording in
+    several files (a damaged split beside an intact copy of the same recording).
     """
 
     name: str
@@ -47,6 +48,7 @@ class Target:
     member: str = ""
     walker: str = ""
     text: bool = False
+    companions: tuple[Path, ...] = ()
 
     @property
     def file(self) -> Path:
@@ -110,8 +112,9 @@ def _time_limit(seconds: float) -> Iterator[None]:
         signal.signal(signal.SIGPROF, old)
 
 
-def read_everything(path: Path) -> int:
-    """Open a log, read ``info()`` and drain ``batches()``; returns the records read.
+def read_everything(path: Path | list[Path]) -> int:
+    """Open a log (or the files of one recording), read ``info()`` and drain
+    ``batches()``; returns the records read.
 
     A log without a range or pose topic (TopicError from ``batches``) still has its
     container drained message by message (ROS logs), so the container parser is
@@ -142,12 +145,14 @@ def check(target: Target, data: bytes, work: Path, time_limit_s: float = TIME_LI
 
     path = target.materialize(work, data)
     names = {path.name, target.file.name}
-    size = sum(p.stat().st_size for p in ([path] if path.is_file() else path.rglob("*")))
+    logs = [path, *target.companions]
+    size = sum(p.stat().st_size for log in logs
+               for p in ([log] if log.is_file() else log.rglob("*")))
     limit = MEMORY_BASE_BYTES + 10 * size
     tracemalloc.start()
     try:
         with _time_limit(time_limit_s):
-            records = read_everything(path)
+            records = read_everything(logs if target.companions else path)
         outcome = Outcome("ok", records=records)
     except _Timeout:
         outcome = Outcome("defect", f"timeout: more than {time_limit_s} s of CPU time")
@@ -264,4 +269,15 @@ def build_targets(root: Path) -> list[Target]:
     if not standalone.exists():
         shutil.copyfile(real / ROS2_REAL[2][1] / ROS2_REAL[2][2], standalone)
     out.append(Target("mcap-real-cdr", "mcap", standalone, walker="mcap"))
+    # One recording in two files, the damaged one beside an intact copy (read as one:
+    # formats/ros/multi_source.py merges them by time and reads identical messages once).
+    by_name = {t.name: t for t in out}
+    for name in ("ros1-lz4", "mcap-zstd", "ros2-db3"):
+        t = by_name[name]
+        copy = root / "copies" / t.log.name
+        if not copy.exists():
+            copy.parent.mkdir(exist_ok=True)
+            (shutil.copytree if t.log.is_dir() else shutil.copyfile)(t.log, copy)
+        out.append(Target(f"{name}-beside-a-copy", t.family, t.log, t.member, t.walker,
+                          companions=(copy,)))
     return out
