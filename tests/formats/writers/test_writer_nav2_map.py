@@ -291,3 +291,9 @@ def test_32_bit_integer_image_reads_as_16_bit_grey(tmp_path: Path) -> None:
         assert img.mode == "I"
     _write_yaml(tmp_path / "i.yaml", "i.tif")
     assert load_nav2_map(tmp_path / "i.yaml").classes.tolist() == [[1, -1, 0]]
+
+
+def test_pgm_with_maxval_1_is_a_black_and_white_map(tmp_path: Path) -> None:
+    (tmp_path / "bw.pgm").write_bytes(b"P2\n2 1\n1\n0 1\n")
+    _write_yaml(tmp_path / "bw.yaml", "bw.pgm")
+    assert load_nav2_map(tmp_path / "bw.yaml").classes.tolist() == [[1, 0]]
