@@ -187,8 +187,9 @@ class PoseRefinementConfig:
     submap_min_echoes: int = doc_field("a shorter stretch joins the next submap", default=60)
     submap_max_points: int = doc_field("points kept per submap (evenly thinned)", default=400)
     max_echo_range_m: float = doc_field("echoes farther than this are not matched, m", default=3.0)
-    arc_fraction: float = doc_field("an echo is matched along ± this fraction of its half beam",
-                               default=0.8)
+    arc_fraction: float = doc_field("an echo is placed along ± this fraction of its half beam "
+                               "(sharpness and matching; the consistency score uses the "
+                               "whole beam)", default=0.8)
     local_map_submaps: int = doc_field("a submap is matched against this many previous ones",
                                   default=3)
     field_resolution_m: float = doc_field("cell of the matching likelihood field, m", default=0.05)
@@ -211,10 +212,13 @@ class PoseRefinementConfig:
     calibration_search: bool = doc_field("search the odometry calibration that makes the echoes "
                                     "sharpest before matching", default=True)
     calibration_max_scale: float = doc_field(
-        "... scale error searched in ± this; 0 (default): the heading bias only — the "
-        "sharpness leans to a too-short scale on sonar (RESULTS.md)", default=0.0)
+        "... scale error searched in ± this by echo consistency (0: the heading bias only)",
+        default=0.0)
     calibration_max_bias_deg_per_m: float = doc_field("... heading bias searched in ± this, deg/m",
                                                  default=3.0)
+    calibration_min_gain: float = doc_field(
+        "... a heading bias is applied only when it sharpens the echoes by at least this "
+        "fraction (true poses: <= 0.002 measured; 0.8 deg/m of bias: >= 0.07)", default=0.01)
     calibrate: bool = doc_field("estimate the odometry's scale error and heading bias", default=True)
     prior_scale: float = doc_field("σ of the scale error's prior (fraction)", default=0.1)
     prior_bias_deg_per_m: float = doc_field("σ of the heading bias's prior, deg/m", default=2.0)
@@ -409,6 +413,8 @@ def _check_ranges(cfg: Config) -> None:
         need(v >= 1, f"pose_refinement.{key}", "must be >= 1", v)
     need(0 <= pr.calibration_max_scale < 0.5, "pose_refinement.calibration_max_scale",
          "must be in [0, 0.5)", pr.calibration_max_scale)
+    need(math.isfinite(pr.calibration_min_gain) and 0 <= pr.calibration_min_gain < 1,
+         "pose_refinement.calibration_min_gain", "must be in [0, 1)", pr.calibration_min_gain)
     need(0 < pr.calibration_max_bias_deg_per_m <= 45,
          "pose_refinement.calibration_max_bias_deg_per_m", "must be in (0, 45]",
          pr.calibration_max_bias_deg_per_m)

@@ -577,7 +577,7 @@ def _trajectory_error(
 ) -> dict[str, Any]:
     """ATE/RPE of the run's trajectory.csv against the true trajectory CSV."""
     from formats.writers.trajectory_csv import read_trajectory
-    from pipeline.trajectory_error import Poses2D, trajectory_error
+    from pipeline.trajectory_error import trajectory_error
 
     run_traj = run_dir / "trajectory.csv"
     if not run_traj.is_file():
@@ -588,9 +588,7 @@ def _trajectory_error(
         raise ConfigError(f"RPE unit must be 'm' or 'frames', got {rpe_unit!r}")
     try:
         result = trajectory_error(
-            Poses2D(est.t_ns, est.x, est.y, est.yaw),
-            Poses2D(truth.t_ns, truth.x, truth.y, truth.yaw),
-            rpe_delta=rpe_delta, rpe_unit="m" if rpe_unit == "m" else "frames",
+            est, truth, rpe_delta=rpe_delta, rpe_unit="m" if rpe_unit == "m" else "frames",
         )
     except InputError as err:
         raise InputError(err.reason, truth_path) from err

@@ -10,9 +10,10 @@ import numpy as np
 
 from formats.arrays import F64, I64
 from formats.errors import OutputError
-from formats.log_writers import LogContent, format_time_s, write_log
+from formats.log_writers import LogContent, write_log
 from formats.map_types import GridSpec
 from formats.writers.nav2_map import write_nav2_map
+from formats.writers.trajectory_csv import trajectory_csv_text
 
 
 class StampedPoses(Protocol):
@@ -66,13 +67,7 @@ def write_log_with_reference(
             raise OutputError("exists already, not overwriting", q)
     log_path = write_log(content, out, fmt, compression=compression)
     tp = trajectory
-    rows = [
-        f"{t},{x!r},{y!r},{a!r}"
-        for t, x, y, a in zip(
-            format_time_s(tp.t_ns), tp.x.tolist(), tp.y.tolist(), tp.yaw.tolist(), strict=True
-        )
-    ]
     with csv_path.open("x", encoding="utf-8", newline="") as f:
-        f.write("t,x,y,yaw\n" + "\n".join(rows) + "\n")
+        f.write(trajectory_csv_text(tp.t_ns, tp.x, tp.y, tp.yaw))
     write_nav2_map(yaml_path, probability, grid)
     return [log_path, yaml_path, pgm_path, csv_path]

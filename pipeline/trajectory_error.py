@@ -34,22 +34,10 @@ import numpy as np
 from formats.angles import wrap_angle
 from formats.arrays import F64, I64
 from formats.errors import ConfigError, InputError
+from formats.writers.trajectory_tum import Trajectory
 from pipeline.pose_sync import POSE_OK, PoseTrack, interpolate_poses
 
 RpeUnit = Literal["m", "frames"]
-
-
-@dataclass(frozen=True)
-class Poses2D:
-    """Stamped SE(2) poses (ns, m, m, rad), stamps strictly increasing."""
-
-    t_ns: I64
-    x: F64
-    y: F64
-    yaw: F64
-
-    def __len__(self) -> int:
-        return int(self.t_ns.shape[0])
 
 
 @dataclass(frozen=True)
@@ -106,13 +94,13 @@ class TrajectoryError:
         ]
 
 
-def associate(estimate: Poses2D, truth: Poses2D) -> tuple[Poses2D, Poses2D]:
+def associate(estimate: Trajectory, truth: Trajectory) -> tuple[Trajectory, Trajectory]:
     """The estimate's poses inside the truth's span and the truth interpolated at them."""
     track = PoseTrack(truth.t_ns, truth.x, truth.y, truth.yaw, "", "")
     look = interpolate_poses(track, estimate.t_ns, max_gap_ns=np.iinfo(np.int64).max)
     ok = look.reason == POSE_OK
-    est = Poses2D(estimate.t_ns[ok], estimate.x[ok], estimate.y[ok], estimate.yaw[ok])
-    ref = Poses2D(estimate.t_ns[ok], look.x[ok], look.y[ok], look.yaw[ok])
+    est = Trajectory(estimate.t_ns[ok], estimate.x[ok], estimate.y[ok], estimate.yaw[ok])
+    ref = Trajectory(estimate.t_ns[ok], look.x[ok], look.y[ok], look.yaw[ok])
     return est, ref
 
 
@@ -125,7 +113,7 @@ def align_se2(px: F64, py: F64, qx: F64, qy: F64) -> tuple[float, float, float]:
     return float(mqx - (c * mpx - s * mpy)), float(mqy - (s * mpx + c * mpy)), theta
 
 
-def rpe_pairs(truth: Poses2D, delta: float, unit: RpeUnit) -> tuple[I64, I64]:
+def rpe_pairs(truth: Trajectory, delta: float, unit: RpeUnit) -> tuple[I64, I64]:
     """Index pairs ``(i, j)`` of the relative pose error (see the module docstring)."""
     n = len(truth)
     if unit == "frames":
@@ -145,7 +133,7 @@ def rpe_pairs(truth: Poses2D, delta: float, unit: RpeUnit) -> tuple[I64, I64]:
 
 
 def trajectory_error(
-    estimate: Poses2D, truth: Poses2D, *, rpe_delta: float = 1.0, rpe_unit: RpeUnit = "m"
+    estimate: Trajectory, truth: Trajectory, *, rpe_delta: float = 1.0, rpe_unit: RpeUnit = "m"
 ) -> TrajectoryError:
     """ATE and RPE of ``estimate`` against ``truth``. InputError when fewer than two
     estimated poses fall inside the truth's time span."""
@@ -171,7 +159,7 @@ def trajectory_error(
     rot: F64 | None = None
     if i.shape[0]:
         # Relative motions in the frame of pose i, for the truth (Q) and the estimate (P).
-        def rel(p: Poses2D) -> tuple[F64, F64, F64]:
+        def rel(p: Trajectory) -> tuple[F64, F64, F64]:
             dx, dy = p.x[j] - p.x[i], p.y[j] - p.y[i]
             ci, si = np.cos(p.yaw[i]), np.sin(p.yaw[i])
             return ci * dx + si * dy, -si * dx + ci * dy, wrap_angle(p.yaw[j] - p.yaw[i])

@@ -1,5 +1,9 @@
-"""Trajectory CSV: ``t,x,y,yaw`` per pose — the format of ``<stem>.truth.csv`` and of a
-run's ``trajectory.csv``.
+"""The truth trajectory CSV, ``<stem>.truth.csv``: ``t,x,y,yaw`` per pose.
+
+``simulate`` and ``emulate`` write it beside their logs (the true trajectory; with drift,
+the log carries the odometry) and ``evaluate --truth-trajectory`` reads it. A run's own
+``trajectory.csv`` is TUM (:mod:`formats.writers.trajectory_tum`); :func:`read_trajectory`
+reads either, so a truth and a run can be given in any order.
 
 ``t`` is exact decimal seconds (``<sec>.<9-digit nsec>`` of the int64 ns stamp), ``x, y``
 metres and ``yaw`` radians as Python ``repr`` floats (they round-trip exactly), so a file
@@ -10,47 +14,26 @@ are comments.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
 
-from formats.arrays import F64, I64
 from formats.errors import FormatError, InputError
+from formats.log_writers import format_time_s
 from formats.writers.atomic import atomic_write_text
+from formats.writers.trajectory_tum import Trajectory, read_trajectory_tum
 
 COLUMNS = ("t", "x", "y", "yaw")
-
-
-@dataclass(frozen=True)
-class TrajectoryTable:
-    """Stamped poses read from a trajectory CSV (ns, m, m, rad)."""
-
-    t_ns: I64
-    x: F64
-    y: F64
-    yaw: F64
-
-    def __len__(self) -> int:
-        return int(self.t_ns.shape[0])
-
-
-def format_stamp(t_ns: int) -> str:
-    """Exact decimal seconds ``<sec>.<9-digit nsec>`` of an int ns stamp."""
-    sign = "-" if t_ns < 0 else ""
-    sec, nsec = divmod(abs(t_ns), 1_000_000_000)
-    return f"{sign}{sec}.{nsec:09d}"
 
 
 def trajectory_csv_text(t_ns: npt.ArrayLike, x: npt.ArrayLike, y: npt.ArrayLike,
                         yaw: npt.ArrayLike) -> str:
     """The CSV text of a trajectory (header ``t,x,y,yaw``)."""
     cols = [np.asarray(c, dtype=np.float64).tolist() for c in (x, y, yaw)]
-    stamps = np.asarray(t_ns, dtype=np.int64).tolist()
     rows = [
-        f"{format_stamp(t)},{a!r},{b!r},{c!r}"
-        for t, a, b, c in zip(stamps, *cols, strict=True)
+        f"{t},{a!r},{b!r},{c!r}"
+        for t, a, b, c in zip(format_time_s(t_ns), *cols, strict=True)
     ]
     return ",".join(COLUMNS) + "\n" + "".join(r + "\n" for r in rows)
 
@@ -76,7 +59,7 @@ def _stamp_ns(text: str) -> int:
     return sign * (int(whole or "0") * 1_000_000_000 + int((frac[:9] or "0").ljust(9, "0")))
 
 
-def read_trajectory_csv(path: Path) -> TrajectoryTable:
+def read_trajectory_csv(path: Path) -> Trajectory:
     """A trajectory CSV as arrays; InputError when missing, FormatError (naming the file and
     the line) when malformed, unsorted or not finite."""
     try:
@@ -120,7 +103,7 @@ def read_trajectory_csv(path: Path) -> TrajectoryTable:
     if n > 1 and not (np.diff(t) > 0).all():
         bad = body[int(np.flatnonzero(np.diff(t) <= 0)[0]) + 1][0]
         raise FormatError(f"line {bad}: stamps must increase", path)
-    return TrajectoryTable(t, vals[0].copy(), vals[1].copy(), vals[2].copy())
+    return Trajectory(t, vals[0].copy(), vals[1].copy(), vals[2].copy())
 
 
 def _is_number(s: str) -> bool:
@@ -131,12 +114,10 @@ def _is_number(s: str) -> bool:
     return True
 
 
-def read_trajectory(path: Path) -> TrajectoryTable:
+def read_trajectory(path: Path) -> Trajectory:
     """A trajectory file of either layout sonarmap writes: the CSV ``t,x,y,yaw`` (truth
     files) or TUM (a run's ``trajectory.csv``, :mod:`formats.writers.trajectory_tum`),
     told apart by the first line that is not a comment (commas or not)."""
-    from formats.writers.trajectory_tum import read_trajectory_tum
-
     try:
         with Path(path).open(encoding="utf-8") as f:
             first = next((ln for ln in f if ln.strip() and not ln.lstrip().startswith("#")), "")
@@ -146,5 +127,4 @@ def read_trajectory(path: Path) -> TrajectoryTable:
         raise FormatError(f"cannot read trajectory: {err}", path) from err
     if "," in first or not first:
         return read_trajectory_csv(path)
-    tum = read_trajectory_tum(path)
-    return TrajectoryTable(tum.t_ns, tum.x, tum.y, tum.yaw)
+    return read_trajectory_tum(path)

@@ -12,6 +12,7 @@ base frame through the sensor's mount, so they can be moved with any pose estima
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,6 +34,19 @@ class Echoes:
     bx: F64  # (N, ARC_SAMPLES)
     by: F64
     odo: F64  # (N, 3) odometry pose (x, y, yaw) of the robot at t_ns
+    sx: F64  # (N,) the sensor's position in the base frame, m (the apex of the echo's cone)
+    sy: F64
+    axis: F64  # (N,) the beam axis in the base frame, rad
+    half: F64  # (N,) half the beam width, rad
+    range_m: F64  # (N,) the echo's range, m
+
+    def arc(self, fraction: float) -> tuple[F64, F64]:
+        """``ARC_SAMPLES`` points of each echo's arc over ``±fraction`` of its half beam,
+        in the base frame."""
+        u = np.linspace(-1.0, 1.0, ARC_SAMPLES) * fraction
+        ang = self.axis[:, None] + self.half[:, None] * u[None, :]
+        return (self.sx[:, None] + self.range_m[:, None] * np.cos(ang),
+                self.sy[:, None] + self.range_m[:, None] * np.sin(ang))
 
     def __len__(self) -> int:
         return int(self.t_ns.shape[0])
@@ -50,7 +64,7 @@ def collect_echoes(
     max_gap_ns: int,
 ) -> Echoes:
     """One pass over the log's readings (time order) keeping the echoes that have a pose."""
-    parts: list[tuple[I64, F64, F64, F64]] = []
+    parts: list[tuple[I64, F64, F64, F64, F64, F64, F64]] = []
     for chunk in ordered_ranges(reader):
         b = chunk.batch
         if len(b) == 0:
@@ -68,18 +82,14 @@ def collect_echoes(
         ok = look.reason == POSE_OK
         sid = sid[echo][ok]
         rr = r[echo][ok]
-        u = np.linspace(-1.0, 1.0, ARC_SAMPLES) * arc_fraction
-        ang = sensors.mount_yaw[sid][:, None] + 0.5 * fov[echo][ok][:, None] * u[None, :]
-        bx = sensors.mount_x[sid][:, None] + rr[:, None] * np.cos(ang)
-        by = sensors.mount_y[sid][:, None] + rr[:, None] * np.sin(ang)
         odo = np.column_stack([look.x[ok], look.y[ok], look.yaw[ok]])
-        parts.append((t[ok], bx, by, odo))
-    if not parts:
-        empty = np.empty((0, ARC_SAMPLES))
-        return Echoes(np.empty(0, np.int64), empty, empty.copy(), np.empty((0, 3)))
-    return Echoes(
-        np.concatenate([p[0] for p in parts]),
-        np.concatenate([p[1] for p in parts]),
-        np.concatenate([p[2] for p in parts]),
-        np.concatenate([p[3] for p in parts]),
-    )
+        parts.append((t[ok], odo, sensors.mount_x[sid], sensors.mount_y[sid],
+                      sensors.mount_yaw[sid], 0.5 * fov[echo][ok], rr))
+    if parts:
+        cols = [np.concatenate([p[k] for p in parts]) for k in range(7)]
+    else:
+        cols = [np.empty(0, np.int64), np.empty((0, 3)), *(np.empty(0) for _ in range(5))]
+    empty = np.empty((0, ARC_SAMPLES))
+    echoes = Echoes(cols[0], empty, empty, *cols[1:])
+    bx, by = echoes.arc(arc_fraction)
+    return dataclasses.replace(echoes, bx=bx, by=by)

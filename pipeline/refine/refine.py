@@ -29,6 +29,7 @@ Everything is numpy and scipy without randomness, so the same input gives the sa
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -125,16 +126,19 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
             tt, tx, ty, tyaw, echoes,
             max_scale=cfg.calibration_max_scale, max_bias=math.radians(cfg.calibration_max_bias_deg_per_m),
             res=cfg.field_resolution_m, sigma=cfg.field_sigma_m,
+            min_gain=cfg.calibration_min_gain,
         )
         ox, oy, oyaw = cal0.correct(tx, ty, tyaw)
         look = interpolate_poses(PoseTrack(tt, ox, oy, oyaw, "", ""), echoes.t_ns,
                                  np.iinfo(np.int64).max)
-        echoes = Echoes(echoes.t_ns, echoes.bx, echoes.by,
-                        np.column_stack([look.x, look.y, look.yaw]))
+        echoes = dataclasses.replace(echoes, odo=np.column_stack([look.x, look.y, look.yaw]))
         metrics["search_scale_error"] = cal0.scale_error
         metrics["search_heading_bias_deg_per_m"] = math.degrees(cal0.heading_bias)
         metrics["sharpness_before"] = cal0.sharpness_uncalibrated
         metrics["sharpness_after"] = cal0.sharpness
+        if math.isfinite(cal0.consistency):
+            metrics["consistency_before"] = cal0.consistency_uncalibrated
+            metrics["consistency_after"] = cal0.consistency
     else:
         ox, oy, oyaw = tx, ty, tyaw
     path = path_length_at(tt, ox, oy, echoes.t_ns) if len(echoes) else np.empty(0)

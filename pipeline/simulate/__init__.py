@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from formats.writers.trajectory_tum import Trajectory
 from pipeline.simulate.simulate import (
     SimOptions,
     SimRanges,
@@ -11,7 +12,7 @@ from pipeline.simulate.simulate import (
     truth_paths,
     write_simulation,
 )
-from pipeline.simulate.trajectory import Trajectory, load_waypoints
+from pipeline.simulate.trajectory import load_waypoints
 from pipeline.simulate.world import World, load_world, world_from_occupancy
 
 __all__ = [

@@ -27,16 +27,12 @@ from formats.errors import ConfigError
 from formats.log_writers import LogContent
 from formats.options import MountConfig
 from formats.presets import PRESETS
+from formats.writers.trajectory_tum import Trajectory
 from pipeline.config import MapperConfig
 from pipeline.drift import DriftModel, apply_drift
 from pipeline.log_with_reference import reference_paths, write_log_with_reference
 from pipeline.simulate.sonar import SonarRing, add_sensor_errors, firing_schedule, true_ranges
-from pipeline.simulate.trajectory import (
-    Trajectory,
-    load_waypoints,
-    plan_motion,
-    sample_trajectory,
-)
+from pipeline.simulate.trajectory import load_waypoints, plan_motion, sample_trajectory
 from pipeline.simulate.world import World, load_world
 
 _MAPPER = MapperConfig()

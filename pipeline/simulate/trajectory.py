@@ -16,21 +16,9 @@ import numpy as np
 import numpy.typing as npt
 
 from formats.angles import wrap_angle
-from formats.arrays import F64, I64
+from formats.arrays import F64
 from formats.errors import ConfigError
-
-
-@dataclass(frozen=True)
-class Trajectory:
-    """Robot poses: ``t_ns`` int64 ns, ``x``/``y`` m, ``yaw`` rad wrapped to [−π, π)."""
-
-    t_ns: I64
-    x: F64
-    y: F64
-    yaw: F64
-
-    def __len__(self) -> int:
-        return int(self.t_ns.shape[0])
+from formats.writers.trajectory_tum import Trajectory  # the one stamped-pose type
 
 
 @dataclass(frozen=True)

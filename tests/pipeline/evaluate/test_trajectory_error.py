@@ -11,16 +11,17 @@ import pytest
 
 from formats.errors import ConfigError, FormatError, InputError
 from formats.writers.trajectory_csv import read_trajectory_csv, write_trajectory_csv
-from pipeline.trajectory_error import Poses2D, align_se2, rpe_pairs, trajectory_error
+from formats.writers.trajectory_tum import Trajectory
+from pipeline.trajectory_error import align_se2, rpe_pairs, trajectory_error
 
 NS = 1_000_000_000
 
 
 def poses(x: list[float], y: list[float], yaw: list[float] | None = None,
-          t_s: list[float] | None = None) -> Poses2D:
+          t_s: list[float] | None = None) -> Trajectory:
     n = len(x)
     t = np.arange(n) if t_s is None else np.asarray(t_s)
-    return Poses2D((np.asarray(t) * NS).astype(np.int64), np.asarray(x, float),
+    return Trajectory((np.asarray(t) * NS).astype(np.int64), np.asarray(x, float),
                    np.asarray(y, float), np.zeros(n) if yaw is None else np.asarray(yaw, float))
 
 
@@ -28,7 +29,7 @@ def test_a_rigidly_moved_estimate_has_zero_ate_and_rpe() -> None:
     truth = poses([0, 1, 2, 3, 3], [0, 0, 0, 0, 1], [0, 0, 0, math.pi / 2, math.pi / 2])
     th, tx, ty = math.radians(30), 5.0, -2.0
     c, s = math.cos(th), math.sin(th)
-    est = Poses2D(truth.t_ns, c * truth.x - s * truth.y + tx, s * truth.x + c * truth.y + ty,
+    est = Trajectory(truth.t_ns, c * truth.x - s * truth.y + tx, s * truth.x + c * truth.y + ty,
                   truth.yaw + th)
     e = trajectory_error(est, truth)
     assert e.ate_rmse_m == pytest.approx(0.0, abs=1e-12)

@@ -10,11 +10,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from formats.writers.trajectory_csv import read_trajectory as read_trajectory_csv
+from formats.writers.trajectory_csv import read_trajectory
 from pipeline.config import Config, PoseRefinementConfig
 from pipeline.simulate import SimOptions, simulate, write_simulation
 from pipeline.simulate.world import world_from_dict
-from pipeline.trajectory_error import Poses2D, trajectory_error
+from pipeline.trajectory_error import trajectory_error
 
 WORLD = {
     "polygon": [{"points": [[0, 0], [10, 0], [10, 6], [0, 6]]}],
@@ -35,9 +35,7 @@ def drifted_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def ate(traj: Path, truth: Path) -> float:
-    est, tru = read_trajectory_csv(traj), read_trajectory_csv(truth)
-    return trajectory_error(Poses2D(est.t_ns, est.x, est.y, est.yaw),
-                            Poses2D(tru.t_ns, tru.x, tru.y, tru.yaw)).ate_rmse_m
+    return trajectory_error(read_trajectory(traj), read_trajectory(truth)).ate_rmse_m
 
 
 def test_refined_run_corrects_the_drift_and_is_deterministic(drifted_log: Path,
@@ -72,7 +70,7 @@ def test_unrefined_run_writes_the_odometry_as_trajectory(drifted_log: Path,
     res = run(drifted_log, tmp_path / "plain", Config())
     assert res.metrics.pose_refinement is None
     assert not (tmp_path / "plain" / "odometry.csv").exists()
-    traj = read_trajectory_csv(tmp_path / "plain" / "trajectory.csv")
+    traj = read_trajectory(tmp_path / "plain" / "trajectory.csv")
     assert len(traj) == res.metrics.counts["poses"]
     assert "pose_refinement" not in json.loads((tmp_path / "plain" / "metrics.json").read_text())
 
@@ -94,4 +92,4 @@ def test_refinement_on_true_poses_barely_moves_them(tmp_path: Path) -> None:
     assert math.isfinite(pr["sharpness_after"])
     assert pr["sharpness_after"] >= pr["sharpness_before"]
     np.testing.assert_allclose(  # TUM keeps 9 decimals
-        read_trajectory_csv(tmp_path / "run" / "odometry.csv").x, sim.poses.x, atol=1e-9)
+        read_trajectory(tmp_path / "run" / "odometry.csv").x, sim.poses.x, atol=1e-9)

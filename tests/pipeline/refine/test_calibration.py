@@ -1,0 +1,69 @@
+"""The two calibration scores on true poses (pipeline.refine.calibration): the sharpness
+rewards a too-short scale (the bias the consistency score was built to avoid), the echo
+consistency peaks at the true calibration."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from formats import open_log
+from formats.presets import PRESETS
+from pipeline.config import Config
+from pipeline.refine import Echoes, collect_echoes
+from pipeline.refine.calibration import _Consistency, _Sharpness
+from pipeline.simulate import SimOptions, simulate, write_simulation
+from pipeline.simulate.world import world_from_dict
+
+WORLD = {
+    "polygon": [{"points": [[0, 0], [10, 0], [10, 6], [0, 6]]}],
+    "segment": [{"from": [3, 0], "to": [3, 2.5]}, {"from": [6, 6], "to": [6, 3.5]},
+                {"from": [7.5, 1.5], "to": [8.5, 1.5]}, {"from": [4.5, 3], "to": [4.5, 4]}],
+}
+WAYPOINTS = [[1.5, 1.5], [8.5, 3.0], [8.5, 4.8], [1.5, 4.8], [1.5, 1.5], [8.5, 3.0]]
+
+
+@pytest.fixture(scope="module")
+def true_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[object, Echoes]:
+    from pipeline.run import prepare
+
+    sim = simulate(world_from_dict(WORLD), WAYPOINTS,
+                   SimOptions(seed=3, speed=0.4, ring_rate_hz=5.0,
+                              mounts=PRESETS["pioneer-p3dx"]))
+    log = tmp_path_factory.mktemp("cal") / "room.mcap"
+    write_simulation(sim, log, "mcap")
+    cfg = Config()
+    with open_log(log, cfg) as reader:
+        sv, sensors, _ = prepare(reader, cfg)
+        echoes = collect_echoes(reader, sv.track, sensors, eps_max=cfg.mapper.eps_max,
+                                max_echo_range_m=3.0, arc_fraction=1.0, time_offset_ns=0,
+                                max_gap_ns=10**9)
+    return sv.track, echoes
+
+
+def scores(true_run: tuple[object, Echoes], kind: type, res: float) -> dict[float, float]:
+    track, echoes = true_run
+    t, x, y, yaw = (np.asarray(getattr(track, a)) for a in ("t_ns", "x", "y", "yaw"))
+    f = kind(t, x, y, yaw, echoes, res=res, sigma=0.1)
+    return {k: f(k, 0.0) for k in (-0.04, 0.0, 0.04)}
+
+
+def test_sharpness_prefers_a_shorter_scale_on_true_poses(true_run: tuple[object, Echoes]
+                                                         ) -> None:
+    s = scores(true_run, _Sharpness, 0.05)
+    assert s[0.04] > s[0.0] > s[-0.04]  # shrinking the path packs the echoes: "sharper"
+
+
+def test_consistency_peaks_at_the_true_scale(true_run: tuple[object, Echoes]) -> None:
+    c = scores(true_run, _Consistency, 0.1)
+    assert c[0.0] > c[0.04] and c[0.0] > c[-0.04]
+    assert all(0.0 < v <= 1.0 for v in c.values())
+
+
+def test_consistency_drops_under_a_heading_bias(true_run: tuple[object, Echoes]) -> None:
+    track, echoes = true_run
+    t, x, y, yaw = (np.asarray(getattr(track, a)) for a in ("t_ns", "x", "y", "yaw"))
+    f = _Consistency(t, x, y, yaw, echoes, res=0.1, sigma=0.1)
+    assert f(0.0, 0.0) > f(0.0, math.radians(0.5)) + 0.02
