@@ -15,7 +15,7 @@ import math
 import numpy as np
 from numba import njit
 
-from pipeline.mapper.kernels.cone import cone_row_span, cone_rows
+from pipeline.mapper.kernels.cone import cones_row_spans
 
 _NONE, _FREE, _OCC = 0, 1, 2
 
@@ -34,37 +34,10 @@ def classic_scans(cones: np.ndarray, up_down: np.ndarray, ranges: np.ndarray, ec
     per classified cell, walking the spans again (the window is reset as it goes).
     """
     freed = 0
-    big = np.iinfo(np.int64).max
     for k in range(cone_cut.shape[0] - 1):
         lo, hi = cone_cut[k], cone_cut[k + 1]
-        n_rows = 0
-        for i in range(lo, hi):
-            r0, r1 = cone_rows(cones[i, 1], cones[i, 2], cones[i, 3], cones[i, 5],
-                               up_down[i, 0], up_down[i, 1], gy, res, height)
-            if r1 >= r0:
-                n_rows += r1 - r0 + 1
-        owner = np.empty(n_rows, dtype=np.int64)
-        rows = np.empty(n_rows, dtype=np.int64)
-        c0s = np.empty(n_rows, dtype=np.int64)
-        c1s = np.empty(n_rows, dtype=np.int64)
-        n = 0
-        row_lo, row_hi, col_lo, col_hi = big, -1, big, -1
-        for i in range(lo, hi):
-            ox, oy, radius = cones[i, 0], cones[i, 1], cones[i, 2]
-            s1, c1, s2, c2 = cones[i, 3], cones[i, 4], cones[i, 5], cones[i, 6]
-            r0, r1 = cone_rows(oy, radius, s1, s2, up_down[i, 0], up_down[i, 1], gy, res, height)
-            for row in range(r0, r1 + 1):
-                a, b = cone_row_span(ox, oy, radius, s1, c1, s2, c2, row, gx, gy, res, width)
-                if a <= b:
-                    owner[n] = i
-                    rows[n] = row
-                    c0s[n] = a
-                    c1s[n] = b
-                    n += 1
-                    row_lo = min(row_lo, row)
-                    row_hi = max(row_hi, row)
-                    col_lo = min(col_lo, a)
-                    col_hi = max(col_hi, b)
+        n, owner, rows, c0s, c1s, row_lo, row_hi, col_lo, col_hi = cones_row_spans(
+            cones, up_down, lo, hi, gx, gy, res, width, height)
         if n == 0:
             continue
         state = np.zeros((row_hi - row_lo + 1, col_hi - col_lo + 1), dtype=np.int8)

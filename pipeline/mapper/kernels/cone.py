@@ -192,3 +192,48 @@ def edge_sector_spans(ox: float, oy: float, s1: float, c1: float, s2: float, c2:
         c1s[n] = b
         n += 1
     return n
+
+
+@njit(cache=True)
+def cones_row_spans(cones: np.ndarray, up_down: np.ndarray, lo: int, hi: int, gx: float,
+                    gy: float, res: float, width: int, height: int
+                    ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                               int, int, int, int]:
+    """The row spans of cones ``lo:hi`` (whole cones, out to ``radius``) and their box.
+
+    ``cones[k]`` = ``(ox, oy, radius, sin e1, cos e1, sin e2, cos e2)``, ``up_down[k]`` =
+    whether the wedge holds +90°, −90°. Returns ``(n, owner, rows, c0s, c1s, row_lo,
+    row_hi, col_lo, col_hi)``: span ``j < n`` is row ``rows[j]``, columns ``c0s[j] ..
+    c1s[j]`` of cone ``owner[j]``; the box is empty (``row_hi = −1``) when ``n = 0``.
+    """
+    n_rows = 0
+    for k in range(lo, hi):
+        r0, r1 = cone_rows(cones[k, 1], cones[k, 2], cones[k, 3], cones[k, 5], up_down[k, 0],
+                           up_down[k, 1], gy, res, height)
+        if r1 >= r0:
+            n_rows += r1 - r0 + 1
+    owner = np.empty(n_rows, dtype=np.int64)
+    rows = np.empty(n_rows, dtype=np.int64)
+    c0s = np.empty(n_rows, dtype=np.int64)
+    c1s = np.empty(n_rows, dtype=np.int64)
+    n = 0
+    big = np.iinfo(np.int64).max
+    row_lo, row_hi, col_lo, col_hi = big, -1, big, -1
+    for k in range(lo, hi):
+        ox, oy, radius = cones[k, 0], cones[k, 1], cones[k, 2]
+        s1, c1, s2, c2 = cones[k, 3], cones[k, 4], cones[k, 5], cones[k, 6]
+        r0, r1 = cone_rows(oy, radius, s1, s2, up_down[k, 0], up_down[k, 1], gy, res, height)
+        for row in range(r0, r1 + 1):
+            a, b = cone_row_span(ox, oy, radius, s1, c1, s2, c2, row, gx, gy, res, width)
+            if a > b:
+                continue
+            owner[n] = k
+            rows[n] = row
+            c0s[n] = a
+            c1s[n] = b
+            n += 1
+            row_lo = min(row_lo, row)
+            row_hi = max(row_hi, row)
+            col_lo = min(col_lo, a)
+            col_hi = max(col_hi, b)
+    return n, owner, rows, c0s, c1s, row_lo, row_hi, col_lo, col_hi

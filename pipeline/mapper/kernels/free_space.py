@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from pipeline.mapper.kernels.cone import cone_row_span, cone_rows
+from pipeline.mapper.kernels.cone import cones_row_spans
 
 
 @njit(cache=True)
@@ -30,34 +30,8 @@ def free_rows(cones: np.ndarray, up_down: np.ndarray, lo: int, hi: int, gx: floa
     ``cones[k]`` = ``(ox, oy, radius, sin e1, cos e1, sin e2, cos e2)``, ``up_down[k]`` =
     whether the wedge holds +90°, −90°.
     """
-    n_rows = 0
-    for k in range(lo, hi):
-        r0, r1 = cone_rows(cones[k, 1], cones[k, 2], cones[k, 3], cones[k, 5], up_down[k, 0],
-                           up_down[k, 1], gy, res, height)
-        if r1 >= r0:
-            n_rows += r1 - r0 + 1
-    rows = np.empty(n_rows, dtype=np.int64)
-    c0s = np.empty(n_rows, dtype=np.int64)
-    c1s = np.empty(n_rows, dtype=np.int64)
-    n = 0
-    big = np.iinfo(np.int64).max
-    row_lo, row_hi, col_lo, col_hi = big, -1, big, -1
-    for k in range(lo, hi):
-        ox, oy, radius = cones[k, 0], cones[k, 1], cones[k, 2]
-        s1, c1, s2, c2 = cones[k, 3], cones[k, 4], cones[k, 5], cones[k, 6]
-        r0, r1 = cone_rows(oy, radius, s1, s2, up_down[k, 0], up_down[k, 1], gy, res, height)
-        for row in range(r0, r1 + 1):
-            a, b = cone_row_span(ox, oy, radius, s1, c1, s2, c2, row, gx, gy, res, width)
-            if a > b:
-                continue
-            rows[n] = row
-            c0s[n] = a
-            c1s[n] = b
-            n += 1
-            row_lo = min(row_lo, row)
-            row_hi = max(row_hi, row)
-            col_lo = min(col_lo, a)
-            col_hi = max(col_hi, b)
+    n, _, rows, c0s, c1s, row_lo, row_hi, col_lo, col_hi = cones_row_spans(
+        cones, up_down, lo, hi, gx, gy, res, width, height)
     if n == 0:
         empty = np.zeros(0, dtype=np.int64)
         return 0, 0, -1, np.zeros(1, dtype=np.int64), empty, empty, 0
