@@ -36,7 +36,7 @@ from pipeline.emulate.laser_map import LaserMap, LaserMapOptions, laser_occupanc
 from pipeline.emulate.ring import (
     DEFAULT_FOV_DEG,
     DEFAULT_MAX_RANGE_M,
-    VirtualRing,
+    SonarRing,
     cone_coverage,
     laser_view,
     mounts_from_config,
@@ -59,7 +59,7 @@ __all__ = [
     "LaserLog",
     "LaserMap",
     "LaserMapOptions",
-    "VirtualRing",
+    "SonarRing",
     "cone_coverage",
     "emulate",
     "emulate_ranges",
