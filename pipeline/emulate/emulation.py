@@ -16,7 +16,8 @@ from formats.errors import InputError
 from formats.laser_log import LaserLog
 from formats.log_writers import LogContent
 from pipeline.drift import DriftModel, apply_drift
-from pipeline.emulate.ring import SonarRing, cone_coverage, laser_view
+from pipeline.emulate.ring import cone_coverage, laser_view
+from pipeline.sonar_ring import SonarRing
 
 CHUNK_CELLS = 2_000_000  # bound on (scan × beam × sonar) and ray samples held at once
 
