@@ -78,7 +78,7 @@ class AttributionMapper:
         # The paper's mapper on a second thread (config.threads == 2), else inline.
         self._paper_thread = PaperThread(self.paper) if config.threads > 1 else None
         self._group_index = 0  # of the next group in the current pass
-        self.counters: MapperCounters = self.paper.counters
+        self._unattributed = 0  # echoes pass 1 found no candidate cell for
         self.free: F32 = empty_grid(grid.shape)
         self.arcs: F32 = empty_grid(grid.shape)
         self.hits: F32 = empty_grid(grid.shape)
@@ -138,10 +138,18 @@ class AttributionMapper:
             count_arcs(arcs, up_down, r_inner, g.origin_x, g.origin_y, g.resolution,
                        self._arc_diff)
         else:
-            self.counters.echoes_unattributed += int(attribute_echoes(
+            self._unattributed += int(attribute_echoes(
                 arcs, up_down, r_inner, g.origin_x, g.origin_y, g.resolution, self.free,
                 self.arcs, cfg.attr_candidate_ratio, cfg.attr_dilution, self.hits,
             ))
+
+    @property
+    def counters(self) -> MapperCounters:
+        """The paper's mapper's counters (readings, scans, features) and the echoes pass 1
+        left unattributed; waits for the paper's thread."""
+        self._paper_done()
+        self.paper.counters.echoes_unattributed = self._unattributed
+        return self.paper.counters
 
     def _paper_done(self) -> None:
         """Wait for the paper's mapper's thread to integrate every group."""

@@ -18,7 +18,6 @@ from __future__ import annotations
 import queue
 import threading
 import weakref
-from typing import Any
 
 from pipeline.mapper.andersone import AndersoneMapper
 from pipeline.mapper.scan_group import ScanGroup
@@ -62,7 +61,7 @@ class PaperThread:
     def offer(self, index: int, group: ScanGroup) -> None:
         """Pass 0: hand over group ``index`` if it is the next one needed and the queue has
         room now; after the first miss, pass 0 offers nothing more."""
-        self._raise_failure()
+        self._check()
         if not self._offering or index != self.handed:
             return
         try:
@@ -74,7 +73,7 @@ class PaperThread:
 
     def give(self, index: int, group: ScanGroup) -> None:
         """Pass 1: hand over group ``index`` if the thread has not had it (waits for room)."""
-        self._raise_failure()
+        self._check()
         if index < self.handed:
             return
         if index != self.handed:
@@ -88,9 +87,12 @@ class PaperThread:
             self._queue.put(_STOP)
             self._thread.join()
             self._thread = None
-        self._raise_failure()
-
-    def _raise_failure(self) -> None:
         if self._failed:
-            err: Any = self._failed[0]
-            raise err
+            raise self._failed[0]
+
+    def _check(self) -> None:
+        """Raise the thread's error; refuse groups once :meth:`finish` has run."""
+        if self._failed:
+            raise self._failed[0]
+        if self._thread is None:
+            raise RuntimeError("scan groups handed to the paper's mapper after it finished")

@@ -96,6 +96,15 @@ def test_an_error_of_the_paper_thread_is_raised_to_the_caller(
         m.snapshot()
 
 
+def test_scans_after_the_results_were_read_are_refused() -> None:
+    scans = ring_scans(100, seed=2)
+    m = _map(THREADED, scans)
+    m.feature_table()  # waits for the thread, which then ends
+    m.begin_pass(1)
+    with pytest.raises(RuntimeError, match="after it finished"):
+        m.integrate_many(scans)
+
+
 def test_threads_is_a_checked_speed_key_outside_the_config_hash() -> None:
     one = Config(mapper=INLINE)
     assert one.hash() == Config().hash()  # results do not depend on it
