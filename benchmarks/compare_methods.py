@@ -175,14 +175,15 @@ def octomap_row(
     classifications, see :mod:`benchmarks.octomap_baseline`); None without octomap."""
     from benchmarks import octomap_baseline as ob
     from formats.writers.nav2_map import load_nav2_map
-    from pipeline.evaluate import evaluate_maps, load_trajectory_xy
+    from formats.writers.trajectory_csv import read_trajectory
+    from pipeline.evaluate import evaluate_maps
 
     if not ob.available():
         print(f"{log.name}: OctoMap row skipped (pip install -e '.[bench]')", file=sys.stderr)
         return None
     prob, grid = ob.octomap_probability(log, cfg)
     ref = load_nav2_map(truth)
-    poses = None if trajectory is None else load_trajectory_xy(trajectory)
+    poses = None if trajectory is None else read_trajectory(trajectory).xy
     best: tuple[dict[str, float], np.ndarray] | None = None
     for occupied_above, free_below in ob.THRESHOLDS.values():
         cls = ob.classes(prob, occupied_above, free_below)

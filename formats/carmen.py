@@ -36,6 +36,7 @@ from formats.arrays import F64, I64
 from formats.contract import SensorMount
 from formats.errors import FormatError
 from formats.magic import GZIP_MAGIC
+from formats.stamps import parse_time
 
 DEFAULT_FOV_DEG = 180.0
 DEFAULT_LASER_MAX_M = 81.83  # SICK LMS "no return" value as CARMEN logs it
@@ -69,7 +70,6 @@ KNOWN_MESSAGES = frozenset(
 FOV_PARAMS = ("laser_front_laser_fov",)
 MAX_RANGE_PARAMS = ("robot_front_laser_max", "laser_front_laser_max_range")
 OFFSET_PARAM = "robot_frontlaser_offset"
-_NS = 1_000_000_000
 
 
 @dataclass(frozen=True)
@@ -163,25 +163,11 @@ def looks_like_carmen(path: str | Path) -> bool:
 
 
 def _seconds_to_ns(text: str, path: Path, line: int) -> int:
-    """Decimal seconds to integer ns, exactly for plain decimals (no float rounding)."""
-    t = text.strip()
-    neg = t.startswith("-")
-    body = t[1:] if neg or t.startswith("+") else t
-    whole, dot, frac = body.partition(".")
-    if (
-        (whole.isdigit() or (dot and not whole))
-        and (not frac or frac.isdigit())
-        and (whole or frac)
-    ):
-        ns = int(whole or "0") * _NS + int((frac + "000000000")[:9])
-        return -ns if neg else ns
+    """Decimal seconds to integer ns, exactly (:func:`formats.stamps.parse_time`)."""
     try:
-        v = float(t)
-    except ValueError:
-        v = math.nan
-    if not math.isfinite(v):
-        raise FormatError(f"line {line}: timestamp {text!r} is not a number", path)
-    return round(v * _NS)
+        return parse_time(text)
+    except ValueError as err:
+        raise FormatError(f"line {line}: timestamp: {err}", path) from None
 
 
 def _numbers(

@@ -68,6 +68,7 @@ from formats.contract import (
 from formats.errors import FormatError
 from formats.options import CsvConfig, ReaderSettings
 from formats.sensor_config import BeamLimits, sensor_setup
+from formats.stamps import parse_time
 
 CHUNK_BYTES = 4 << 20  # bytes of text per chunk (about 60 000 rows of a typical log)
 POSE_PARENT_FRAME = "odom"
@@ -467,19 +468,10 @@ def _times_ns(table: _Table, chunk: _Chunk, name: str) -> I64:
 
 
 def _time_slow(table: _Table, line: int, name: str, text: str, k: int) -> int:
-    from decimal import Decimal, InvalidOperation
-
     try:
-        d = Decimal(text)
-    except InvalidOperation:
-        what = "an empty field" if text == "" else repr(text)
-        raise table.error(line, f"column '{name}': expected a time, found {what}") from None
-    if not d.is_finite():
-        raise table.error(line, f"column '{name}': {text!r} is not a finite time")
-    ns = int(d.scaleb(k).to_integral_value(rounding="ROUND_HALF_UP"))
-    if not -(2**63) <= ns < 2**63:
-        raise table.error(line, f"column '{name}': {text!r} is out of the int64 ns range")
-    return ns
+        return parse_time(text, digits=k)
+    except ValueError as err:
+        raise table.error(line, f"column '{name}': {err}") from None
 
 
 def _sensor_column(table: _Table, chunk: _Chunk) -> Strs:

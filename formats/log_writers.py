@@ -35,6 +35,7 @@ from formats.angles import wrap_angle
 from formats.arrays import F64, I64
 from formats.contract import PoseBatch, RangeBatch, SensorMount
 from formats.errors import ConfigError, OutputError
+from formats.stamps import format_time_s
 
 FORMATS: tuple[str, ...] = ("ros1", "ros2", "ros2-mcap", "mcap", "mcap-ros1", "csv", "csv-set")
 _COMPRESSION: dict[str, tuple[str, ...]] = {
@@ -475,16 +476,6 @@ def _write_mcap(c: LogContent, path: Path, fmt: str, compression: str) -> None:
 
 
 # --------------------------------------------------------------------------- CSV writers
-
-
-def format_time_s(t_ns: npt.ArrayLike) -> list[str]:
-    """Exact decimal seconds ``<sec>.<9-digit nsec>`` of int64 nanosecond stamps."""
-    out = []
-    for v in np.asarray(t_ns, dtype=np.int64).tolist():
-        sign = "-" if v < 0 else ""
-        sec, nsec = divmod(abs(v), 1_000_000_000)
-        out.append(f"{sign}{sec}.{nsec:09d}")
-    return out
 
 
 def _f(a: npt.ArrayLike) -> list[str]:

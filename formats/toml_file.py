@@ -11,18 +11,15 @@ from pathlib import Path
 from typing import Any
 
 from formats.errors import ConfigError
+from formats.text_file import read_text
 
 __all__ = ["read_toml"]
 
 
 def read_toml(path: str | Path, what: str) -> dict[str, Any]:
     """The parsed document; ``what`` names the file's role in messages ("configuration")."""
-    p = Path(path)
+    text = read_text(path, f"{what} file", errors=(ConfigError, ConfigError))
     try:
-        return tomllib.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError as err:
-        raise ConfigError(f"{what} file not found", p) from err
-    except (OSError, UnicodeDecodeError) as err:
-        raise ConfigError(f"cannot read {what}: {err}", p) from err
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
-        raise ConfigError(f"invalid TOML: {err}", p) from err
+        raise ConfigError(f"invalid TOML: {err}", path) from err

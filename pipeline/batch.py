@@ -40,6 +40,7 @@ from typing import TYPE_CHECKING, Any
 
 from formats.errors import ConfigError, FormatError, InputError, OutputError, SonarmapError
 from formats.tables import markdown_table
+from formats.text_file import read_text
 from pipeline.config import Config, config_from_dict, load_config
 from pipeline.metrics_schema import finite, read_metrics
 
@@ -128,12 +129,8 @@ class BatchResult:
 def read_manifest(path: Path) -> list[Path]:
     """The paths a manifest lists: one per line, ``#`` comments and blank lines ignored,
     relative paths taken relative to the manifest's directory."""
-    try:
-        text = Path(path).read_text(encoding="utf-8-sig")  # a byte-order mark is not a path
-    except FileNotFoundError as err:
-        raise InputError("manifest not found", path) from err
-    except (OSError, UnicodeDecodeError) as err:
-        raise InputError(f"cannot read manifest: {err}", path) from err
+    # utf-8-sig: a byte-order mark is not a path
+    text = read_text(path, "manifest", errors=(InputError, InputError), encoding="utf-8-sig")
     out: list[Path] = []
     for line in text.splitlines():
         s = line.strip()

@@ -47,6 +47,7 @@ from formats.arrays import F64, I8, B
 from formats.errors import ConfigError, FormatError, InputError
 from formats.map_types import GridSpec
 from formats.tables import text_table
+from formats.writers.trajectory_csv import read_trajectory
 from pipeline.metrics_schema import Metrics, finite, read_metrics
 
 __all__ = [
@@ -54,7 +55,6 @@ __all__ = [
     "Evaluation",
     "evaluate_maps",
     "evaluate_run",
-    "load_trajectory_xy",
     "resample_classes",
     "run_sensor_reach",
 ]
@@ -234,39 +234,6 @@ def run_sensor_reach(run_dir: Path, metrics: Metrics) -> tuple[float | None, str
     if found:
         return max(found), "config.toml"
     return None, "unknown"
-
-
-def load_trajectory_xy(path: Path) -> F64:
-    """Positions (N×2, m) of a trajectory CSV ``t,x,y,yaw`` (header optional, columns by name).
-
-    FormatError naming the file when it is missing, empty or not numeric.
-    """
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError as err:
-        raise InputError("trajectory file not found", path) from err
-    except (OSError, UnicodeDecodeError) as err:
-        raise FormatError(f"cannot read trajectory: {err}", path) from err
-    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
-    if not lines:
-        raise FormatError("trajectory is empty", path)
-    head = [c.strip().lower() for c in lines[0].split(",")]
-    try:
-        [float(c) for c in head]
-        ix, iy, body = 1, 2, lines  # no header: t,x,y,yaw
-    except ValueError:
-        if "x" not in head or "y" not in head:
-            raise FormatError(f"trajectory header has no x and y columns: {lines[0]!r}", path) from None
-        ix, iy, body = head.index("x"), head.index("y"), lines[1:]
-    if not body:
-        raise FormatError("trajectory has a header but no poses", path)
-    try:
-        xy = np.loadtxt(body, delimiter=",", usecols=(ix, iy), ndmin=2, dtype=np.float64)
-    except (ValueError, IndexError) as err:
-        raise FormatError(f"trajectory is not numeric CSV ({err})", path) from err
-    if not np.isfinite(xy).all():
-        raise FormatError("trajectory has non-finite positions", path)
-    return np.ascontiguousarray(xy)
 
 
 # --------------------------------------------------------------------------- resampling
@@ -547,7 +514,7 @@ def evaluate_run(
         reach, reach_source = float(sensor_reach_m), "argument"
     else:
         reach, reach_source = run_sensor_reach(run_dir, metrics)
-    poses = None if trajectory is None else load_trajectory_xy(Path(trajectory))
+    poses = None if trajectory is None else read_trajectory(Path(trajectory)).xy
 
     values, notes = evaluate_maps(
         run_map.classes, run_map.grid, truth.classes, truth.grid,
@@ -576,7 +543,6 @@ def _trajectory_error(
     run_dir: Path, truth_path: Path, rpe_delta: float, rpe_unit: str
 ) -> dict[str, Any]:
     """ATE/RPE of the run's trajectory.csv against the true trajectory CSV."""
-    from formats.writers.trajectory_csv import read_trajectory
     from pipeline.trajectory_error import trajectory_error
 
     run_traj = run_dir / "trajectory.csv"

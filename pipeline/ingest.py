@@ -1,10 +1,14 @@
-"""Ingest: the reader stream for the chosen topics, in two passes.
+"""Ingest: the reader stream for the chosen topics, decoded once.
 
 Pass 1 (:func:`survey`) reads poses and mounts and summarises the range stream (count,
-time span, per-sensor counts and limits) without keeping the readings: it fixes the pose
-track, the sensor table and the grid extent before any mapping starts. Pass 2
-(:func:`ordered_ranges`) streams the readings again in time order for mapping. Memory is
-bounded by the pose track (small) and one reorder window of readings, not the log length.
+time span, per-sensor counts and limits): it fixes the pose track, the sensor table and
+the grid extent before any mapping starts. With ``keep_readings`` it also puts the
+readings in time order (:mod:`pipeline.reorder_window`) and spills them to disk
+(:mod:`pipeline.reading_spill`), so the mapping passes stream them from there instead of
+reading and decoding the log again. :func:`ordered_ranges` streams a log's readings in
+time order straight from the reader (the same window, for callers without a survey).
+Memory is bounded by one reorder window of readings; the pose track and the spilled
+readings live in temporary files, mapped read-only.
 """
 
 from __future__ import annotations
@@ -18,6 +22,8 @@ from formats.arrays import I64, B
 from formats.contract import LogReader, MountBatch, PoseBatch, RangeBatch, SensorMount
 from formats.errors import InputError
 from pipeline.pose_sync import PoseTrack, PoseTrackBuilder
+from pipeline.reading_spill import ReadingSpill, SpilledReadings
+from pipeline.reorder_window import REORDER_WINDOW_NS, RangeChunk, ReorderWindow
 
 
 @dataclass
@@ -31,7 +37,8 @@ class RangeSummary:
     max_range_m: float = float("nan")  # largest finite r_max any reading carries
     backwards: int = 0  # readings whose stamp is older than an earlier one of the same sensor
 
-    def add(self, b: RangeBatch, stamps: StampOrder) -> None:
+    def add(self, b: RangeBatch, backwards: B) -> None:
+        """Count a batch in; ``backwards``: its readings whose stamp went backwards."""
         n = len(b)
         if n == 0:
             return
@@ -46,7 +53,7 @@ class RangeSummary:
         if finite.size:
             m = float(finite.max())
             self.max_range_m = m if np.isnan(self.max_range_m) else max(self.max_range_m, m)
-        self.backwards += int(stamps.backwards(b).sum())
+        self.backwards += int(backwards.sum())
 
 
 def stamps_behind(t: I64, newest: int | None) -> tuple[B, I64, int | None]:
@@ -101,30 +108,58 @@ class StampOrder:
 
 @dataclass
 class Survey:
-    """Result of pass 1."""
+    """Result of pass 1 (``readings``: the spilled readings, None when not kept)."""
 
     track: PoseTrack
     mounts: dict[str, SensorMount]
     ranges: RangeSummary
     sensor_names: list[str]
+    readings: SpilledReadings | None = None
+
+    def ordered_ranges(self, reader: LogReader) -> Iterator[RangeChunk]:
+        """The readings in time order: from the spill when pass 1 kept them, else read
+        again from ``reader`` (:func:`ordered_ranges`); the same chunks either way."""
+        if self.readings is not None:
+            return self.readings.chunks()
+        return ordered_ranges(reader)
 
 
-def survey(reader: LogReader, on_readings: Callable[[int], None] | None = None) -> Survey:
-    """Pass 1: pose track, static mounts and a summary of the readings. ``on_readings``:
+def survey(reader: LogReader, on_readings: Callable[[int], None] | None = None,
+           *, keep_readings: bool = False) -> Survey:
+    """Pass 1: pose track, static mounts and a summary of the readings; with
+    ``keep_readings`` the readings in time order too, spilled to disk. ``on_readings``:
     called with the number of readings found so far after each batch of them."""
     poses = PoseTrackBuilder()
     mounts: dict[str, SensorMount] = {}
     summary = RangeSummary()
     stamps = StampOrder()
-    for batch in reader.batches(("poses", "mounts", "ranges")):
-        if isinstance(batch, RangeBatch):
-            summary.add(batch, stamps)
-            if on_readings is not None:
-                on_readings(summary.count)
-        elif isinstance(batch, PoseBatch):
-            poses.add(batch)
-        elif isinstance(batch, MountBatch):
-            mounts.update(batch.mounts)
+    window = ReorderWindow() if keep_readings else None
+    spill = ReadingSpill() if keep_readings else None
+    try:
+        for batch in reader.batches(("poses", "mounts", "ranges")):
+            if isinstance(batch, RangeBatch):
+                if len(batch):
+                    back = stamps.backwards(batch)
+                    summary.add(batch, back)
+                    if window is not None and spill is not None:
+                        chunk = window.push(batch, back)
+                        if chunk is not None:
+                            spill.add(chunk)
+                if on_readings is not None:
+                    on_readings(summary.count)
+            elif isinstance(batch, PoseBatch):
+                poses.add(batch)
+            elif isinstance(batch, MountBatch):
+                mounts.update(batch.mounts)
+        if window is not None and spill is not None:
+            last = window.flush()
+            if last is not None:
+                spill.add(last)
+    except BaseException:
+        if spill is not None:
+            spill.close()
+        raise
+    readings = spill.finish() if spill is not None else None
     if summary.count == 0:
         raise InputError("the log has no range readings on the selected topics", reader.path)
     track = poses.finish()
@@ -132,66 +167,25 @@ def survey(reader: LogReader, on_readings: Callable[[int], None] | None = None) 
         raise InputError(
             f"the log has {len(track)} usable pose(s); mapping needs a pose stream", reader.path
         )
-    return Survey(track, mounts, summary, list(reader.sensor_names))
+    return Survey(track, mounts, summary, list(reader.sensor_names), readings)
 
 
-@dataclass
-class RangeChunk:
-    """Time-ordered readings released by :func:`ordered_ranges`, with what was dropped
-    on the way since the previous chunk."""
-
-    batch: RangeBatch
-    late: int = 0
-    backwards: int = 0
-
-
-def ordered_ranges(reader: LogReader, reorder_window_ns: int = 2_000_000_000) -> Iterator[RangeChunk]:
-    """Pass 2: readings in time order, in chunks.
+def ordered_ranges(reader: LogReader,
+                   reorder_window_ns: int = REORDER_WINDOW_NS) -> Iterator[RangeChunk]:
+    """The log's readings in time order, in chunks, read from ``reader``.
 
     Readings whose header stamp jumped backwards (see :class:`StampOrder`) are dropped and
-    counted. Logs interleave topics and connections chunk by chunk, so batches are not
-    globally sorted: readings are held until the stream has moved ``reorder_window_ns``
-    past them, then released sorted (stable, so equal stamps keep log order). A reading
-    older than what was already released is *late*: it is dropped and counted, since its
-    scan has already been mapped.
+    counted, then the reorder window (:class:`~pipeline.reorder_window.ReorderWindow`)
+    releases them sorted and drops (and counts) the late ones.
     """
     stamps = StampOrder()
-    pending: list[RangeBatch] = []
-    released_up_to: int | None = None
-    newest: int | None = None
+    window = ReorderWindow(reorder_window_ns)
     for batch in reader.batches(("ranges",)):
         if not isinstance(batch, RangeBatch) or len(batch) == 0:
             continue
-        back = stamps.backwards(batch)
-        backwards = int(back.sum())
-        if backwards:
-            batch = batch.take(~back)
-        late = 0
-        if released_up_to is not None and len(batch):
-            is_late = batch.t_ns < released_up_to
-            late = int(is_late.sum())
-            if late:
-                batch = batch.take(~is_late)
-        if len(batch):
-            pending.append(batch)
-            bmax = int(batch.t_ns.max())
-            newest = bmax if newest is None else max(newest, bmax)
-        ready_chunk: RangeBatch | None = None
-        if newest is not None and pending:
-            merged = RangeBatch.concat(pending)
-            ready = merged.t_ns < newest - reorder_window_ns
-            if ready.any():
-                out = merged.take(ready)
-                pending = [merged.take(~ready)]
-                order = np.argsort(out.t_ns, kind="stable")
-                released_up_to = int(out.t_ns[order[-1]])
-                ready_chunk = out.take(order)
-            else:
-                pending = [merged]
-        if ready_chunk is not None or late or backwards:
-            yield RangeChunk(ready_chunk if ready_chunk is not None else RangeBatch.concat([]),
-                             late, backwards)
-    if pending:
-        merged = RangeBatch.concat(pending)
-        if len(merged):
-            yield RangeChunk(merged.take(np.argsort(merged.t_ns, kind="stable")))
+        chunk = window.push(batch, stamps.backwards(batch))
+        if chunk is not None:
+            yield chunk
+    last = window.flush()
+    if last is not None:
+        yield last

@@ -21,7 +21,8 @@ import typing
 from pathlib import Path
 from typing import Any, TypedDict, cast, is_typeddict
 
-from formats.errors import FormatError, InputError
+from formats.errors import FormatError
+from formats.text_file import read_text
 
 __all__ = [
     "Counts",
@@ -154,12 +155,7 @@ class Metrics(TypedDict, total=False):
 def read_metrics(path: Path) -> Metrics:
     """A run's metrics.json, checked (:func:`metrics_doc`); InputError if missing,
     FormatError if unreadable or a declared key has the wrong type."""
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError as err:
-        raise InputError("run directory has no metrics.json", path) from err
-    except (OSError, UnicodeDecodeError) as err:
-        raise FormatError(f"cannot read metrics: {err}", path) from err
+    text = read_text(path, "metrics file")
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as err:

@@ -16,8 +16,6 @@ AUTO_GAP_MIN_S and at most AUTO_GAP_MAX_S — so 1 Hz odometry (poses 0.9 s apar
 from __future__ import annotations
 
 import math
-import mmap
-import tempfile
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 
@@ -27,6 +25,7 @@ import numpy.typing as npt
 from formats.angles import wrap_angle
 from formats.arrays import F64, I64
 from formats.contract import PoseBatch
+from pipeline.spilled_columns import ColumnSpill, MappedColumns
 
 # Reasons a reading has no pose (codes in PoseLookup.reason).
 POSE_OK = 0
@@ -71,8 +70,7 @@ class PoseTrack:
     child_frame: str
     backwards: int = 0  # stamps that went backwards in the log (dropped)
     duplicates: int = 0  # repeated stamps (the first was kept)
-    _maps: tuple[mmap.mmap, ...] = field(default=(), repr=False, compare=False)
-    _released: list[int] = field(default_factory=lambda: [0], repr=False, compare=False)
+    _spill: MappedColumns | None = field(default=None, repr=False, compare=False)
 
     def __len__(self) -> int:
         return int(self.t_ns.shape[0])
@@ -163,25 +161,17 @@ class PoseTrack:
     def release_before(self, t_ns: int | None = None) -> None:
         """Give back the resident pages of poses older than the pose before ``t_ns`` (all
         pages with None). Only pages are dropped: the values stay readable (from the file)."""
-        if not self._maps or not hasattr(mmap, "MADV_DONTNEED"):
+        if self._spill is None:
             return
         if t_ns is None:
-            for m in self._maps:
-                m.madvise(mmap.MADV_DONTNEED)
-            self._released[0] = 0  # a new walk from the start may follow
+            self._spill.release_before(None)
             return
         self._release_index(max(int(np.searchsorted(self.t_ns, t_ns)) - 2, 0))
 
     def _release_index(self, i: int) -> None:
         """Give back the whole pages of every column that lie before pose ``i``."""
-        if not self._maps or not hasattr(mmap, "MADV_DONTNEED"):
-            return
-        upto = (i * 8) // mmap.PAGESIZE * mmap.PAGESIZE  # every column is 8 bytes a pose
-        if upto <= self._released[0]:
-            return
-        for m in self._maps:
-            m.madvise(mmap.MADV_DONTNEED, 0, min(upto, len(m)))
-        self._released[0] = upto
+        if self._spill is not None:
+            self._spill.release_before(i)
 
 
 def build_pose_track(batches: Sequence[PoseBatch]) -> PoseTrack:
@@ -202,8 +192,8 @@ class PoseTrackBuilder:
     (the running maximum and the last kept stamp carry over).
 
     Memory: the kept poses (32 bytes each, 23 MB per ten hours of 20 Hz odometry) are
-    written to four anonymous temporary files, one per column, and :meth:`finish` maps
-    them read-only. Pass 2 reads the track in time order and releases the pages behind it
+    written to four anonymous temporary files, one per column
+    (:mod:`pipeline.spilled_columns`), and :meth:`finish` maps them read-only. Pass 2 reads the track in time order and releases the pages behind it
     (:meth:`PoseTrack.release_before`), so the resident part of the track does not grow
     with the log: the page cache holds the rest, and the files vanish with the process,
     even a killed one (they are unlinked from the start). Measured before, when the track
@@ -211,8 +201,7 @@ class PoseTrackBuilder:
     """
 
     def __init__(self) -> None:
-        self._files = tuple(tempfile.TemporaryFile(prefix="sonarmap-track-") for _ in range(4))  # noqa: SIM115 (closed in finish)
-        self._n = 0
+        self._spill = ColumnSpill(_TRACK_DTYPES, prefix="sonarmap-track-")
         self._running: int | None = None  # the largest stamp so far
         self._last_kept: int | None = None  # the last stamp that passed the order filter
         self._frames = ("", "")
@@ -252,28 +241,15 @@ class PoseTrackBuilder:
         y = np.asarray(b.y, dtype=np.float64)
         yaw = np.asarray(b.yaw, dtype=np.float64)
         keep &= np.isfinite(x) & np.isfinite(y) & np.isfinite(yaw)
-        for f, col, dtype in zip(self._files, (t, x, y, yaw), _TRACK_DTYPES, strict=True):
-            f.write(np.ascontiguousarray(col[keep], dtype=dtype).tobytes())
-        self._n += int(np.count_nonzero(keep))
+        self._spill.append(t[keep], x[keep], y[keep], yaw[keep])
 
     def finish(self) -> PoseTrack:
         """The track (its columns mapped from the files); the files are closed."""
-        n = self._n
-        cols: list[np.ndarray] = []
-        maps: list[mmap.mmap] = []
-        for f, dtype in zip(self._files, _TRACK_DTYPES, strict=True):
-            f.flush()
-            if n:
-                m = mmap.mmap(f.fileno(), n * np.dtype(dtype).itemsize, access=mmap.ACCESS_READ)
-                maps.append(m)
-                cols.append(np.frombuffer(m, dtype=dtype, count=n))
-            else:
-                cols.append(np.empty(0, dtype=dtype))
-            f.close()  # the mapping keeps the (unlinked) file until the arrays go
-        t, x, y, yaw = cols
+        spill = self._spill.finish()
+        t, x, y, yaw = spill.columns
         return PoseTrack(
             t, x, y, yaw, *self._frames,
-            backwards=self.backwards, duplicates=self.duplicates, _maps=tuple(maps),
+            backwards=self.backwards, duplicates=self.duplicates, _spill=spill,
         )
 
 

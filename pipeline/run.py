@@ -1,6 +1,7 @@
 """``run()``: a log in, a map directory out — the pipeline as named stages.
 
-1. **ingest** — open the log (:mod:`formats`), pass 1 survey (:mod:`pipeline.ingest`);
+1. **ingest** — open the log (:mod:`formats`), pass 1 survey (:mod:`pipeline.ingest`): the
+   log is read and decoded once, its readings spilled in time order for the mapping passes;
 2. **pose_sync** — each reading's robot pose and sonar geometry (:mod:`pipeline.pose_sync`);
 3. **scan_building** — readings grouped into scans (:mod:`pipeline.scans`);
 4. **mapping** — the mapper (:mod:`pipeline.mapper`), Andersone's method or the baseline;
@@ -31,7 +32,7 @@ from formats.map_types import GridSpec
 from formats.writers.trajectory_tum import Trajectory
 from pipeline import __version__
 from pipeline.config import Config, dump_config
-from pipeline.ingest import Survey, ordered_ranges, survey
+from pipeline.ingest import Survey, survey
 from pipeline.mapped_share import check_mapped_share, mapped_readings
 from pipeline.mapper import Mapper, make_mapper
 from pipeline.mapper.types import MapSnapshot, Scan
@@ -143,7 +144,7 @@ def run(
             passes = max(m.passes for m in mappers.values())
             try:
                 for index in range(passes):
-                    # Every pass streams the log again: nothing grows with the log's length.
+                    # Every pass streams the readings pass 1 spilled, in time order.
                     active = {k: m for k, m in mappers.items() if index < m.passes}
                     for m in active.values():
                         m.begin_pass(index)
@@ -202,9 +203,10 @@ def _refine_poses(
 def prepare(
     reader: LogReader, config: Config, found: Callable[[int], None] | None = None
 ) -> tuple[Survey, SensorTable, GridSpec]:
-    """Pass 1 over an open log: its survey, the sensor table and the map grid (``found``
-    hears the readings counted so far)."""
-    sv = survey(reader, found)
+    """Pass 1 over an open log: its survey (the readings kept, spilled, for the mapping
+    passes), the sensor table and the map grid (``found`` hears the readings counted so
+    far)."""
+    sv = survey(reader, found, keep_readings=True)
     sensors = resolve_sensors(
         sv.sensor_names,
         sv.mounts,
@@ -291,7 +293,7 @@ def stream_scans(
     builder = ScanBuilder(ScanKeys(config.scans, track))
     state = StreamState(0, Counter(), Counter(), 0, gap_s, median_s)
     total = sv.ranges.count
-    stream = ordered_ranges(reader)
+    stream = sv.ordered_ranges(reader)
     while True:
         with timer.stage("ingest"):
             item = next(stream, None)

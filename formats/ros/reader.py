@@ -88,6 +88,8 @@ class _PassState:
 
     scan_counter: int = 0
     last_values: dict[str, npt.NDArray[np.float64]] = field(default_factory=dict)
+    # The Range messages' frame ids in order of their first reading (the mounts' frames).
+    range_frames: dict[str, None] = field(default_factory=dict)
 
 
 class RosLogReader:
@@ -172,8 +174,10 @@ class RosLogReader:
         )
 
     def batches(self, kinds: Sequence[Kind] = ALL_KINDS) -> Iterator[Batch]:
-        """Stream the asked kinds: the MountBatch first, then (tf) poses, then range and
-        pose batches chunk by chunk in log order.
+        """Stream the asked kinds: the MountBatch, then (tf) poses, then range and pose
+        batches chunk by chunk in log order. With ranges asked too, the MountBatch comes
+        last instead: the Range frames it needs are learnt from the stream itself, so the
+        log is not read twice.
 
         Raises :class:`TopicError` when ranges/poses are asked for and the log has no (or
         an ambiguous) source of them, :class:`ConfigError` when a PointCloud/SonarArray
@@ -191,15 +195,16 @@ class RosLogReader:
                 msgtype = self._topics[topic][0].msgtype
                 if msgtype in RING_TYPES:
                     rings[topic] = self._ring(topic, msgtype)
-        if "mounts" in want:
-            yield self._mounts()
-        if "poses" in want and sel.pose_is_tf:
-            yield self._tf_poses()
         ids: list[int] = []
         if "ranges" in want:
             ids += [c.id for t in sel.range_topics for c in self._topics[t]]
         if "poses" in want and not sel.pose_is_tf:
             ids += [c.id for t in sel.pose_topics for c in self._topics[t]]
+        mounts_last = "mounts" in want and "ranges" in want and bool(ids)
+        if "mounts" in want and not mounts_last:
+            yield self._mounts()
+        if "poses" in want and sel.pose_is_tf:
+            yield self._tf_poses()
         if not ids:
             return
         state = _PassState()
@@ -212,6 +217,10 @@ class RosLogReader:
             group.append(raw)
         if group:
             yield from self._convert_group(group, rings, state)
+        if mounts_last:
+            if self._range_frames is None:
+                self._range_frames = list(state.range_frames)
+            yield self._mounts()
 
     # ------------------------------------------------------------------ laser scans
 
@@ -396,7 +405,7 @@ class RosLogReader:
             cols = self._decode(raw)
             topic = raw.connection.topic
             if isinstance(cols, RangeColumns):
-                ranges.append(self._range_batch(raw, cols))
+                ranges.append(self._range_batch(raw, cols, state))
             elif isinstance(cols, PointColumns):
                 ranges.append(self._pointcloud_batch(raw, cols, rings[topic], state))
             elif isinstance(cols, SonarArrayColumns):
@@ -413,11 +422,13 @@ class RosLogReader:
             if len(merged):
                 yield merged
 
-    def _range_batch(self, raw: RawBatch, cols: RangeColumns) -> RangeBatch:
+    def _range_batch(self, raw: RawBatch, cols: RangeColumns, state: _PassState) -> RangeBatch:
         present = np.unique(cols.frame)
         # New sensors get ids in order of their first reading (stable, readable ids).
         for code in present[np.argsort(_first_index(cols.frame, present))]:
-            self._sensor_id(cols.frames[int(code)])
+            frame = cols.frames[int(code)]
+            self._sensor_id(frame)
+            state.range_frames.setdefault(frame, None)
         lut = np.array([self._sensor_id(f) for f in cols.frames], np.int32)
         return make_range_batch(
             cols.stamp_ns,

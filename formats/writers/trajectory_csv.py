@@ -19,8 +19,9 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from formats.errors import FormatError, InputError
-from formats.log_writers import format_time_s
+from formats.errors import FormatError
+from formats.stamps import format_time_s, parse_time
+from formats.text_file import read_text
 from formats.writers.atomic import atomic_write_text
 from formats.writers.trajectory_tum import Trajectory, read_trajectory_tum
 
@@ -44,30 +45,10 @@ def write_trajectory_csv(path: Path, t_ns: npt.ArrayLike, x: npt.ArrayLike, y: n
     atomic_write_text(path, trajectory_csv_text(t_ns, x, y, yaw))
 
 
-def _stamp_ns(text: str) -> int:
-    """Exact int ns of decimal seconds text (``12.5``, ``-3``, ``1700000000.000000001``)."""
-    s = text.strip()
-    sign = -1 if s.startswith("-") else 1
-    body = s.lstrip("+-")
-    whole, _, frac = body.partition(".")
-    if not (whole or frac) or not (whole.isdigit() or whole == "") or not (
-        frac.isdigit() or frac == ""
-    ) or not whole.isascii() or not frac.isascii():
-        raise ValueError(f"not a decimal time: {text!r}")
-    if len(frac) > 9 and frac[9:].strip("0"):
-        raise ValueError(f"time finer than 1 ns: {text!r}")
-    return sign * (int(whole or "0") * 1_000_000_000 + int((frac[:9] or "0").ljust(9, "0")))
-
-
 def read_trajectory_csv(path: Path) -> Trajectory:
     """A trajectory CSV as arrays; InputError when missing, FormatError (naming the file and
     the line) when malformed, unsorted or not finite."""
-    try:
-        text = Path(path).read_text(encoding="utf-8")
-    except FileNotFoundError as err:
-        raise InputError("trajectory file not found", path) from err
-    except (OSError, UnicodeDecodeError) as err:
-        raise FormatError(f"cannot read trajectory: {err}", path) from err
+    text = read_text(path, "trajectory file")
     lines = [
         (i + 1, ln) for i, ln in enumerate(text.splitlines())
         if ln.strip() and not ln.lstrip().startswith("#")
@@ -92,7 +73,7 @@ def read_trajectory_csv(path: Path) -> Trajectory:
     for k, (lineno, ln) in enumerate(body):
         cells = ln.split(",")
         try:
-            t[k] = _stamp_ns(cells[idx[0]])
+            t[k] = parse_time(cells[idx[0]])
             for j in range(3):
                 vals[j, k] = float(cells[idx[j + 1]])
         except (ValueError, IndexError) as err:
@@ -118,13 +99,8 @@ def read_trajectory(path: Path) -> Trajectory:
     """A trajectory file of either layout sonarmap writes: the CSV ``t,x,y,yaw`` (truth
     files) or TUM (a run's ``trajectory.csv``, :mod:`formats.writers.trajectory_tum`),
     told apart by the first line that is not a comment (commas or not)."""
-    try:
-        with Path(path).open(encoding="utf-8") as f:
-            first = next((ln for ln in f if ln.strip() and not ln.lstrip().startswith("#")), "")
-    except FileNotFoundError as err:
-        raise InputError("trajectory file not found", path) from err
-    except (OSError, UnicodeDecodeError) as err:
-        raise FormatError(f"cannot read trajectory: {err}", path) from err
+    lines = read_text(path, "trajectory file").splitlines()
+    first = next((ln for ln in lines if ln.strip() and not ln.lstrip().startswith("#")), "")
     if "," in first or not first:
         return read_trajectory_csv(path)
     return read_trajectory_tum(path)

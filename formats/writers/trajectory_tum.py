@@ -25,14 +25,15 @@ import numpy as np
 import numpy.typing as npt
 
 from formats.arrays import F64, I64
-from formats.errors import FormatError, InputError
+from formats.errors import FormatError
+from formats.stamps import format_time_s, parse_time
+from formats.text_file import read_text
 from formats.writers.atomic import atomic_open
 
 __all__ = ["Trajectory", "read_trajectory_tum", "write_trajectory_tum"]
 
 
 _BLOCK = 50_000  # poses formatted at a time (hours of odometry stay small in memory)
-_NS = 1_000_000_000
 
 
 @dataclass(frozen=True)
@@ -47,6 +48,11 @@ class Trajectory:
     def __len__(self) -> int:
         return int(self.t_ns.shape[0])
 
+    @property
+    def xy(self) -> F64:
+        """Positions, N×2 (m)."""
+        return np.column_stack([self.x, self.y])
+
 
 def header_line(frame: str) -> str:
     """The comment line that opens the file (names the columns and the frame)."""
@@ -55,18 +61,16 @@ def header_line(frame: str) -> str:
 
 
 def _format_block(t_ns: I64, x: F64, y: F64, yaw: F64) -> str:
-    sec, nsec = np.divmod(t_ns, _NS)  # floor division: negative stamps stay exact
     yaw = math.pi - np.mod(math.pi - yaw, 2 * math.pi)  # into (−π, π]: −π and π alike
     qz, qw = np.sin(0.5 * yaw), np.cos(0.5 * yaw)
     # One canonical quaternion per yaw (qw ≥ 0): q and −q are the same rotation.
     flip = (qw < 0) | ((qw == 0) & (qz < 0))
     qz, qw = np.where(flip, -qz, qz), np.where(flip, -qw, qw)
-    rows = zip(sec.tolist(), nsec.tolist(), x.tolist(), y.tolist(), qz.tolist(), qw.tolist(),
-               strict=True)
+    rows = zip(format_time_s(t_ns), x.tolist(), y.tolist(), qz.tolist(), qw.tolist(), strict=True)
     # "+ 0.0" turns −0.0 into 0.0: the same pose always prints the same bytes.
     return "".join(
-        f"{s}.{n:09d} {px + 0.0:.9f} {py + 0.0:.9f} 0 0 0 {z + 0.0:.9f} {w + 0.0:.9f}\n"
-        for s, n, px, py, z, w in rows
+        f"{t} {px + 0.0:.9f} {py + 0.0:.9f} 0 0 0 {z + 0.0:.9f} {w + 0.0:.9f}\n"
+        for t, px, py, z, w in rows
     )
 
 
@@ -102,29 +106,12 @@ def write_trajectory_tum(
             f.write(_format_block(np.asarray(t[sl], dtype=np.int64), bx, by, byaw).encode("ascii"))
 
 
-def _parse_stamp(text: str) -> int:
-    """Decimal seconds as exact int ns (``"12.5"`` → 12_500_000_000)."""
-    sign = -1 if text.startswith("-") else 1
-    whole, _, frac = text.lstrip("+-").partition(".")
-    if not whole.isdigit() and not (whole == "" and frac.isdigit()):
-        raise ValueError(text)
-    if frac and not frac.isdigit():
-        raise ValueError(text)
-    ns = int(whole or "0") * _NS + int((frac + "000000000")[:9])
-    return sign * ns
-
-
 def read_trajectory_tum(path: Path) -> Trajectory:
     """Read a TUM trajectory (``t x y z qx qy qz qw``, ``#`` comments) as planar poses:
     yaw from the quaternion's rotation about +z. InputError when the file is missing,
     FormatError naming the file and line when a line is not 8 numbers."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError as err:
-        raise InputError("trajectory file not found", path) from err
-    except (OSError, UnicodeDecodeError) as err:
-        raise FormatError(f"cannot read trajectory: {err}", path) from err
+    text = read_text(path, "trajectory file")
     t: list[int] = []
     vals: list[list[float]] = []
     for lineno, line in enumerate(text.splitlines(), start=1):
@@ -137,7 +124,7 @@ def read_trajectory_tum(path: Path) -> Trajectory:
                 f"(t x y z qx qy qz qw), got {len(parts)} fields", path
             )
         try:
-            t.append(_parse_stamp(parts[0]))
+            t.append(parse_time(parts[0]))
             vals.append([float(p) for p in parts[1:]])
         except ValueError:
             raise FormatError(f"line {lineno}: not a number in {line!r}", path) from None

@@ -36,7 +36,6 @@ from pipeline.emulate.laser_map import LaserMap, LaserMapOptions, laser_occupanc
 from pipeline.emulate.ring import (
     DEFAULT_FOV_DEG,
     DEFAULT_MAX_RANGE_M,
-    VirtualRing,
     cone_coverage,
     laser_view,
     mounts_from_config,
@@ -49,6 +48,7 @@ from pipeline.emulate.run import (
     run_emulation,
     write_emulation,
 )
+from pipeline.sonar_ring import SonarRing
 
 __all__ = [
     "DEFAULT_FOV_DEG",
@@ -59,7 +59,7 @@ __all__ = [
     "LaserLog",
     "LaserMap",
     "LaserMapOptions",
-    "VirtualRing",
+    "SonarRing",
     "cone_coverage",
     "emulate",
     "emulate_ranges",

@@ -16,12 +16,13 @@ from formats.errors import InputError
 from formats.laser_log import LaserLog
 from formats.log_writers import LogContent
 from pipeline.drift import DriftModel, apply_drift
-from pipeline.emulate.ring import VirtualRing, cone_coverage, laser_view
+from pipeline.emulate.ring import cone_coverage, laser_view
+from pipeline.sonar_ring import SonarRing
 
 CHUNK_CELLS = 2_000_000  # bound on (scan × beam × sonar) and ray samples held at once
 
 
-def emulate_ranges(log: LaserLog, ring: VirtualRing) -> F64:
+def emulate_ranges(log: LaserLog, ring: SonarRing) -> F64:
     """(S, K) sonar readings (m): per scan and sonar, the shortest laser return inside the
     cone; max range when none is closer; −inf when closer than the min range."""
     s_n, b_n = log.ranges.shape
@@ -52,7 +53,7 @@ class Emulation:
 
     content: LogContent
     ranges: F64  # (S, K) readings of the emitted sonars
-    ring: VirtualRing  # the emitted sonars
+    ring: SonarRing  # the emitted sonars
     dropped: tuple[str, ...]  # sonars not emitted (outside the laser's view)
     notes: tuple[str, ...]
     truth: PoseBatch | None = None  # the true poses when the log's odometry is drifted
@@ -78,7 +79,7 @@ class Emulation:
         )
 
 
-def emulate(log: LaserLog, ring: VirtualRing, *, require_full_cone: bool = False) -> Emulation:
+def emulate(log: LaserLog, ring: SonarRing, *, require_full_cone: bool = False) -> Emulation:
     """Emulate the ring's sonars the laser can see for over every scan of ``log``."""
     if len(log) == 0:
         raise InputError("no laser scans to emulate from")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import replace
 
 import numpy as np
 import numpy.typing as npt
@@ -17,37 +17,11 @@ from formats.options import MountConfig
 from formats.presets import PRESETS
 from formats.sensor_config import sensor_setup
 from pipeline.config import Config
+from pipeline.sonar_ring import SonarRing
 
 DEFAULT_FOV_DEG = 30.0  # Polaroid 600-series beam, full width
 DEFAULT_MAX_RANGE_M = 5.0
 _COVERAGE_RAYS = 61  # directions sampled across a cone to measure how much the laser sees
-
-
-@dataclass(frozen=True)
-class VirtualRing:
-    """Sonars to emulate, in the base frame: one entry per sonar (m, rad)."""
-
-    names: tuple[str, ...]
-    x: F64
-    y: F64
-    yaw: F64
-    fov: F64  # full beam width β
-    min_range: F64
-    max_range: F64
-
-    def __len__(self) -> int:
-        return len(self.names)
-
-    def take(self, index: npt.NDArray[np.intp]) -> VirtualRing:
-        return VirtualRing(
-            tuple(self.names[i] for i in index.tolist()),
-            self.x[index],
-            self.y[index],
-            self.yaw[index],
-            self.fov[index],
-            self.min_range[index],
-            self.max_range[index],
-        )
 
 
 def ring_from_mounts(
@@ -58,7 +32,7 @@ def ring_from_mounts(
     default_fov_deg: float = DEFAULT_FOV_DEG,
     default_min_range: float = 0.0,
     default_max_range: float = DEFAULT_MAX_RANGE_M,
-) -> VirtualRing:
+) -> SonarRing:
     """The ring of ``mounts``; ``fov_deg``/``max_range`` override every sonar, mount values
     of 0 ("from the log") take the defaults."""
     if not mounts:
@@ -67,23 +41,15 @@ def ring_from_mounts(
         raise ConfigError(f"fov_deg must be in (0, 180), got {fov_deg!r}")
     if max_range is not None and not (max_range > 0 and math.isfinite(max_range)):
         raise ConfigError(f"max_range must be > 0, got {max_range!r}")
-    fov = [fov_deg if fov_deg is not None else (m.fov_deg or default_fov_deg) for m in mounts]
-    rmax = [
-        max_range if max_range is not None else (m.max_range or default_max_range) for m in mounts
-    ]
-    rmin = [m.min_range or default_min_range for m in mounts]
-    for m, lo, hi in zip(mounts, rmin, rmax, strict=True):
-        if not lo < hi:
-            raise ConfigError(f"sonar {m.name}: min range {lo} m is not below max range {hi} m")
-    return VirtualRing(
-        names=tuple(m.name for m in mounts),
-        x=np.array([m.x for m in mounts], np.float64),
-        y=np.array([m.y for m in mounts], np.float64),
-        yaw=np.radians(np.array([m.yaw_deg for m in mounts], np.float64)),
-        fov=np.radians(np.array(fov, np.float64)),
-        min_range=np.array(rmin, np.float64),
-        max_range=np.array(rmax, np.float64),
-    )
+    return SonarRing.from_mounts([
+        replace(
+            m,
+            fov_deg=fov_deg if fov_deg is not None else (m.fov_deg or default_fov_deg),
+            min_range=m.min_range or default_min_range,
+            max_range=max_range if max_range is not None else (m.max_range or default_max_range),
+        )
+        for m in mounts
+    ])
 
 
 def mounts_from_config(cfg: Config, preset: str | None = None) -> tuple[MountConfig, ...]:
@@ -109,7 +75,7 @@ def laser_view(log: LaserLog) -> tuple[float, float]:
 
 
 def cone_coverage(
-    ring: VirtualRing, mount: SensorMount, view: tuple[float, float]
+    ring: SonarRing, mount: SensorMount, view: tuple[float, float]
 ) -> tuple[F64, npt.NDArray[np.bool_]]:
     """Per sonar: the fraction of its cone (sampled at its max range) inside the laser's
     view, and whether its axis (at max range) is inside."""

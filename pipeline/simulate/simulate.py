@@ -31,9 +31,10 @@ from formats.writers.trajectory_tum import Trajectory
 from pipeline.config import MapperConfig
 from pipeline.drift import DriftModel, apply_drift
 from pipeline.log_with_reference import reference_paths, write_log_with_reference
-from pipeline.simulate.sonar import SonarRing, add_sensor_errors, firing_schedule, true_ranges
+from pipeline.simulate.sonar import add_sensor_errors, firing_schedule, true_ranges
 from pipeline.simulate.trajectory import load_waypoints, plan_motion, sample_trajectory
 from pipeline.simulate.world import World, load_world
+from pipeline.sonar_ring import SonarRing
 
 _MAPPER = MapperConfig()
 

@@ -11,62 +11,15 @@ do; the mapper's ``eps_max`` classifies it as no echo).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 
 from formats.arrays import F64, I32, I64
 from formats.errors import ConfigError
-from formats.options import MountConfig
 from pipeline.simulate.world import World
 
 # Upper bound on ray×obstacle pairs evaluated at once (memory ≈ 8 B × a few arrays each).
 _MAX_PAIRS = 1 << 21
-
-
-@dataclass(frozen=True)
-class SonarRing:
-    """Mounts as arrays: position (m) and axis (rad) in base_link, beam width and limits."""
-
-    names: tuple[str, ...]
-    x: F64
-    y: F64
-    yaw: F64
-    fov: F64  # full beam width β, rad
-    min_range: F64
-    max_range: F64
-
-    def __len__(self) -> int:
-        return len(self.names)
-
-    @staticmethod
-    def from_mounts(mounts: Sequence[MountConfig]) -> SonarRing:
-        """A ring from MountConfig entries; each needs a name, fov_deg and max_range > 0."""
-        if not mounts:
-            raise ConfigError("the sonar ring has no mounts")
-        names = [m.name for m in mounts]
-        if len(set(names)) != len(names) or not all(names):
-            raise ConfigError(f"sonar mount names must be unique and non-empty, got {names}")
-        for m in mounts:
-            if not (0 < m.fov_deg < 180 and m.max_range > 0 and 0 <= m.min_range < m.max_range):
-                raise ConfigError(
-                    f"mount '{m.name}' needs 0 < fov_deg < 180 and 0 <= min_range < max_range,"
-                    f" got fov_deg={m.fov_deg}, min_range={m.min_range}, max_range={m.max_range}"
-                )
-
-        def col(attr: str) -> F64:
-            return np.array([float(getattr(m, attr)) for m in mounts], dtype=np.float64)
-
-        return SonarRing(
-            names=tuple(names),
-            x=col("x"),
-            y=col("y"),
-            yaw=np.deg2rad(col("yaw_deg")),
-            fov=np.deg2rad(col("fov_deg")),
-            min_range=col("min_range"),
-            max_range=col("max_range"),
-        )
 
 
 def firing_schedule(

@@ -18,6 +18,7 @@ import numpy.typing as npt
 from formats.angles import wrap_angle
 from formats.arrays import F64
 from formats.errors import ConfigError
+from formats.text_file import read_text
 from formats.writers.trajectory_tum import Trajectory  # the one stamped-pose type
 
 
@@ -103,12 +104,7 @@ def sample_trajectory(plan: MotionPlan, rate_hz: float, start_ns: int) -> Trajec
 def load_waypoints(path: str | Path) -> F64:
     """Waypoints (N×2, m) from a CSV file ``x,y``; header, '#' lines and blanks allowed."""
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError as err:
-        raise ConfigError("waypoint file not found", p) from err
-    except (OSError, UnicodeDecodeError) as err:
-        raise ConfigError(f"cannot read waypoint file: {err}", p) from err
+    text = read_text(p, "waypoint file", errors=(ConfigError, ConfigError))
     rows: list[tuple[float, float]] = []
     lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
     for i, row in enumerate(csv.reader(lines)):

@@ -107,7 +107,7 @@ def test_beam_count_change_and_bad_timestamp(tmp_path: Path) -> None:
     bad = [flaser([1.0] * 3, (0, 0, 0), "1.0"), flaser([1.0] * 4, (0, 0, 0), "2.0")]
     with pytest.raises(FormatError, match=r"line 2: FLASER has 4 beams, earlier scans have 3"):
         read_carmen(write(tmp_path, bad))
-    with pytest.raises(FormatError, match=r"line 1: timestamp 'soon' is not a number"):
+    with pytest.raises(FormatError, match=r"line 1: timestamp: expected a time, found 'soon'"):
         read_carmen(write(tmp_path, [flaser([1.0], (0, 0, 0), "soon")], "t.log"))
 
 

@@ -15,7 +15,6 @@ from formats.errors import ConfigError, OutputError
 from formats.log_writers import (
     FORMATS,
     LogContent,
-    format_time_s,
     serialize_ranges,
     typestore,
     write_log,
@@ -266,18 +265,6 @@ def test_csv_set_keeps_per_reading_limits_when_they_vary(tmp_path: Path) -> None
         ranges = list(csv.DictReader(f))
     assert list(ranges[0]) == ["t", "sensor", "range", "fov", "min_range", "max_range", "scan"]
     assert [r["max_range"] for r in ranges][2:4] == ["5.0", "4.0"]
-
-
-def test_time_formatting_is_exact() -> None:
-    assert format_time_s([0, 1, 1_500_000_000, -1, -2_000_000_001]) == [
-        "0.000000000",
-        "0.000000001",
-        "1.500000000",
-        "-0.000000001",
-        "-2.000000001",
-    ]
-    big = 1_700_000_000_999_999_999
-    assert format_time_s([big]) == ["1700000000.999999999"]
 
 
 @pytest.mark.parametrize("fmt", FORMATS)

@@ -53,7 +53,7 @@ def test_optional_and_null_values_are_accepted() -> None:
 
 
 def test_read_metrics_errors(tmp_path: Path) -> None:
-    with pytest.raises(InputError, match=r"run directory has no metrics\.json"):
+    with pytest.raises(InputError, match=r"metrics\.json: metrics file not found"):
         read_metrics(tmp_path / "metrics.json")
     (tmp_path / "metrics.json").write_text("{not json", encoding="utf-8")
     with pytest.raises(FormatError, match="not valid JSON"):

@@ -115,10 +115,14 @@ def test_robot_bag_ranges_poses_mounts(tmp_path: Path, compression: str, unsorte
             assert src.chunk_count > 5
         batches = _collect(reader)
         names = list(reader.sensor_names)
-    # The mounts come first, once.
-    mounts = batches[0]
+    # The mounts come once, last: their Range frames are learnt from the readings' stream.
+    mounts = batches[-1]
     assert isinstance(mounts, MountBatch)
     assert sum(isinstance(b, MountBatch) for b in batches) == 1
+    # Asked alone, the same mounts (from a pass over the Range frames and tf).
+    with open_ros1_bag(path) as alone:
+        only = _collect(alone, ("mounts",))
+    assert len(only) == 1 and only[0] == mounts
     assert mounts.base_frame == "base_link"
     assert sorted(mounts.mounts) == sorted(SONARS)
     left = mounts.mounts["sonar_left"]

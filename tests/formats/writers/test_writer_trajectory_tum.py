@@ -53,6 +53,18 @@ def test_round_trip_is_exact_in_time_and_close_in_pose(tmp_path: Path) -> None:
     assert np.allclose(back.yaw, YAW, atol=1e-8)
 
 
+def test_stamps_before_the_epoch_round_trip(tmp_path: Path) -> None:
+    """A negative stamp is written as its decimal value (−1 ns is "-0.000000001", not the
+    floor-divided "-1.999999999") and read back exactly."""
+    p = tmp_path / "trajectory.csv"
+    t = np.array([-2_000_000_001, -1, 0])
+    write_trajectory_tum(p, t, X, Y, YAW)
+    assert [ln.split()[0] for ln in p.read_text().splitlines()[1:]] == [
+        "-2.000000001", "-0.000000001", "0.000000000"
+    ]
+    assert read_trajectory_tum(p).t_ns.tolist() == t.tolist()
+
+
 def test_a_yaw_of_pi_is_one_canonical_quaternion(tmp_path: Path) -> None:
     a, b = tmp_path / "a", tmp_path / "b"
     write_trajectory_tum(a, T[:1], X[:1], Y[:1], [math.pi])

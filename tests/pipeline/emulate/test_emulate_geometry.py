@@ -13,7 +13,7 @@ from formats.errors import ConfigError, InputError
 from formats.options import MountConfig
 from formats.presets import PRESETS
 from pipeline.emulate import (
-    VirtualRing,
+    SonarRing,
     cone_coverage,
     emulate,
     emulate_ranges,
@@ -25,7 +25,7 @@ ANGLES = -90.0 + np.arange(180.0)  # a CARMEN front laser: −90° + i·1°
 PIONEER = ring_from_mounts(PRESETS["pioneer-p3dx"])
 
 
-def one_sonar(fov_deg: float = 30.0, rmin: float = 0.1, rmax: float = 5.0) -> VirtualRing:
+def one_sonar(fov_deg: float = 30.0, rmin: float = 0.1, rmax: float = 5.0) -> SonarRing:
     return ring_from_mounts(
         [
             MountConfig(

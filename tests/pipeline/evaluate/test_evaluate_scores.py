@@ -20,10 +20,10 @@ from evaluate_helpers import (
 
 from formats.errors import ConfigError, FormatError, InputError
 from formats.map_types import GridSpec
+from formats.writers.trajectory_csv import read_trajectory
 from pipeline.evaluate import (
     Evaluation,
     evaluate_run,
-    load_trajectory_xy,
     resample_classes,
     run_sensor_reach,
 )
@@ -236,17 +236,18 @@ def test_unreadable_inputs_are_format_errors(tmp_path: Path) -> None:
 
 
 def test_trajectory_errors(tmp_path: Path) -> None:
+    """--trajectory reads the truth CSV through the one trajectory reader."""
     p = tmp_path / "traj.csv"
     p.write_text("t,a,b\n1,2,3\n", encoding="utf-8")
-    with pytest.raises(FormatError, match=r"traj\.csv: trajectory header has no x and y"):
-        load_trajectory_xy(p)
+    with pytest.raises(FormatError, match=r"traj\.csv: trajectory header has no x, y, yaw column"):
+        read_trajectory(p)
     p.write_text("t,x,y,yaw\n1,2,oops,0\n", encoding="utf-8")
-    with pytest.raises(FormatError, match=r"traj\.csv: trajectory is not numeric"):
-        load_trajectory_xy(p)
+    with pytest.raises(FormatError, match=r"traj\.csv: line 2: not a t,x,y,yaw row"):
+        read_trajectory(p)
     p.write_text("t,x,y,yaw\n", encoding="utf-8")
     with pytest.raises(FormatError, match="header but no poses"):
-        load_trajectory_xy(p)
+        read_trajectory(p)
     with pytest.raises(InputError, match="trajectory file not found"):
-        load_trajectory_xy(tmp_path / "none.csv")
+        read_trajectory(tmp_path / "none.csv")
     p.write_text("# true poses\nyaw,y,x,t\n0,1.5,2.5,0\n0,1.0,3.0,1\n", encoding="utf-8")
-    np.testing.assert_array_equal(load_trajectory_xy(p), [[2.5, 1.5], [3.0, 1.0]])
+    np.testing.assert_array_equal(read_trajectory(p).xy, [[2.5, 1.5], [3.0, 1.0]])

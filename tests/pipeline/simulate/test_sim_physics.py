@@ -8,9 +8,7 @@ import numpy as np
 import pytest
 
 from formats.errors import ConfigError
-from formats.options import MountConfig
 from pipeline.simulate.sonar import (
-    SonarRing,
     add_sensor_errors,
     cast_rays,
     firing_schedule,
@@ -201,14 +199,3 @@ def test_firing_schedule_ring_order_and_period() -> None:
         firing_schedule(16, 0.0, 0, 10)
 
 
-def test_ring_from_mounts_converts_units_and_validates() -> None:
-    ring = SonarRing.from_mounts(
-        [MountConfig("a", 0.1, 0.2, 90.0, 30.0, 0.1, 5.0), MountConfig("b", 0, 0, -45, 20, 0, 3)]
-    )
-    assert ring.names == ("a", "b")
-    np.testing.assert_allclose(ring.yaw, [math.pi / 2, -math.pi / 4])
-    np.testing.assert_allclose(ring.fov, np.radians([30.0, 20.0]))
-    with pytest.raises(ConfigError, match="mount 'c' needs 0 < fov_deg < 180"):
-        SonarRing.from_mounts([MountConfig("c", fov_deg=0.0, max_range=5.0)])
-    with pytest.raises(ConfigError, match="unique"):
-        SonarRing.from_mounts([MountConfig("a", fov_deg=10, max_range=1)] * 2)

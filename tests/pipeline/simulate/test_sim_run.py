@@ -139,7 +139,7 @@ def test_drift_grows_with_distance_on_average() -> None:
 def test_options_are_validated() -> None:
     with pytest.raises(ConfigError, match="'p_miss' must be in \\[0, 1\\]"):
         simulate(BOX, L_PATH, _opts(p_miss=1.5))
-    with pytest.raises(ConfigError, match="mount 'm' needs"):
+    with pytest.raises(ConfigError, match=r"sonar m: beam width 0.0° is not in \(0°, 180°\)"):
         simulate(BOX, L_PATH, _opts(mounts=(MountConfig("m"),)))
 
 

@@ -1,0 +1,47 @@
+"""Time stamps as text: exact decimal seconds ↔ int64 nanoseconds, one rule for every file.
+
+Every text format sonarmap reads or writes (CSV logs, CARMEN logs, trajectory CSV and TUM)
+carries time as decimal seconds. Converting through a float loses ~256 ns at epoch scale,
+so both directions are exact: digits below the unit are rounded half away from zero and
+exponent notation (``1.5e9``) is accepted, as :class:`decimal.Decimal` reads it.
+"""
+
+from __future__ import annotations
+
+from decimal import ROUND_HALF_UP, Decimal, InvalidOperation
+
+import numpy as np
+import numpy.typing as npt
+
+__all__ = ["format_time_s", "parse_time"]
+
+_INT64 = 2**63
+
+
+def parse_time(text: str, digits: int = 9) -> int:
+    """Exact int of a decimal time text scaled by ``10**digits`` (9: seconds → ns).
+
+    ValueError, with a message fit for "<file>: line N: column 't': <message>", when the
+    text is not a number, not finite or outside int64.
+    """
+    try:
+        d = Decimal(text.strip())
+    except InvalidOperation:
+        what = "an empty field" if not text.strip() else repr(text)
+        raise ValueError(f"expected a time, found {what}") from None
+    if not d.is_finite():
+        raise ValueError(f"{text!r} is not a finite time")
+    n = int(d.scaleb(digits).to_integral_value(rounding=ROUND_HALF_UP))
+    if not -_INT64 <= n < _INT64:
+        raise ValueError(f"{text!r} is out of the int64 ns range")
+    return n
+
+
+def format_time_s(t_ns: npt.ArrayLike) -> list[str]:
+    """Exact decimal seconds ``<sec>.<9-digit nsec>`` of int64 nanosecond stamps."""
+    out = []
+    for v in np.asarray(t_ns, dtype=np.int64).tolist():
+        sign = "-" if v < 0 else ""
+        sec, nsec = divmod(abs(v), 1_000_000_000)
+        out.append(f"{sign}{sec}.{nsec:09d}")
+    return out
