@@ -40,6 +40,7 @@ import io
 import math
 import sys
 import tempfile
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -316,6 +317,10 @@ class DriftRow:
     ate_refined: float
     seconds_unrefined: float
     seconds_refined: float
+    cpu_unrefined: float  # CPU seconds of the whole run() call (the machine may be loaded)
+    cpu_refined: float
+    found: tuple[float, float]  # (scale error, heading bias °/m) refinement applied, drifted
+    found_true: tuple[float, float]  # ... on the true poses (truth: 0, 0)
 
 
 DRIFT_CASES = ("office", "corridor", "intel-lab", "freiburg-101", "orebro", "fhw")
@@ -378,18 +383,25 @@ def drifted_comparison(work: Path, tolerance: float, names: tuple[str, ...] = DR
     chosen = load_config(config).pose_refinement if config is not None else Config().pose_refinement
     refine = Config(pose_refinement=dataclasses.replace(chosen, enabled=True))
     for name, clean, drifted, truth, traj in _drift_cases(work, names):
-        f1, ate, secs = {}, {}, {}
+        f1, ate, secs, cpu, found = {}, {}, {}, {}, {}
         for key, log, cfg in (("true", clean, Config()), ("drifted", drifted, Config()),
                               ("refined", drifted, refine), ("true_refined", clean, refine)):
             out = work / name / key
+            c0 = time.process_time()
             result = run(log, out, cfg, force=True)
+            cpu[key] = time.process_time() - c0
+            pr = result.metrics.pose_refinement or {}
+            found[key] = (float(pr.get("search_scale_error", math.nan)),
+                          float(pr.get("search_heading_bias_deg_per_m", math.nan)))
             ev = evaluate_run(out, truth, trajectory=traj, tolerance_m=tolerance,
                               truth_trajectory=traj)
             f1[key] = ev.f1
             ate[key] = float(ev.trajectory_error["ate_rmse_m"]) if ev.trajectory_error else math.nan
             secs[key] = float(result.metrics.timing["stage_seconds"]["total"])
         rows.append(DriftRow(name, f1["true"], f1["drifted"], f1["refined"], f1["true_refined"],
-                             ate["drifted"], ate["refined"], secs["drifted"], secs["refined"]))
+                             ate["drifted"], ate["refined"], secs["drifted"], secs["refined"],
+                             cpu["drifted"], cpu["refined"], found["refined"],
+                             found["true_refined"]))
         print(f"{name}: done", file=sys.stderr, flush=True)
     return rows
 
@@ -398,15 +410,18 @@ def drift_markdown(rows: list[DriftRow]) -> str:
     lines = [
         f"| drifted case ({DRIFT_SCALE:.0%} scale, {DRIFT_BIAS_DEG_PER_M:g}°/m) | F1 true poses "
         "| F1 drifted | F1 refined | refined/true | F1 true poses refined | ATE drifted (m) "
-        "| ATE refined (m) | ATE ratio | s unrefined | s refined |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| ATE refined (m) | ATE ratio | scale, bias found: drifted / true poses "
+        "| s unrefined | s refined | CPU s unrefined | CPU s refined |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|",
     ]
     for r in rows:
         lines.append(
             f"| {r.name} | {r.f1_true:.3f} | {r.f1_drifted:.3f} | {r.f1_refined:.3f} | "
             f"{r.f1_refined / r.f1_true:.2f} | {r.f1_true_refined:.3f} | {r.ate_drifted:.3f} | "
             f"{r.ate_refined:.3f} | {r.ate_drifted / max(r.ate_refined, 1e-9):.1f}× | "
-            f"{r.seconds_unrefined:.1f} | {r.seconds_refined:.1f} |"
+            f"{r.found[0]:+.3f}, {r.found[1]:.2f}°/m / {r.found_true[0]:+.3f}, "
+            f"{r.found_true[1]:.2f}°/m | {r.seconds_unrefined:.1f} | {r.seconds_refined:.1f} | "
+            f"{r.cpu_unrefined:.1f} | {r.cpu_refined:.1f} |"
         )
     return "\n".join(lines)
 

@@ -151,11 +151,14 @@ class _BinnedSharpness(_Placed):
 
 
 class _Consistency(_Placed):
-    """Echo consistency ``H / (H + F)`` under a candidate calibration (module docstring)."""
+    """Echo consistency ``H / (H + F)`` under a candidate calibration (module docstring),
+    compiled (:mod:`pipeline.refine.consistency_kernel`); ``reference=True``: the numpy
+    version below, which the kernel's tests compare it with."""
 
     def __init__(self, t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
-                 res: float, sigma: float):
+                 res: float, sigma: float, reference: bool = False):
         super().__init__(t_ns, x, y, yaw, echoes, MAX_ECHOES_CONSISTENCY)
+        self.reference = reference
         # The whole cone: an oblique surface's nearest point, which made the echo, lies at
         # the cone's edge (the sharpness's narrower arc would put it in front of the wall).
         keep = _thin(len(echoes), MAX_ECHOES_CONSISTENCY)
@@ -172,6 +175,13 @@ class _Consistency(_Placed):
         pose = self.poses(k, b)
         wx, wy = self.arcs(pose)
         ox, oy = transform_points(pose, self.sx, self.sy)  # each sonar's position
+        if not self.reference:
+            from pipeline.refine.consistency_kernel import consistency_score, gaussian_weights
+
+            return float(consistency_score(
+                np.ascontiguousarray(wx), np.ascontiguousarray(wy), ox, oy, self.steps,
+                self.band, self.res, 4 * self.sigma, gaussian_weights(self.sigma / self.res),
+                MIN_EVIDENCE))
         dx, dy = wx - ox[:, None], wy - oy[:, None]
         r = np.hypot(dx, dy)
         along = self.steps[None, None, :]

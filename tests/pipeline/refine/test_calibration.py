@@ -67,3 +67,36 @@ def test_consistency_drops_under_a_heading_bias(true_run: tuple[object, Echoes])
     t, x, y, yaw = (np.asarray(getattr(track, a)) for a in ("t_ns", "x", "y", "yaw"))
     f = _Consistency(t, x, y, yaw, echoes, res=0.1, sigma=0.1)
     assert f(0.0, 0.0) > f(0.0, math.radians(0.5)) + 0.02
+
+
+@pytest.mark.parametrize(("k", "b_deg"), [(0.0, 0.0), (0.03, 0.8), (-0.05, -1.5)])
+def test_the_compiled_consistency_gives_the_reference_score(true_run: tuple[object, Echoes],
+                                                           k: float, b_deg: float) -> None:
+    track, echoes = true_run
+    t, x, y, yaw = (np.asarray(getattr(track, a)) for a in ("t_ns", "x", "y", "yaw"))
+    compiled = _Consistency(t, x, y, yaw, echoes, res=0.1, sigma=0.1)
+    reference = _Consistency(t, x, y, yaw, echoes, res=0.1, sigma=0.1, reference=True)
+    got, want = compiled(k, math.radians(b_deg)), reference(k, math.radians(b_deg))
+    assert 0.3 < want < 1.0
+    assert got == pytest.approx(want, rel=1e-12, abs=1e-12)
+
+
+def test_the_compiled_consistency_scores_an_echo_down_where_another_saw_free_space() -> None:
+    from pipeline.refine.consistency_kernel import consistency_score, gaussian_weights
+
+    w = gaussian_weights(1.0)  # σ = 1 cell: scipy's 7 weights
+    assert w.shape == (7,) and w.sum() == pytest.approx(1.0) and w[3] == w.max()
+    steps = np.arange(1, 31) * 0.1
+    near = (np.array([[1.0, 1.0, 1.0]]), np.array([[-0.3, 0.0, 0.3]]))  # an arc 1 m ahead
+    far = (np.array([[2.0, 2.0, 2.0]]), np.array([[-0.6, 0.0, 0.6]]))  # one 2 m ahead
+
+    def score(arcs: list[tuple[np.ndarray, np.ndarray]], min_evidence: float) -> float:
+        wx, wy = np.vstack([a[0] for a in arcs]), np.vstack([a[1] for a in arcs])
+        o = np.zeros(len(arcs))
+        return float(consistency_score(wx, wy, o, o, steps, 0.2, 0.1, 0.4, w, min_evidence))
+
+    # One echo: its arc holds only its own hits (blurred: < 2 per cell) and no free sample.
+    assert score([near], 2.0) == 0.0  # nothing covered enough to score
+    assert score([near], 0.1) > 0.95
+    # A longer reading from the same sonar saw the near arc's cells free: it scores low.
+    assert score([near, far], 0.1) < 0.8
