@@ -112,6 +112,12 @@ def emulate(
         float, typer.Option("--drift-yaw", help="Odometry yaw noise, rad per √rad.")
     ] = 0.0,
     drift_seed: Annotated[int, typer.Option("--drift-seed", help="Seed of the drift noise.")] = 0,
+    raw_odometry: Annotated[
+        bool,
+        typer.Option("--raw-odometry", help="Log the laser log's own wheel odometry (CARMEN "
+                     "ODOM lines) as the robot's poses instead of the corrected scan poses: "
+                     "real drift; the truth trajectory keeps the corrected poses."),
+    ] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary.")] = False,
 ) -> None:
     """Emulate a sonar ring from real laser scans: each virtual sonar reads the shortest
@@ -119,7 +125,7 @@ def emulate(
     laser occupancy map <stem>.laser.yaml/.pgm (the reference) and the trajectory
     <stem>.truth.csv beside it. Sonars outside the laser's view are not emitted.
     The --drift-* options drift the logged odometry (seeded; the truth trajectory keeps
-    the poses before drift).
+    the poses before drift); --raw-odometry logs the robot's real odometry instead.
 
     Examples:
 
@@ -130,6 +136,8 @@ def emulate(
       sonarmap emulate intel.log -o intel_csv --format csv-set --fov-deg 25 --max-range 4
 
       sonarmap emulate intel.log -o drifted.mcap --drift-scale 0.03 --drift-heading-bias 0.8
+
+      sonarmap emulate intel.log -o odometry.mcap --raw-odometry
     """
     from pipeline.config import load_config
     from pipeline.drift import DriftModel
@@ -150,6 +158,7 @@ def emulate(
         compression=compression,
         drift=DriftModel(drift_scale, drift_heading_bias, drift_xy, drift_yaw).validate(),
         drift_seed=drift_seed,
+        raw_odometry=raw_odometry,
     )
     result = run_emulation(laser_log, output, format, config=cfg, options=options)
     if quiet:

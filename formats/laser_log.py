@@ -9,6 +9,7 @@ the pipeline interpolates the poses at the scan stamps.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -24,6 +25,7 @@ from formats.contract import PoseBatch, SensorMount
 from formats.errors import InputError
 
 if TYPE_CHECKING:
+    from formats.carmen import CarmenOdom
     from formats.ros.columns import LaserScanColumns
     from formats.ros.reader import RosLogReader
 
@@ -49,6 +51,9 @@ class LaserLog:
     child_frame: str
     source_format: str
     notes: tuple[str, ...] = ()
+    # The robot's own wheel odometry (frame ``odom``), when the log has it apart from the
+    # scan poses (CARMEN ODOM lines): real drift for ``emulate --raw-odometry``.
+    odometry: PoseBatch | None = None
 
     def __len__(self) -> int:
         return int(self.t_ns.shape[0])
@@ -81,20 +86,17 @@ def sorted_by_time(log: LaserLog) -> LaserLog:
         return log
     moved = int(np.count_nonzero(np.diff(log.t_ns) < 0))
     note = f"{moved} scans had stamps going backwards; scans sorted by stamp"
-    return LaserLog(
-        log.t_ns[order],
-        log.ranges[order],
-        log.angles[order],
-        log.range_min[order],
-        log.range_max[order],
-        log.x[order],
-        log.y[order],
-        log.yaw[order],
-        log.laser_mount,
-        log.parent_frame,
-        log.child_frame,
-        log.source_format,
-        (*log.notes, note),
+    return dataclasses.replace(
+        log,
+        t_ns=log.t_ns[order],
+        ranges=log.ranges[order],
+        angles=log.angles[order],
+        range_min=log.range_min[order],
+        range_max=log.range_max[order],
+        x=log.x[order],
+        y=log.y[order],
+        yaw=log.yaw[order],
+        notes=(*log.notes, note),
     )
 
 
@@ -124,6 +126,7 @@ def read_carmen_laser_log(
     if log.skipped:
         skipped = ", ".join(f"{k} {v}" for k, v in sorted(log.skipped.items()))
         notes.append(f"CARMEN lines not used: {skipped}")
+    odometry = carmen_odometry(log.odom, base_frame)
     t_ns = las.t_ns
     if s_n > 1 and np.all(t_ns == t_ns[0]):
         # Some Radish logs (Örebro) carry no time at all: every stamp is the same. The
@@ -133,6 +136,9 @@ def read_carmen_laser_log(
             f"every FLASER stamp is {t_ns[0] / 1e9:g} s: scans stamped "
             f"{UNSTAMPED_SCAN_PERIOD_NS / 1e9:g} s apart in log order"
         )
+        odometry = None  # no common clock: ODOM lines cannot be matched to the scans
+    if odometry is not None:
+        notes.append(f"raw odometry: {len(odometry)} ODOM poses (emulate --raw-odometry logs them)")
     return LaserLog(
         t_ns=t_ns,
         ranges=las.ranges,
@@ -147,6 +153,22 @@ def read_carmen_laser_log(
         child_frame=base_frame,
         source_format="carmen",
         notes=tuple(notes),
+        odometry=odometry,
+    )
+
+
+def carmen_odometry(odom: CarmenOdom, base_frame: str) -> PoseBatch | None:
+    """A CARMEN log's ODOM lines as the robot's raw odometry (``odom → base_frame``), in
+    stamp order, one pose per stamp (the first); None without two distinct stamps (the
+    Örebro log's lines carry no time)."""
+    if len(odom) < 2 or np.all(odom.t_ns == odom.t_ns[0]):
+        return None
+    order = np.argsort(odom.t_ns, kind="stable")
+    t = odom.t_ns[order]
+    first = np.concatenate([[True], np.diff(t) > 0])
+    idx = order[first]
+    return PoseBatch(
+        t[first], odom.x[idx], odom.y[idx], wrap_angle(odom.yaw[idx]), "odom", base_frame
     )
 
 

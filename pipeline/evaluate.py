@@ -24,6 +24,12 @@ beside every simulated log), and scores the run's map on the truth grid:
 * **Free space.** Free accuracy: of the run's free cells on known truth cells, the fraction
   free in the truth. Unknown fraction: of the truth's known cells in scope, the fraction
   the run left unknown.
+* **Aligned scores** (with a true trajectory). A run on drifting odometry builds its map
+  in its own frame, anchored where the odometry started; a small heading error early on
+  turns the whole map. ``aligned`` scores the map again after moving it by the rigid
+  motion that best lays the run's trajectory onto the true one (the SE(2) alignment of
+  the ATE, :func:`pipeline.trajectory_error.align_se2`), so it measures the map's shape,
+  not where its frame was anchored (:func:`move_classes`).
 * **Features.** Mean (and median) distance, m, from each feature mean to the nearest true
   occupied cell centre (exact, k-d tree), and the paper's mean feature variance (m²) from
   ``metrics.json``.
@@ -114,6 +120,9 @@ class Evaluation:
     missed: dict[str, int] = field(default_factory=dict)
     # ATE/RPE of the run's trajectory.csv against --truth-trajectory (pipeline.trajectory_error)
     trajectory_error: dict[str, Any] | None = None
+    # The map scored again after the trajectory's SE(2) alignment (module docstring):
+    # precision, recall, f1 and the alignment [tx, ty, θ] (m, m, rad).
+    aligned: dict[str, Any] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: floats rounded to 12 significant digits, notes as a list."""
@@ -135,7 +144,7 @@ class Evaluation:
         if not isinstance(data, dict):
             raise FormatError("evaluation is not a JSON object", source)
         names = [f.name for f in fields(cls)]
-        optional = ("notes", "false_occupied", "missed", "trajectory_error")
+        optional = ("notes", "false_occupied", "missed", "trajectory_error", "aligned")
         missing = [n for n in names if n not in data and n not in optional]
         if missing:
             raise FormatError(f"evaluation has no {', '.join(missing)}", source)
@@ -199,6 +208,12 @@ class Evaluation:
             te = dict(self.trajectory_error)
             te["alignment"] = tuple(te["alignment"])
             rows += TrajectoryError(**te).table_rows()
+        if self.aligned is not None:
+            tx, ty, th = self.aligned["alignment"]
+            rows.append(("F1 aligned", f"{self.aligned['f1']:.4f}  (precision "
+                         f"{pct(self.aligned['precision'])}, recall {pct(self.aligned['recall'])}; "
+                         f"the map moved by its trajectory's alignment: {math.degrees(th):.2f}°, "
+                         f"({tx:.3f}, {ty:.3f}) m)"))
         lines = text_table(None, rows)
         lines += [f"note: {n}" for n in self.notes]
         return "\n".join(lines)
@@ -271,6 +286,39 @@ def resample_classes(
     if src.resolution < dst.resolution * (1.0 - 1e-9):
         out[dr[inside], dc[inside]] = OCCUPIED  # pooling: a finer run keeps thin walls
     return out, int((~inside).sum())
+
+
+def move_classes(
+    classes: I8, grid: GridSpec, motion: tuple[float, float, float]
+) -> tuple[I8, GridSpec]:
+    """``classes`` moved rigidly by ``motion`` = ``(tx, ty, θ)`` (a point p goes to
+    R(θ)·p + t), on an axis-aligned grid of the same resolution that covers the moved map:
+    each cell takes the class of the source cell under its centre, and each occupied source
+    cell also marks the cell its centre moves into, so a turned wall stays unbroken."""
+    tx, ty, th = motion
+    c, s, res = math.cos(th), math.sin(th), grid.resolution
+    xs = np.array([0.0, grid.width, 0.0, grid.width]) * res + grid.origin_x
+    ys = np.array([0.0, 0.0, grid.height, grid.height]) * res + grid.origin_y
+    mx, my = c * xs - s * ys + tx, s * xs + c * ys + ty
+    # 1e-9 of a cell: an edge that lands on a cell boundary (a quarter turn) adds no cell.
+    ox = math.floor(mx.min() / res + 1e-9) * res
+    oy = math.floor(my.min() / res + 1e-9) * res
+    dst = GridSpec(ox, oy, res, math.ceil((mx.max() - ox) / res - 1e-9),
+                   math.ceil((my.max() - oy) / res - 1e-9))
+    cx = _centres(ox, res, dst.width)[None, :] - tx
+    cy = _centres(oy, res, dst.height)[:, None] - ty
+    cols, cok = _index(c * cx + s * cy, grid.origin_x, res, grid.width)  # R(−θ)·(p − t)
+    rows, rok = _index(-s * cx + c * cy, grid.origin_y, res, grid.height)
+    out = np.full(dst.shape, UNKNOWN, dtype=np.int8)
+    ok = cok & rok
+    out[ok] = classes[rows[ok], cols[ok]]
+    occ_r, occ_c = np.nonzero(classes == OCCUPIED)
+    px = grid.origin_x + (occ_c + 0.5) * res
+    py = grid.origin_y + (occ_r + 0.5) * res
+    dc, cin = _index(c * px - s * py + tx, ox, res, dst.width)
+    dr, rin = _index(s * px + c * py + ty, oy, res, dst.height)
+    out[dr[cin & rin], dc[cin & rin]] = OCCUPIED
+    return out, dst
 
 
 def _extended(truth: GridSpec, run: GridSpec) -> tuple[GridSpec, tuple[slice, slice]]:
@@ -521,9 +569,21 @@ def evaluate_run(
         tolerance_m=tolerance_m, poses_xy=poses, reach_m=reach,
         feature_xy=np.column_stack([features.x, features.y]),
     )
-    traj_err = None
+    traj_err = aligned = None
     if truth_trajectory is not None:
         traj_err = _trajectory_error(run_dir, Path(truth_trajectory), rpe_delta, rpe_unit)
+        motion = (float(traj_err["alignment"][0]), float(traj_err["alignment"][1]),
+                  float(traj_err["alignment"][2]))
+        moved, moved_grid = move_classes(run_map.classes, run_map.grid, motion)
+        tx, ty, th = motion
+        fx = math.cos(th) * features.x - math.sin(th) * features.y + tx
+        fy = math.sin(th) * features.x + math.cos(th) * features.y + ty
+        scores, _ = evaluate_maps(
+            moved, moved_grid, truth.classes, truth.grid, tolerance_m=tolerance_m,
+            poses_xy=poses, reach_m=reach, feature_xy=np.column_stack([fx, fy]),
+        )
+        aligned = {"precision": scores["precision"], "recall": scores["recall"],
+                   "f1": scores["f1"], "alignment": [tx, ty, th]}
     mean_var = finite(metrics.get("paper_metric", {}).get("mean_feature_variance_m2"))
     if mean_var is None:
         notes += ("metrics.json has no mean feature variance",)
@@ -535,6 +595,7 @@ def evaluate_run(
         mean_feature_variance_m2=mean_var,
         notes=notes,
         trajectory_error=traj_err,
+        aligned=aligned,
         **values,
     )
 

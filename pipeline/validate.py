@@ -53,7 +53,7 @@ from formats.tables import text_table
 from pipeline.config import Config
 from pipeline.ingest import StampOrder
 from pipeline.mapped_share import MIN_MAPPED_FRACTION
-from pipeline.pose_sync import MAX_POSE_SPEED_MPS, pose_gap_limit_s
+from pipeline.pose_sync import MAX_POSE_SPEED_MPS, is_pose_jump, pose_gap_limit_s
 from pipeline.reading_quality import (
     MAX_RANGE,
     NAN,
@@ -633,13 +633,12 @@ def _pose_findings(
 def _pose_jumps(
     label: str, ts: npt.NDArray[np.int64], xy: npt.NDArray[np.float64]
 ) -> list[Finding]:
-    """Consecutive poses further apart than a robot moves at MAX_POSE_SPEED_MPS."""
+    """Consecutive poses further apart than a robot moves (:func:`is_pose_jump`)."""
     if ts.shape[0] < 2:
         return []
     dist = np.hypot(np.diff(xy[:, 0]), np.diff(xy[:, 1]))
     dt = np.diff(ts).astype(np.float64) / 1e9
-    with np.errstate(invalid="ignore"):
-        jump = np.flatnonzero(dist > MAX_POSE_SPEED_MPS * np.maximum(dt, 0.0))
+    jump = np.flatnonzero(is_pose_jump(dist, dt))
     if not jump.size:
         return []
     i = int(jump[np.argmax(dist[jump])])

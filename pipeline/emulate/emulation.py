@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from formats.angles import wrap_angle
-from formats.arrays import F64
+from formats.arrays import F64, I64
 from formats.contract import PoseBatch, SensorMount, make_range_batch
 from formats.errors import InputError
 from formats.laser_log import LaserLog
@@ -77,6 +77,59 @@ class Emulation:
             self, content=dataclasses.replace(self.content, poses=drifted), truth=p,
             notes=(*self.notes, note),
         )
+
+
+    def with_raw_odometry(self, odometry: PoseBatch) -> Emulation:
+        """The same emulation with the robot's own wheel odometry as its pose track: real
+        drift. The odometry is cut to the scans' time span (one pose either side) and moved
+        rigidly to start at the first scan's pose, as :meth:`with_drift` starts at the true
+        pose; the scan poses it replaces become the truth."""
+        true = self.content.poses
+        t0, t1 = int(true.t_ns[0]), int(true.t_ns[-1])
+        t = odometry.t_ns
+        if len(odometry) < 2 or t[0] > t0 or t[-1] < t1:
+            raise InputError(
+                f"the log's odometry ({_span_s(t)}) does not cover its scans ({_span_s(true.t_ns)})"
+            )
+        lo = int(np.searchsorted(t, t0, side="right")) - 1
+        hi = int(np.searchsorted(t, t1, side="left")) + 1
+        ox, oy, oyaw = _pose_at(odometry, t0)
+        turn = float(wrap_angle(true.yaw[0] - oyaw))
+        c, s = math.cos(turn), math.sin(turn)
+        dx, dy = odometry.x[lo:hi] - ox, odometry.y[lo:hi] - oy
+        moved = PoseBatch(
+            t[lo:hi].copy(),
+            true.x[0] + c * dx - s * dy,
+            true.y[0] + s * dx + c * dy,
+            wrap_angle(odometry.yaw[lo:hi] + turn),
+            odometry.parent_frame,
+            true.child_frame,
+        )
+        ex, ey, _ = _pose_at(moved, true.t_ns)
+        off = np.hypot(ex - true.x, ey - true.y)
+        note = (
+            f"poses: the log's raw wheel odometry ({hi - lo} poses, moved rigidly to start at "
+            f"the first scan's pose), {float(off.mean()):.2f} m from the corrected scan poses "
+            f"on average, {float(off.max()):.2f} m at most; the truth trajectory keeps the "
+            "corrected poses"
+        )
+        return dataclasses.replace(
+            self, content=dataclasses.replace(self.content, poses=moved), truth=true,
+            notes=(*self.notes, note),
+        )
+
+
+def _pose_at(poses: PoseBatch, t_ns: int | I64) -> tuple[F64, F64, F64]:
+    """Poses at stamps inside the batch's span: linear in x, y and in the unwrapped yaw."""
+    t = (poses.t_ns - poses.t_ns[0]).astype(np.float64)
+    q = (np.asarray(t_ns, dtype=np.int64) - poses.t_ns[0]).astype(np.float64)
+    yaw = np.interp(q, t, np.unwrap(poses.yaw))
+    return np.interp(q, t, poses.x), np.interp(q, t, poses.y), wrap_angle(yaw)
+
+
+def _span_s(t_ns: I64) -> str:
+    """``a…b s`` of a stamp array."""
+    return f"{t_ns[0] / 1e9:.3f}…{t_ns[-1] / 1e9:.3f} s"
 
 
 def emulate(log: LaserLog, ring: SonarRing, *, require_full_cone: bool = False) -> Emulation:

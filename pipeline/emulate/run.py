@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from formats.errors import OutputError
+from formats.errors import ConfigError, InputError, OutputError
 from pipeline.config import Config
 from pipeline.drift import DriftModel
 from pipeline.emulate.emulation import Emulation, emulate
@@ -62,6 +62,7 @@ class EmulateOptions:
     compression: str = "none"
     drift: DriftModel = field(default_factory=DriftModel)  # odometry drift (pipeline.drift)
     drift_seed: int = 0
+    raw_odometry: bool = False  # log the laser log's own wheel odometry (real drift)
 
 
 @dataclass(frozen=True)
@@ -88,6 +89,9 @@ def run_emulation(
     cfg = config if config is not None else Config()
     opt = options if options is not None else EmulateOptions()
     out = Path(out_path)
+    if opt.raw_odometry and not opt.drift.is_zero:
+        raise ConfigError("raw odometry and a drift model are exclusive: the raw odometry "
+                          "drifts by itself")
     # Refuse existing outputs before the (slow) reading and emulation.
     for q in (out, *output_paths(out)):
         if q.exists() or q.is_symlink():
@@ -107,9 +111,16 @@ def run_emulation(
         laser_topic=opt.laser_topic,
         laser_max_range=opt.laser_max_range,
     )
-    em = emulate(log, ring, require_full_cone=opt.require_full_cone).with_drift(
-        opt.drift, opt.drift_seed
-    )
+    em = emulate(log, ring, require_full_cone=opt.require_full_cone)
+    if opt.raw_odometry:
+        if log.odometry is None:
+            raise InputError("the log has no raw odometry apart from its scan poses (CARMEN "
+                             "ODOM lines on the scans' clock)", laser_path)
+        try:
+            em = em.with_raw_odometry(log.odometry)
+        except InputError as err:
+            raise InputError(err.reason, laser_path) from None
+    em = em.with_drift(opt.drift, opt.drift_seed)
     lmap = laser_occupancy_map(
         log,
         LaserMapOptions(

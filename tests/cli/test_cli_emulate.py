@@ -83,3 +83,17 @@ def test_bad_format_is_a_usage_error(tmp_path: Path) -> None:
         app(), ["emulate", str(INTEL), "-o", str(tmp_path / "x"), "--format", "png"]
     )
     assert res.exit_code == 2
+
+
+def test_raw_odometry_flag(tmp_path: Path) -> None:
+    out = tmp_path / "odo.mcap"
+    args = ["emulate", str(INTEL), "-o", str(out), "--max-scans", "30", "--raw-odometry"]
+    res = CliRunner().invoke(app(), args)
+    assert res.exit_code == 0, res.output
+    assert "note: poses: the log's raw wheel odometry" in res.output
+    assert out.exists() and (tmp_path / "odo.truth.csv").exists()
+    res = CliRunner().invoke(app(), [*args[:3], str(tmp_path / "b.mcap"), *args[4:],
+                                     "--drift-scale", "0.03"])
+    assert res.exit_code == 1
+    assert "raw odometry and a drift model are exclusive" in res.output
+    assert not (tmp_path / "b.mcap").exists()

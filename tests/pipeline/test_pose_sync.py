@@ -12,10 +12,13 @@ from pipeline.pose_sync import (
     AFTER_LAST_POSE,
     BEFORE_FIRST_POSE,
     IN_POSE_GAP,
+    MAX_POSE_SPEED_MPS,
     POSE_JUMP,
     POSE_OK,
+    STAMP_JITTER_S,
     build_pose_track,
     interpolate_poses,
+    is_pose_jump,
     pose_gap_limit_s,
     sonar_geometry,
 )
@@ -64,10 +67,20 @@ def test_backwards_and_duplicate_pose_stamps_are_removed_and_counted():
 
 def test_epoch_stamps_keep_nanosecond_precision():
     t0 = 1_700_000_000 * S
-    tr = track([t0, t0 + 2], [0.0, 2.0], [0, 0], [0, 0])
-    # 2 m in 2 ns is no robot: only the arithmetic is under test here.
-    look = interpolate_poses(tr, np.array([t0 + 1], np.int64), S, max_speed=math.inf)
-    assert look.x[0] == pytest.approx(1.0)
+    tr = track([t0, t0 + 2], [0.0, 0.5], [0, 0], [0, 0])
+    # 0.5 m in 2 ns passes as stamp jitter: only the arithmetic is under test here.
+    look = interpolate_poses(tr, np.array([t0 + 1], np.int64), S)
+    assert look.reason[0] == POSE_OK
+    assert look.x[0] == pytest.approx(0.25)
+
+
+def test_stamp_jitter_is_not_a_jump_but_a_glitch_is():
+    """Real odometry (the Intel lab's ODOM lines): two lines 1 ms apart 6 cm from each other
+    are jitter in the stamps; a 19.6 m spike within 0.1 s is a glitch."""
+    step = np.array([0.06, 0.9, 1.5, 19.6, 19.6])
+    dt = np.array([0.001, 0.0, 0.001, 0.09, 2.0])
+    assert is_pose_jump(step, dt).tolist() == [False, False, True, True, False]
+    assert pytest.approx(1.0) == STAMP_JITTER_S * MAX_POSE_SPEED_MPS
 
 
 def test_readings_between_poses_a_robot_cannot_reach_get_pose_jump():
