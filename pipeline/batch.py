@@ -25,6 +25,7 @@ traceback is logged); the other logs complete. The summary (``summary.parquet``,
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import hashlib
 import io
 import json
@@ -475,7 +476,8 @@ def run_batch(
     # was for; a concurrent batch's live staging stays.
     clean_stale_entries(out_dir)
     names = output_names(logs)
-    cfg_dict = cfg.to_dict()
+    # One thread per worker (mapper.threads = 1): the workers already share the cores.
+    cfg_dict = cfg.replace(mapper=dataclasses.replace(cfg.mapper, threads=1)).to_dict()
     total = len(logs)
     rows: list[LogOutcome] = []
     if progress is not None:

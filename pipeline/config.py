@@ -122,6 +122,11 @@ class MapperConfig:
         default=0.35,
     )
     seed: int = doc_field("seed of the particle generator (runs are reproducible)", default=0)
+    threads: int = doc_field(
+        "threads the default method may use: 2 runs the paper's features on a second "
+        "thread beside the rest of the run (results do not depend on it; not in config_hash)",
+        default=2,
+    )
 
     def sigma_floor(self, resolution: float) -> float:
         """σ_min in metres: the configured value, or half a cell when it is 0."""
@@ -227,6 +232,10 @@ class PoseRefinementConfig:
                               default=16.0)
 
 
+# Keys that set how fast a run goes, never what it computes: left out of Config.hash.
+SPEED_KEYS = (("mapper", "threads"),)
+
+
 @dataclass(frozen=True)
 class Config:
     """Everything a run needs besides the log itself."""
@@ -249,8 +258,12 @@ class Config:
         return plain
 
     def hash(self) -> str:
-        """sha256 of the canonical JSON of the configuration (first 16 hex digits)."""
-        text = json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"))
+        """sha256 of the canonical JSON of the configuration (first 16 hex digits), without
+        the keys that only set the speed (:data:`SPEED_KEYS`): no result depends on them."""
+        plain = self.to_dict()
+        for section, key in SPEED_KEYS:
+            del plain[section][key]
+        text = json.dumps(plain, sort_keys=True, separators=(",", ":"))
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
     def replace(self, **sections: Any) -> Config:
@@ -371,6 +384,7 @@ def _check_ranges(cfg: Config) -> None:
     need(m.protect_times >= 1, "mapper.protect_times", "must be >= 1", m.protect_times)
     need(m.sigma_min >= 0, "mapper.sigma_min", "must be >= 0", m.sigma_min)
     need(0 <= m.seed < 2**63, "mapper.seed", "must be in [0, 2**63)", m.seed)
+    need(m.threads in (1, 2), "mapper.threads", "must be 1 or 2", m.threads)
     for key in ("p_free", "p_clamp_min", "p_clamp_max", "p_occ", "classic_p_occ"):
         prob(f"mapper.{key}", getattr(m, key))
     need(m.p_free < 0.5, "mapper.p_free", "must be < 0.5 (a free observation)", m.p_free)

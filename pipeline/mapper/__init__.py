@@ -3,7 +3,8 @@ method (§1-5) and the classic baseline (§8). No I/O.
 
 ``make_mapper(config, grid)`` picks :class:`AttributionMapper`, :class:`AndersoneMapper`
 or :class:`ClassicMapper` by ``config.method``; all follow the :class:`Mapper` protocol.
-Module map: ``attribution`` (§9) with ``cone_kernels`` (its compiled cone loops),
+Module map: ``attribution`` (§9) with ``cone_kernels`` (its compiled cone loops) and
+``paper_thread`` (the paper's mapper inside it, on a second thread),
 ``reading_features`` (eqs. 1-4), ``feature_set`` (eqs. 5-8 + spatial index),
 ``free_space`` (§3), ``correction`` (§4), ``occupancy`` (§5), ``grid_raster`` (shapes →
 cells), ``andersone`` / ``classic`` (the mappers), ``scan_group`` (groups of scans joined

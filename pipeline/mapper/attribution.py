@@ -22,7 +22,9 @@ its clamps); cells with no free observation are unknown.
 
 Pass 0 shares each group of scans' classification and free cones with the paper's mapper
 (:mod:`~pipeline.mapper.scan_group`) and counts cones and arcs per row span, not per cell
-(row difference grids, summed once when pass 1 begins).
+(row difference grids, summed once when pass 1 begins). With ``threads = 2`` the paper's
+mapper runs on a second thread (:mod:`~pipeline.mapper.paper_thread`), with the same
+results.
 
 Memory is the three float32 evidence grids (and pass 0's two int32 difference grids) and
 the paper's feature set: nothing grows with the log's length (the pipeline streams the
@@ -48,6 +50,7 @@ from pipeline.mapper.cone_kernels import (
 )
 from pipeline.mapper.free_space import cone_table
 from pipeline.mapper.occupancy import logit
+from pipeline.mapper.paper_thread import PaperThread
 from pipeline.mapper.reading_features import distance_sigma
 from pipeline.mapper.scan_group import ScanGroup, scan_groups
 from pipeline.mapper.types import (
@@ -72,7 +75,10 @@ class AttributionMapper:
         self.config = config
         self.grid = grid
         self.paper = AndersoneMapper(config, grid)
-        self.counters: MapperCounters = self.paper.counters
+        # The paper's mapper on a second thread (config.threads == 2), else inline.
+        self._paper_thread = PaperThread(self.paper) if config.threads > 1 else None
+        self._group_index = 0  # of the next group in the current pass
+        self._unattributed = 0  # echoes pass 1 found no candidate cell for
         self.free: F32 = empty_grid(grid.shape)
         self.arcs: F32 = empty_grid(grid.shape)
         self.hits: F32 = empty_grid(grid.shape)
@@ -89,6 +95,7 @@ class AttributionMapper:
         if index == 1:
             self._settle_counts()
         self.pass_index = index
+        self._group_index = 0
 
     def _settle_counts(self) -> None:
         """Add pass 0's span counts to ``free`` and ``arcs`` (once)."""
@@ -105,15 +112,22 @@ class AttributionMapper:
         """Add scans in order to the current pass."""
         for group in scan_groups(scans, self.config):
             self._integrate_group(group)
+            self._group_index += 1
 
     def _integrate_group(self, group: ScanGroup) -> None:
         g, cfg = self.grid, self.config
+        thread = self._paper_thread
         if self.pass_index == 0:
             # The paper's mapper and the free counts share the group's classes and cones.
-            self.paper.integrate_group(group)
             _, cones, up_down = group.free_cones
+            if thread is None:
+                self.paper.integrate_group(group)
+            else:
+                thread.offer(self._group_index, group)
             assert self._free_diff is not None
             count_free(cones, up_down, g.origin_x, g.origin_y, g.resolution, self._free_diff)
+        elif thread is not None:
+            thread.give(self._group_index, group)  # the groups pass 0 could not hand over
         cat = group.cat
         d: F64 = np.where(group.codes == rq.OK, cat.range_m, 0.0)
         band = np.maximum(cfg.attr_band_sigmas * distance_sigma(d, cfg), 0.5 * g.resolution)
@@ -124,10 +138,23 @@ class AttributionMapper:
             count_arcs(arcs, up_down, r_inner, g.origin_x, g.origin_y, g.resolution,
                        self._arc_diff)
         else:
-            self.counters.echoes_unattributed += int(attribute_echoes(
+            self._unattributed += int(attribute_echoes(
                 arcs, up_down, r_inner, g.origin_x, g.origin_y, g.resolution, self.free,
                 self.arcs, cfg.attr_candidate_ratio, cfg.attr_dilution, self.hits,
             ))
+
+    @property
+    def counters(self) -> MapperCounters:
+        """The paper's mapper's counters (readings, scans, features) and the echoes pass 1
+        left unattributed; waits for the paper's thread."""
+        self._paper_done()
+        self.paper.counters.echoes_unattributed = self._unattributed
+        return self.paper.counters
+
+    def _paper_done(self) -> None:
+        """Wait for the paper's mapper's thread to integrate every group."""
+        if self._paper_thread is not None:
+            self._paper_thread.finish()
 
     def occupied(self) -> B:
         """Cells whose attributed echo weight beats their free count (the linear test)."""
@@ -142,6 +169,7 @@ class AttributionMapper:
     def snapshot(self) -> MapSnapshot:
         """Occupied cells at ``p_occ``; other observed cells from their free count."""
         cfg = self.config
+        self._paper_done()
         occupied = self.occupied()
         lo, hi = logit(cfg.p_clamp_min), logit(cfg.p_clamp_max)
         free_logodds = np.clip(self.free * np.float32(logit(cfg.p_free)), lo, hi).astype(np.float32)
@@ -160,8 +188,10 @@ class AttributionMapper:
 
     def feature_table(self) -> FeatureTable:
         """The paper's features (pass 0), sorted by id."""
+        self._paper_done()
         return self.paper.feature_table()
 
     def feature_variance(self) -> tuple[float, float]:
         """The paper's metric of the features (§7)."""
+        self._paper_done()
         return self.paper.feature_variance()

@@ -18,8 +18,12 @@ class Mapper(Protocol):
 
     config: MapperConfig
     grid: GridSpec
-    counters: MapperCounters
     passes: int
+
+    @property
+    def counters(self) -> MapperCounters:
+        """What happened inside the mapper (complete once the last pass is done)."""
+        ...
 
     def begin_pass(self, index: int) -> None:
         """Start pass ``index`` over the scans."""

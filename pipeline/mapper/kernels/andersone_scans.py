@@ -20,7 +20,7 @@ from pipeline.mapper.kernels.feature_index import (
 from pipeline.mapper.kernels.free_space import add_free_rows, free_rows
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def integrate_scans(fa: FeatureArrays, feat_mean: np.ndarray, feat_cov: np.ndarray,
                     feat_t: np.ndarray, feat_cut: np.ndarray, cones: np.ndarray,
                     up_down: np.ndarray, cone_cut: np.ndarray, gx: float, gy: float,

@@ -1,0 +1,98 @@
+"""The paper's mapper inside the default method, on a second thread.
+
+The attribution method (:mod:`pipeline.mapper.attribution`) feeds every group of scans of
+its evidence pass to the paper's mapper for ``features.parquet`` and the paper's metric:
+the larger part of its work. :class:`PaperThread` runs that mapper on a thread of its own
+(its kernel releases the GIL), so it overlaps the rest of the run on a second core.
+
+Deterministic by construction: the paper's mapper takes groups ``0, 1, 2, ...`` exactly
+once each, in order, from one queue, on one thread; nothing it computes depends on when a
+group arrives. Both passes of the attribution method build the same groups in the same
+order, so a group may come from either: pass 0 offers each group while the queue has room
+(:meth:`offer`: never waits) and stops at the first it cannot hand over; pass 1 hands over
+the rest (:meth:`give`: waits for room). Memory is the queue's :data:`QUEUE_GROUPS` groups.
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+import weakref
+
+from pipeline.mapper.andersone import AndersoneMapper
+from pipeline.mapper.scan_group import ScanGroup
+
+# Groups waiting for the thread (64 scans each, ~0.3 MB with their cones).
+QUEUE_GROUPS = 16
+_STOP = None
+
+
+def _work(paper: AndersoneMapper, todo: queue.Queue[ScanGroup | None], failed: list[BaseException]) -> None:
+    """The thread: integrate groups in order until the stop mark (or the first error)."""
+    while True:
+        group = todo.get()
+        if group is _STOP:
+            return
+        if failed:
+            continue  # drain: the error is reported to the feeding thread
+        try:
+            paper.integrate_group(group)
+        except BaseException as err:  # handed to the feeding thread
+            failed.append(err)
+
+
+class PaperThread:
+    """Feeds an :class:`AndersoneMapper` on its own thread; :meth:`finish` waits for it."""
+
+    def __init__(self, paper: AndersoneMapper) -> None:
+        self.paper = paper
+        self.handed = 0  # groups handed over so far: the index of the next one it needs
+        self._offering = True  # pass 0 still offers (until the queue is first full)
+        self._queue: queue.Queue[ScanGroup | None] = queue.Queue(QUEUE_GROUPS)
+        self._failed: list[BaseException] = []
+        self._thread: threading.Thread | None = threading.Thread(
+            target=_work, args=(paper, self._queue, self._failed),
+            name="sonarmap-paper-mapper", daemon=True,
+        )
+        self._thread.start()
+        # A mapper dropped half-way (a failed run) stops its thread.
+        weakref.finalize(self, self._queue.put, _STOP)
+
+    def offer(self, index: int, group: ScanGroup) -> None:
+        """Pass 0: hand over group ``index`` if it is the next one needed and the queue has
+        room now; after the first miss, pass 0 offers nothing more."""
+        self._check()
+        if not self._offering or index != self.handed:
+            return
+        try:
+            self._queue.put_nowait(group)
+        except queue.Full:
+            self._offering = False
+            return
+        self.handed += 1
+
+    def give(self, index: int, group: ScanGroup) -> None:
+        """Pass 1: hand over group ``index`` if the thread has not had it (waits for room)."""
+        self._check()
+        if index < self.handed:
+            return
+        if index != self.handed:
+            raise RuntimeError(f"scan group {index} given before group {self.handed}")
+        self._queue.put(group)
+        self.handed += 1
+
+    def finish(self) -> None:
+        """Wait until every group handed over is integrated; re-raise the thread's error."""
+        if self._thread is not None:
+            self._queue.put(_STOP)
+            self._thread.join()
+            self._thread = None
+        if self._failed:
+            raise self._failed[0]
+
+    def _check(self) -> None:
+        """Raise the thread's error; refuse groups once :meth:`finish` has run."""
+        if self._failed:
+            raise self._failed[0]
+        if self._thread is None:
+            raise RuntimeError("scan groups handed to the paper's mapper after it finished")

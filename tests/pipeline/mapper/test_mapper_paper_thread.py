@@ -1,0 +1,113 @@
+"""The paper's mapper on a second thread inside the default method: the same features,
+map and counters as inline, wherever the hand-over from pass 0 to pass 1 falls; its errors
+reach the caller."""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+import pytest
+
+from formats.errors import ConfigError
+from pipeline.config import Config, MapperConfig
+from pipeline.mapper import AttributionMapper
+from pipeline.mapper import paper_thread as pt
+from pipeline.mapper.andersone import AndersoneMapper
+from pipeline.mapper.scan_group import ScanGroup
+from pipeline.mapper.synthetic import ring_scans, room_grid
+from pipeline.mapper.types import Scan
+
+INLINE = MapperConfig(threads=1)
+THREADED = MapperConfig(threads=2)
+
+
+def _map(cfg: MapperConfig, scans: list[Scan], chunk: int = 50) -> AttributionMapper:
+    m = AttributionMapper(cfg, room_grid())
+    for index in range(m.passes):
+        m.begin_pass(index)
+        for k in range(0, len(scans), chunk):  # the pipeline's chunks of scans
+            m.integrate_many(scans[k : k + chunk])
+    return m
+
+
+def _assert_same(a: AttributionMapper, b: AttributionMapper) -> None:
+    sa, sb = a.snapshot(), b.snapshot()
+    assert sa.probability.tobytes() == sb.probability.tobytes()
+    assert sa.counters == sb.counters
+    for f in dataclasses.fields(sa.features):
+        np.testing.assert_array_equal(getattr(sa.features, f.name), getattr(sb.features, f.name))
+    assert a.feature_variance() == b.feature_variance()
+    assert a.paper.rng.bit_generator.state == b.paper.rng.bit_generator.state
+
+
+def test_threaded_features_equal_inline_when_pass_1_hands_over_most_groups(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    scans = ring_scans(700, seed=4)
+    inline = _map(INLINE, scans)
+    assert inline._paper_thread is None and len(inline.feature_table()) > 50
+    # A slow paper's mapper and a one-group queue: pass 0 hands over only its first groups.
+    slow = AndersoneMapper.integrate_group
+
+    def integrate_slowly(self: AndersoneMapper, group: ScanGroup) -> None:
+        time.sleep(0.05)
+        slow(self, group)
+
+    monkeypatch.setattr(pt, "QUEUE_GROUPS", 1)
+    monkeypatch.setattr(AndersoneMapper, "integrate_group", integrate_slowly)
+    handed_in_pass_0: list[int] = []
+    original_give = pt.PaperThread.give
+
+    def give(self: pt.PaperThread, index: int, group: ScanGroup) -> None:
+        if not handed_in_pass_0:
+            handed_in_pass_0.append(self.handed)
+        original_give(self, index, group)
+
+    monkeypatch.setattr(pt.PaperThread, "give", give)
+    threaded = _map(THREADED, scans)
+    groups = -(-len(scans) // 50)  # one group per chunk of 50 scans
+    assert 0 < handed_in_pass_0[0] < groups // 2
+    _assert_same(threaded, inline)
+
+
+def test_threaded_features_equal_inline_when_pass_0_hands_over_every_group() -> None:
+    scans = ring_scans(300, seed=5)
+    threaded = _map(THREADED, scans, chunk=300)
+    assert threaded._paper_thread is not None
+    _assert_same(threaded, _map(INLINE, scans, chunk=300))
+
+
+def test_an_error_of_the_paper_thread_is_raised_to_the_caller(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    def fail(self: AndersoneMapper, group: ScanGroup) -> None:
+        raise FloatingPointError("kernel failed")
+
+    monkeypatch.setattr(AndersoneMapper, "integrate_group", fail)
+    m = AttributionMapper(THREADED, room_grid())
+    m.begin_pass(0)
+    scans = ring_scans(300, seed=1)
+    # At the next hand-over after the failure, or when the results are asked for.
+    with pytest.raises(FloatingPointError, match="kernel failed"):
+        for k in range(0, 300, 10):
+            m.integrate_many(scans[k : k + 10])
+        m.snapshot()
+
+
+def test_scans_after_the_results_were_read_are_refused() -> None:
+    scans = ring_scans(100, seed=2)
+    m = _map(THREADED, scans)
+    m.feature_table()  # waits for the thread, which then ends
+    m.begin_pass(1)
+    with pytest.raises(RuntimeError, match="after it finished"):
+        m.integrate_many(scans)
+
+
+def test_threads_is_a_checked_speed_key_outside_the_config_hash() -> None:
+    one = Config(mapper=INLINE)
+    assert one.hash() == Config().hash()  # results do not depend on it
+    assert Config(mapper=dataclasses.replace(INLINE, seed=1)).hash() != one.hash()
+    with pytest.raises(ConfigError, match=r"mapper\.threads"):
+        Config(mapper=MapperConfig(threads=0)).validate()
