@@ -105,7 +105,7 @@ def peak(values: F64) -> float:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from benchmarks.compare_methods import DRIFT_CASES, _drift_cases
+    from benchmarks.compare_methods import SYNTHETIC_DRIFT_CASES, _drift_cases
     from formats import open_log
     from pipeline.config import Config
     from pipeline.pose_sync import pose_gap_limit_s
@@ -113,7 +113,7 @@ def main(argv: list[str] | None = None) -> int:
     from pipeline.run import prepare
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--cases", nargs="+", default=list(DRIFT_CASES), metavar="NAME")
+    ap.add_argument("--cases", nargs="+", default=list(SYNTHETIC_DRIFT_CASES), metavar="NAME")
     ap.add_argument("--work", type=Path, default=Path("build/compare/drifted"))
     args = ap.parse_args(argv)
     cfg = Config()

@@ -58,6 +58,14 @@ class LaserLog:
     def __len__(self) -> int:
         return int(self.t_ns.shape[0])
 
+    def take(self, index: npt.NDArray[np.intp]) -> LaserLog:
+        """The scans at ``index``, in that order (everything else kept)."""
+        return dataclasses.replace(
+            self, t_ns=self.t_ns[index], ranges=self.ranges[index], angles=self.angles[index],
+            range_min=self.range_min[index], range_max=self.range_max[index],
+            x=self.x[index], y=self.y[index], yaw=self.yaw[index],
+        )
+
     def laser_poses(self) -> tuple[F64, F64, F64]:
         """World (parent-frame) pose of the laser per scan: base pose ∘ laser mount."""
         m = self.laser_mount
@@ -86,18 +94,7 @@ def sorted_by_time(log: LaserLog) -> LaserLog:
         return log
     moved = int(np.count_nonzero(np.diff(log.t_ns) < 0))
     note = f"{moved} scans had stamps going backwards; scans sorted by stamp"
-    return dataclasses.replace(
-        log,
-        t_ns=log.t_ns[order],
-        ranges=log.ranges[order],
-        angles=log.angles[order],
-        range_min=log.range_min[order],
-        range_max=log.range_max[order],
-        x=log.x[order],
-        y=log.y[order],
-        yaw=log.yaw[order],
-        notes=(*log.notes, note),
-    )
+    return dataclasses.replace(log.take(order), notes=(*log.notes, note))
 
 
 def read_carmen_laser_log(

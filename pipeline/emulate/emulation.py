@@ -73,10 +73,7 @@ class Emulation:
             f"{model.noise_yaw:g} rad/√rad (seed {seed}); the truth trajectory keeps the "
             "poses before drift"
         )
-        return dataclasses.replace(
-            self, content=dataclasses.replace(self.content, poses=drifted), truth=p,
-            notes=(*self.notes, note),
-        )
+        return self._logging(drifted, note)
 
 
     def with_raw_odometry(self, odometry: PoseBatch) -> Emulation:
@@ -113,9 +110,14 @@ class Emulation:
             f"on average, {float(off.max()):.2f} m at most; the truth trajectory keeps the "
             "corrected poses"
         )
+        return self._logging(moved, note)
+
+    def _logging(self, odometry: PoseBatch, note: str) -> Emulation:
+        """This emulation logging ``odometry`` as its poses; the poses it had become the
+        truth trajectory."""
         return dataclasses.replace(
-            self, content=dataclasses.replace(self.content, poses=moved), truth=true,
-            notes=(*self.notes, note),
+            self, content=dataclasses.replace(self.content, poses=odometry),
+            truth=self.content.poses, notes=(*self.notes, note),
         )
 
 

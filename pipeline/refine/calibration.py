@@ -133,14 +133,22 @@ class _Sharpness(_Placed):
 class _BinnedSharpness(_Placed):
     """The sharpness's coarse stand-in for the wide scan: ``Σ n² / (Σ n)²`` of the points'
     counts ``n`` in square bins of ``2σ``, averaged over two grids offset by half a bin
-    (no dense grid, no blur: a wrong bias spreads the points over a large area)."""
+    (no dense grid, no blur: a wrong bias spreads the points over a large area). Compiled
+    (:func:`pipeline.refine.kernels.binned_sharpness`, bit for bit the numpy version below,
+    ``reference=True``)."""
 
-    def __init__(self, t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *, sigma: float):
+    def __init__(self, t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *, sigma: float,
+                 reference: bool = False):
         super().__init__(t_ns, x, y, yaw, echoes, MAX_ECHOES_SCAN)
         self.bin = 2 * sigma
+        self.reference = reference
 
     def __call__(self, k: float, b: float) -> float:
         wx, wy = self.arcs(self.poses(k, b))
+        if not self.reference:
+            from pipeline.refine.kernels import binned_sharpness
+
+            return float(binned_sharpness(wx.ravel(), wy.ravel(), self.bin))
         total = 0.0
         for shift in (0.0, 0.5):
             ix = np.floor(wx.ravel() / self.bin + shift).astype(np.int64)
@@ -152,7 +160,7 @@ class _BinnedSharpness(_Placed):
 
 class _Consistency(_Placed):
     """Echo consistency ``H / (H + F)`` under a candidate calibration (module docstring),
-    compiled (:mod:`pipeline.refine.consistency_kernel`); ``reference=True``: the numpy
+    compiled (:mod:`pipeline.refine.kernels`); ``reference=True``: the numpy
     version below, which the kernel's tests compare it with."""
 
     def __init__(self, t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
@@ -176,7 +184,7 @@ class _Consistency(_Placed):
         wx, wy = self.arcs(pose)
         ox, oy = transform_points(pose, self.sx, self.sy)  # each sonar's position
         if not self.reference:
-            from pipeline.refine.consistency_kernel import consistency_score, gaussian_weights
+            from pipeline.refine.kernels import consistency_score, gaussian_weights
 
             return float(consistency_score(
                 np.ascontiguousarray(wx), np.ascontiguousarray(wy), ox, oy, self.steps,

@@ -82,7 +82,7 @@ def test_the_compiled_consistency_gives_the_reference_score(true_run: tuple[obje
 
 
 def test_the_compiled_consistency_scores_an_echo_down_where_another_saw_free_space() -> None:
-    from pipeline.refine.consistency_kernel import consistency_score, gaussian_weights
+    from pipeline.refine.kernels import consistency_score, gaussian_weights
 
     w = gaussian_weights(1.0)  # σ = 1 cell: scipy's 7 weights
     assert w.shape == (7,) and w.sum() == pytest.approx(1.0) and w[3] == w.max()
@@ -100,3 +100,31 @@ def test_the_compiled_consistency_scores_an_echo_down_where_another_saw_free_spa
     assert score([near], 0.1) > 0.95
     # A longer reading from the same sonar saw the near arc's cells free: it scores low.
     assert score([near, far], 0.1) < 0.8
+    assert consistency_score(np.empty((0, 3)), np.empty((0, 3)), np.empty(0), np.empty(0),
+                             steps, 0.2, 0.1, 0.4, w, 0.1) == 0.0  # no echoes: nothing agrees
+
+
+def test_the_compiled_binned_sharpness_counts_points_per_bin() -> None:
+    from pipeline.refine.kernels import binned_sharpness
+
+    # Bins of 0.2 m: three points share a bin, one lies far off, one just left of x = 0.
+    # Unshifted grid: counts 3, 1, 1 → 11 / 25; grid shifted by half a bin: the one left
+    # of 0 joins the three → 4, 1 → 17 / 25; the score is their mean.
+    x = np.array([0.05, 0.05, 0.05, 1.05, -0.05])
+    y = np.array([0.05, 0.05, 0.05, 1.05, 0.05])
+    assert binned_sharpness(x, y, 0.2) == pytest.approx((11 / 25 + 17 / 25) / 2, abs=1e-15)
+    assert binned_sharpness(x[:0], y[:0], 0.2) == 0.0
+
+
+@pytest.mark.parametrize("b_deg", [0.0, 0.8, -2.5])
+def test_the_compiled_binned_sharpness_is_the_reference_bit_for_bit(
+        true_run: tuple[object, Echoes], b_deg: float) -> None:
+    from pipeline.refine.calibration import _BinnedSharpness
+
+    track, echoes = true_run
+    t, x, y, yaw = (np.asarray(getattr(track, a)) for a in ("t_ns", "x", "y", "yaw"))
+    compiled = _BinnedSharpness(t, x, y, yaw, echoes, sigma=0.1)
+    reference = _BinnedSharpness(t, x, y, yaw, echoes, sigma=0.1, reference=True)
+    want = reference(0.0, math.radians(b_deg))
+    assert 0.0 < want < 1.0
+    assert compiled(0.0, math.radians(b_deg)) == want

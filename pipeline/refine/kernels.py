@@ -1,15 +1,21 @@
-"""The echo-consistency score (:class:`pipeline.refine.calibration._Consistency`) compiled.
+"""The calibration scores' inner loops compiled (numba, ``@njit(cache=True)``); the numpy
+versions in :mod:`pipeline.refine.calibration` stay as the reference the tests compare with.
 
-The numpy version builds every free-cone sample as an array (echoes × arc points × steps
-along each ray), bins hits and free samples into two grids, blurs both whole grids with
-``scipy.ndimage.gaussian_filter`` and reads them back at the arc points: 30-65 ms per
-candidate calibration on the drifted logs, ~150 candidates per scale search. This kernel
-does the same in two passes without the sample arrays, and blurs only where the score
-reads — at each arc point's cell, the separable Gaussian (scipy's weights: ``truncate =
-3``, normalised) summed over the raw counts around it (the box is padded by 4σ, so the
-reference's zero boundary is never reached). Same cells, same weights; sums in another
-order, so scores agree with the reference to ~1e-12 (``tests/pipeline/refine/
-test_consistency_kernel.py``), and the result is deterministic.
+* :func:`consistency_score` — the echo consistency (``_Consistency``). The numpy version
+  builds every free-cone sample as an array (echoes × arc points × steps along each ray),
+  bins hits and free samples into two grids, blurs both whole grids with
+  ``scipy.ndimage.gaussian_filter`` and reads them back at the arc points: 15-50 ms per
+  candidate calibration on the drifted logs, ~150 candidates per scale search. The kernel
+  does the same in two passes without the sample arrays, and blurs only where the score
+  reads — at each arc point's cell, the separable Gaussian (scipy's weights: ``truncate =
+  3``, normalised) summed over the raw counts around it (the box is padded by 4σ, so the
+  reference's zero boundary is never reached). Same cells, same weights, sums in another
+  order: scores agree with the reference to ~1e-14.
+* :func:`binned_sharpness` — the wide heading-bias scan's score (``_BinnedSharpness``):
+  points counted per bin in a hash table instead of sorted by ``numpy.unique``; the counts
+  are integers, so the score is the reference's bit for bit.
+
+Both are deterministic (no parallel reductions).
 """
 
 from __future__ import annotations
@@ -42,6 +48,8 @@ def consistency_score(wx: np.ndarray, wy: np.ndarray, ox: np.ndarray, oy: np.nda
     arc, ``weights`` the blur's 1-D weights.
     """
     n, a = wx.shape
+    if n == 0 or a == 0:
+        return 0.0
     ns = steps.shape[0]
     # Pass 1: the box of the arc points and the free samples (as the reference computes it).
     xmin, ymin, xmax, ymax = np.inf, np.inf, -np.inf, -np.inf
@@ -117,3 +125,34 @@ def consistency_score(wx: np.ndarray, wy: np.ndarray, ox: np.ndarray, oy: np.nda
             total += best
             scored += 1
     return total / scored if scored > 0 else 0.0
+
+
+@njit(cache=True)
+def binned_sharpness(x: np.ndarray, y: np.ndarray, size: float) -> float:
+    """``Σ n² / (Σ n)²`` of the points' counts ``n`` in square bins of ``size``, averaged
+    over two grids offset by half a bin (``_BinnedSharpness``)."""
+    n = x.shape[0]
+    if n == 0:
+        return 0.0
+    bits = 1
+    while (1 << bits) < 2 * n:
+        bits += 1
+    slots = 1 << bits
+    keys = np.empty(slots, dtype=np.int64)
+    counts = np.zeros(slots, dtype=np.int64)
+    total = 0.0
+    for shift in (0.0, 0.5):
+        counts[:] = 0
+        sumsq = 0
+        for i in range(n):
+            key = math.floor(x[i] / size + shift) * (1 << 32) + math.floor(y[i] / size + shift)
+            # multiplicative hashing (the product's high bits), linear probing
+            h = ((key * 0x5851F42D4C957F2D) >> (64 - bits)) & (slots - 1)
+            while counts[h] != 0 and keys[h] != key:
+                h = (h + 1) & (slots - 1)
+            keys[h] = key
+            sumsq += 2 * counts[h] + 1  # (c + 1)² − c²
+            counts[h] += 1
+        total += float(sumsq) / float(n) ** 2
+    return total / 2
+
