@@ -5,6 +5,7 @@ reach the caller."""
 from __future__ import annotations
 
 import dataclasses
+import sys
 import time
 
 import numpy as np
@@ -94,6 +95,14 @@ def test_an_error_of_the_paper_thread_is_raised_to_the_caller(
         for k in range(0, 300, 10):
             m.integrate_many(scans[k : k + 10])
         m.snapshot()
+
+
+def test_the_gil_switch_interval_is_short_while_the_thread_runs() -> None:
+    before = sys.getswitchinterval()
+    m = AttributionMapper(THREADED, room_grid())
+    assert sys.getswitchinterval() == min(before, pt.SWITCH_INTERVAL_S) < 0.005
+    m.feature_table()  # the thread ends
+    assert sys.getswitchinterval() == before
 
 
 def test_scans_after_the_results_were_read_are_refused() -> None:
