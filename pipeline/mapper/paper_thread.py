@@ -55,8 +55,9 @@ class PaperThread:
             name="sonarmap-paper-mapper", daemon=True,
         )
         self._thread.start()
-        # A mapper dropped half-way (a failed run) stops its thread.
-        weakref.finalize(self, self._queue.put, _STOP)
+        # A mapper dropped half-way (a failed run) stops its thread; at interpreter exit
+        # the daemon thread just ends (no waiting for room in the queue then).
+        weakref.finalize(self, self._queue.put, _STOP).atexit = False
 
     def offer(self, index: int, group: ScanGroup) -> None:
         """Pass 0: hand over group ``index`` if it is the next one needed and the queue has
