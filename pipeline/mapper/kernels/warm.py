@@ -1,4 +1,5 @@
-"""Compile every mapper kernel into numba's on-disk cache: ``python -m pipeline.mapper.kernels.warm``.
+"""Compile every kernel (the mappers' and pose refinement's) into numba's on-disk cache:
+``python -m pipeline.mapper.kernels.warm``.
 
 ``make setup`` runs it once after installing, so the first ``sonarmap run`` (``make demo``,
 the test suite) loads compiled code instead of compiling; it prints how long compiling took.
@@ -8,6 +9,8 @@ A run without it compiles on first use instead, with the same results.
 from __future__ import annotations
 
 import time
+
+import numpy as np
 
 from pipeline.config import MapperConfig
 from pipeline.mapper import make_mapper
@@ -25,7 +28,18 @@ def warm() -> float:
             mapper.begin_pass(index)
             mapper.integrate_many(scans)
         mapper.snapshot()
+    _warm_refinement()
     return time.perf_counter() - t0
+
+
+def _warm_refinement() -> None:
+    """The calibration scores of ``--refine-poses`` (numba compiles per argument types)."""
+    from pipeline.refine.kernels import binned_sharpness, consistency_score
+
+    none2, none1 = np.empty((0, 3)), np.empty(0)
+    binned_sharpness(none1, none1, 0.1)
+    consistency_score(none2, none2, none1, none1, np.linspace(0.0, 1.0, 3), 0.2, 0.1, 0.4,
+                      np.ones(3), 1.0)
 
 
 if __name__ == "__main__":
