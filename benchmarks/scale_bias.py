@@ -125,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
         with open_log(clean, cfg) as reader:
             sv, sensors, _ = prepare(reader, cfg)
             gap = round(pose_gap_limit_s(0, sv.track.median_interval_s()) * 1e9)
-            echoes = collect_echoes(reader, sv.track, sensors, eps_max=cfg.mapper.eps_max,
+            echoes = collect_echoes(sv.ordered_ranges(reader), sv.track, sensors, eps_max=cfg.mapper.eps_max,
                                     max_echo_range_m=pr.max_echo_range_m,
                                     arc_fraction=pr.arc_fraction, time_offset_ns=0,
                                     max_gap_ns=gap)

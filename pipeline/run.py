@@ -182,7 +182,7 @@ def _refine_poses(
     from pipeline.refine import collect_echoes, refine_track
 
     echoes = collect_echoes(
-        reader, sv.track, sensors,
+        sv.ordered_ranges(reader), sv.track, sensors,
         eps_max=config.mapper.eps_max,
         max_echo_range_m=config.pose_refinement.max_echo_range_m,
         arc_fraction=config.pose_refinement.arc_fraction,

@@ -13,14 +13,14 @@ base frame through the sensor's mount, so they can be moved with any pose estima
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
 
 from formats.arrays import F64, I64
-from formats.contract import LogReader
-from pipeline.ingest import ordered_ranges
 from pipeline.pose_sync import POSE_OK, PoseTrack, interpolate_poses
+from pipeline.reorder_window import RangeChunk
 from pipeline.sensors import SensorTable
 
 ARC_SAMPLES = 7
@@ -53,7 +53,7 @@ class Echoes:
 
 
 def collect_echoes(
-    reader: LogReader,
+    chunks: Iterable[RangeChunk],
     track: PoseTrack,
     sensors: SensorTable,
     *,
@@ -63,9 +63,11 @@ def collect_echoes(
     time_offset_ns: int,
     max_gap_ns: int,
 ) -> Echoes:
-    """One pass over the log's readings (time order) keeping the echoes that have a pose."""
+    """One pass over the log's readings in time order (``chunks``: the survey's spill,
+    :meth:`pipeline.ingest.Survey.ordered_ranges`, so the log is not decoded again)
+    keeping the echoes that have a pose."""
     parts: list[tuple[I64, F64, F64, F64, F64, F64, F64]] = []
-    for chunk in ordered_ranges(reader):
+    for chunk in chunks:
         b = chunk.batch
         if len(b) == 0:
             continue

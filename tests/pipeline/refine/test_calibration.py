@@ -37,7 +37,7 @@ def true_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[object, Echoes]:
     cfg = Config()
     with open_log(log, cfg) as reader:
         sv, sensors, _ = prepare(reader, cfg)
-        echoes = collect_echoes(reader, sv.track, sensors, eps_max=cfg.mapper.eps_max,
+        echoes = collect_echoes(sv.ordered_ranges(reader), sv.track, sensors, eps_max=cfg.mapper.eps_max,
                                 max_echo_range_m=3.0, arc_fraction=1.0, time_offset_ns=0,
                                 max_gap_ns=10**9)
     return sv.track, echoes

@@ -53,7 +53,7 @@ def drifted_run(layout: str, tmp: Path) -> tuple[Any, Any, Trajectory]:
     cfg = Config()
     with open_log(log, cfg) as reader:
         sv, sensors, _ = prepare(reader, cfg)
-        echoes = collect_echoes(reader, sv.track, sensors, eps_max=cfg.mapper.eps_max,
+        echoes = collect_echoes(sv.ordered_ranges(reader), sv.track, sensors, eps_max=cfg.mapper.eps_max,
                                 max_echo_range_m=3.0, arc_fraction=0.8, time_offset_ns=0,
                                 max_gap_ns=10**9)
     truth = Trajectory(sim.true_poses.t_ns, sim.true_poses.x, sim.true_poses.y, sim.true_poses.yaw)
