@@ -426,7 +426,9 @@ def _client_inner(
             threads_per_worker=1,
             processes=True,
             host="127.0.0.1",
-            dashboard_address=None,
+            # Any free port for the scheduler's HTTP server: with None it still takes 8787,
+            # and a second cluster on the machine (another batch, a parallel test) warned.
+            dashboard_address=":0",
             silence_logs=logging.ERROR,
             # Each worker's share of the machine: a log whose map outgrows it (an odometry
             # glitch, an absurd grid) has its worker restarted and fails as a row, instead
