@@ -19,51 +19,36 @@ from __future__ import annotations
 import argparse
 import sys
 import tempfile
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 
 if __package__ in (None, ""):  # run as a script: the repository root on the path
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.bench_end_to_end import LogSpec, RunFigures, cached_log, run_once
+from benchmarks.log_parts import Accept, anything, split_mcap
 
 
-def _cut(src: Path, parts: Sequence[tuple[Path, Callable[[str, int], bool]]]) -> None:
-    """Copy every message of ``src`` into the first part whose test accepts it."""
+def _cut(src: Path, parts: Sequence[tuple[Path, Accept]]) -> None:
+    """Copy every message of ``src`` into the first part that accepts it (zstd chunks);
+    every message must land in a part."""
     from mcap.reader import make_reader
-    from mcap.writer import CompressionType, Writer
 
-    outs = []
-    for path, accept in parts:
-        f = path.open("wb")
-        w = Writer(f, compression=CompressionType.ZSTD)
-        w.start(profile="ros2", library="sonarmap bench")
-        outs.append((f, w, accept, {}, {}))
-    with src.open("rb") as fin:
-        for schema, channel, msg in make_reader(fin).iter_messages(log_time_order=False):
-            for _, w, accept, schemas, channels in outs:
-                if not accept(channel.topic, msg.log_time):
-                    continue
-                if schema.id not in schemas:
-                    schemas[schema.id] = w.register_schema(schema.name, schema.encoding,
-                                                           schema.data)
-                if channel.id not in channels:
-                    channels[channel.id] = w.register_channel(
-                        channel.topic, channel.message_encoding, schemas[schema.id])
-                w.add_message(channels[channel.id], msg.log_time, msg.data, msg.publish_time)
-                break
-            else:
-                raise AssertionError(f"no part takes the message at {msg.log_time}")
-    for f, w, *_ in outs:
-        w.finish()
-        f.close()
+    split_mcap(src, parts)
+
+    def count(p: Path) -> int:
+        with p.open("rb") as f:
+            return int(make_reader(f).get_summary().statistics.message_count)  # type: ignore[union-attr]
+
+    if sum(count(p) for p, _ in parts) != count(src):
+        raise AssertionError(f"no part takes some messages of {src}")
 
 
 def split_files(log: Path, splits: int) -> dict[str, list[Path]]:
     """The log cut by time into ``splits`` files and by topic into two (cached beside it)."""
     from mcap.reader import make_reader
 
-    d = log.parent / f"parts-v2-{splits}"
+    d = log.parent / f"parts-v3-{splits}"
     by_time = [d / f"rec_{i}.mcap" for i in range(splits)]
     by_topic = [d / "sonar.mcap", d / "odom.mcap"]
     if not all(p.exists() for p in by_time + by_topic):
@@ -72,13 +57,13 @@ def split_files(log: Path, splits: int) -> dict[str, list[Path]]:
             stats = make_reader(f).get_summary().statistics  # type: ignore[union-attr]
         t0, t1 = stats.message_start_time, stats.message_end_time + 1
 
-        def before(k: int) -> Callable[[str, int], bool]:  # integer ns: exact cuts
-            return lambda topic, t: t < t0 + (k + 1) * (t1 - t0) // splits
+        def before(k: int) -> Accept:  # integer ns: exact cuts
+            return lambda topic, t, data: t < t0 + (k + 1) * (t1 - t0) // splits
 
         _cut(log, [(p, before(k)) for k, p in enumerate(by_time)])
         pose_topics = {"/odom", "/tf"}
-        _cut(log, [(by_topic[0], lambda topic, t: topic not in pose_topics),
-                   (by_topic[1], lambda topic, t: True)])
+        _cut(log, [(by_topic[0], lambda topic, t, data: topic not in pose_topics),
+                   (by_topic[1], anything())])
     return {f"by time, {splits} files": by_time, "by topic, sonar + odometry": by_topic}
 
 

@@ -10,9 +10,17 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 import pytest
-from split_logs import Accept, anything, before, split_mcap, split_ros1, split_ros2, topics
 from typer.testing import CliRunner
 
+from benchmarks.log_parts import (
+    Accept,
+    anything,
+    before,
+    split_mcap,
+    split_ros1,
+    split_ros2,
+    topics,
+)
 from cli.app import app
 
 ROOT = Path(__file__).resolve().parents[2]

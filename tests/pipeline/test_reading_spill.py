@@ -20,7 +20,7 @@ from pipeline.mapper.types import SCAN_FIELDS, Scan
 from pipeline.run import prepare, stream_scans
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "formats" / "ros"))
-from split_logs import anything, before, split_mcap
+from benchmarks.log_parts import anything, before, split_mcap
 
 OFFICE = Path(__file__).resolve().parents[2] / "sample_logs" / "office" / "office.mcap"
 T0 = 1_700_000_000_000_000_000

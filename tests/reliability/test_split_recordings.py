@@ -10,8 +10,7 @@ from pathlib import Path
 from typer.testing import CliRunner
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "formats" / "ros"))
-from split_logs import anything, before, split_mcap
-
+from benchmarks.log_parts import anything, before, split_mcap
 from cli.app import app
 from formats import open_log
 

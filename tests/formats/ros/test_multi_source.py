@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from split_logs import anything, before, split_mcap, topics
 
+from benchmarks.log_parts import anything, before, split_mcap, topics
 from formats import open_log
 from formats.contract import PoseBatch, RangeBatch
 from formats.errors import FormatError
