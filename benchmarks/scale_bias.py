@@ -36,7 +36,7 @@ import numpy as np
 from formats.arrays import F64
 from pipeline.refine.calibration import MAX_ECHOES_CONSISTENCY, _Consistency, _Placed, _thin
 from pipeline.refine.echoes import Echoes
-from pipeline.refine.se2 import transform_points
+from pipeline.se2 import transform_points
 
 SCALES = np.round(np.arange(-0.06, 0.0601, 0.01), 3)
 

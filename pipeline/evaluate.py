@@ -55,6 +55,7 @@ from formats.map_types import GridSpec
 from formats.tables import text_table
 from formats.writers.trajectory_csv import read_trajectory
 from pipeline.metrics_schema import Metrics, finite, read_metrics
+from pipeline.se2 import inverse, transform_points
 
 __all__ = [
     "RUN_FILES",
@@ -295,28 +296,28 @@ def move_classes(
     R(θ)·p + t), on an axis-aligned grid of the same resolution that covers the moved map:
     each cell takes the class of the source cell under its centre, and each occupied source
     cell also marks the cell its centre moves into, so a turned wall stays unbroken."""
-    tx, ty, th = motion
-    c, s, res = math.cos(th), math.sin(th), grid.resolution
+    res = grid.resolution
     xs = np.array([0.0, grid.width, 0.0, grid.width]) * res + grid.origin_x
     ys = np.array([0.0, 0.0, grid.height, grid.height]) * res + grid.origin_y
-    mx, my = c * xs - s * ys + tx, s * xs + c * ys + ty
+    mx, my = transform_points(motion, xs, ys)
     # 1e-9 of a cell: an edge that lands on a cell boundary (a quarter turn) adds no cell.
     ox = math.floor(mx.min() / res + 1e-9) * res
     oy = math.floor(my.min() / res + 1e-9) * res
     dst = GridSpec(ox, oy, res, math.ceil((mx.max() - ox) / res - 1e-9),
                    math.ceil((my.max() - oy) / res - 1e-9))
-    cx = _centres(ox, res, dst.width)[None, :] - tx
-    cy = _centres(oy, res, dst.height)[:, None] - ty
-    cols, cok = _index(c * cx + s * cy, grid.origin_x, res, grid.width)  # R(−θ)·(p − t)
-    rows, rok = _index(-s * cx + c * cy, grid.origin_y, res, grid.height)
+    # Each cell centre moved back into the source map.
+    sx, sy = transform_points(inverse(motion), _centres(ox, res, dst.width)[None, :],
+                              _centres(oy, res, dst.height)[:, None])
+    cols, cok = _index(sx, grid.origin_x, res, grid.width)
+    rows, rok = _index(sy, grid.origin_y, res, grid.height)
     out = np.full(dst.shape, UNKNOWN, dtype=np.int8)
     ok = cok & rok
     out[ok] = classes[rows[ok], cols[ok]]
     occ_r, occ_c = np.nonzero(classes == OCCUPIED)
-    px = grid.origin_x + (occ_c + 0.5) * res
-    py = grid.origin_y + (occ_r + 0.5) * res
-    dc, cin = _index(c * px - s * py + tx, ox, res, dst.width)
-    dr, rin = _index(s * px + c * py + ty, oy, res, dst.height)
+    qx, qy = transform_points(motion, _centres(grid.origin_x, res, grid.width)[occ_c],
+                              _centres(grid.origin_y, res, grid.height)[occ_r])
+    dc, cin = _index(qx, ox, res, dst.width)
+    dr, rin = _index(qy, oy, res, dst.height)
     out[dr[cin & rin], dc[cin & rin]] = OCCUPIED
     return out, dst
 
@@ -575,15 +576,13 @@ def evaluate_run(
         motion = (float(traj_err["alignment"][0]), float(traj_err["alignment"][1]),
                   float(traj_err["alignment"][2]))
         moved, moved_grid = move_classes(run_map.classes, run_map.grid, motion)
-        tx, ty, th = motion
-        fx = math.cos(th) * features.x - math.sin(th) * features.y + tx
-        fy = math.sin(th) * features.x + math.cos(th) * features.y + ty
+        fx, fy = transform_points(motion, features.x, features.y)
         scores, _ = evaluate_maps(
             moved, moved_grid, truth.classes, truth.grid, tolerance_m=tolerance_m,
             poses_xy=poses, reach_m=reach, feature_xy=np.column_stack([fx, fy]),
         )
         aligned = {"precision": scores["precision"], "recall": scores["recall"],
-                   "f1": scores["f1"], "alignment": [tx, ty, th]}
+                   "f1": scores["f1"], "alignment": list(motion)}
     mean_var = finite(metrics.get("paper_metric", {}).get("mean_feature_variance_m2"))
     if mean_var is None:
         notes += ("metrics.json has no mean feature variance",)

@@ -17,6 +17,7 @@ from formats.laser_log import LaserLog
 from formats.log_writers import LogContent
 from pipeline.drift import DriftModel, apply_drift
 from pipeline.emulate.ring import cone_coverage, laser_view
+from pipeline.se2 import compose, inverse
 from pipeline.sonar_ring import SonarRing
 
 CHUNK_CELLS = 2_000_000  # bound on (scan × beam × sonar) and ray samples held at once
@@ -90,18 +91,13 @@ class Emulation:
             )
         lo = int(np.searchsorted(t, t0, side="right")) - 1
         hi = int(np.searchsorted(t, t1, side="left")) + 1
-        ox, oy, oyaw = _pose_at(odometry, t0)
-        turn = float(wrap_angle(true.yaw[0] - oyaw))
-        c, s = math.cos(turn), math.sin(turn)
-        dx, dy = odometry.x[lo:hi] - ox, odometry.y[lo:hi] - oy
-        moved = PoseBatch(
-            t[lo:hi].copy(),
-            true.x[0] + c * dx - s * dy,
-            true.y[0] + s * dx + c * dy,
-            wrap_angle(odometry.yaw[lo:hi] + turn),
-            odometry.parent_frame,
-            true.child_frame,
-        )
+        # The rigid motion taking the odometry's pose at the first scan onto the true one.
+        motion = compose([true.x[0], true.y[0], true.yaw[0]], inverse(_pose_at(odometry, t0)))
+        sl = slice(lo, hi)
+        x, y, yaw = compose(motion, np.column_stack(
+            [odometry.x[sl], odometry.y[sl], odometry.yaw[sl]])).T
+        moved = PoseBatch(t[sl].copy(), x.copy(), y.copy(), yaw.copy(), odometry.parent_frame,
+                          true.child_frame)
         ex, ey, _ = _pose_at(moved, true.t_ns)
         off = np.hypot(ex - true.x, ey - true.y)
         note = (

@@ -54,7 +54,7 @@ import numpy.typing as npt
 from formats.arrays import F64, I64
 from pipeline.drift import DriftModel, apply_drift
 from pipeline.refine.echoes import Echoes
-from pipeline.refine.se2 import transform_points
+from pipeline.se2 import transform_points
 
 MAX_ECHOES = 8_000  # echoes used for the sharpness (evenly thinned beyond)
 MAX_ECHOES_SCAN = 2_000  # ... in the first, binned scan over the whole bias range

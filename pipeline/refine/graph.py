@@ -31,7 +31,7 @@ import numpy.typing as npt
 
 from formats.angles import wrap_angle
 from formats.arrays import F64, I64
-from pipeline.refine.se2 import between
+from pipeline.se2 import between
 
 
 @dataclass(frozen=True)

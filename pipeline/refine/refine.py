@@ -52,8 +52,8 @@ from pipeline.refine.graph import (
     sqrt_information,
 )
 from pipeline.refine.matcher import LikelihoodField, Match, SearchWindow, match
-from pipeline.refine.se2 import between, compose, inverse, transform_points
 from pipeline.refine.submaps import Submap, build_submaps, path_length_at
+from pipeline.se2 import between, compose, inverse, transform_points
 
 
 @dataclass(frozen=True)

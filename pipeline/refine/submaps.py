@@ -17,7 +17,7 @@ import numpy as np
 
 from formats.arrays import F64, I64
 from pipeline.refine.echoes import Echoes
-from pipeline.refine.se2 import between, transform_points
+from pipeline.se2 import between, transform_points
 
 
 @dataclass(frozen=True)

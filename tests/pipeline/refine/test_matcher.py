@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from pipeline.refine.matcher import LikelihoodField, SearchWindow, match
-from pipeline.refine.se2 import inverse, transform_points
+from pipeline.se2 import inverse, transform_points
 
 
 def room_points() -> tuple[np.ndarray, np.ndarray]:

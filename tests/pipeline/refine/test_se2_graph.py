@@ -1,4 +1,4 @@
-"""SE(2) helpers and the pose graph (pipeline.refine.se2, pipeline.refine.graph)."""
+"""SE(2) helpers and the pose graph (pipeline.se2, pipeline.refine.graph)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from pipeline.refine.graph import GraphOptions, MatchConstraints, Odometry, solve, sqrt_information
-from pipeline.refine.se2 import between, compose, inverse, transform_points
+from pipeline.se2 import between, compose, inverse, transform_points
 
 
 def test_compose_inverse_between_agree() -> None:

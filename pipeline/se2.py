@@ -1,4 +1,5 @@
-"""SE(2) poses as arrays ``(x, y, θ)`` (m, m, rad): composition, inverse, relative motion.
+"""SE(2) poses as arrays ``(x, y, θ)`` (m, m, rad): composition, inverse, relative motion,
+points moved by a pose (used by pose refinement, evaluation and emulation).
 
 Every function is vectorised: its arguments are arrays of poses (last axis of size 3) or
 single poses; angles come out wrapped to [−π, π).
