@@ -198,7 +198,8 @@ class PoseTrackBuilder:
 
     Memory: the kept poses (32 bytes each, 23 MB per ten hours of 20 Hz odometry) are
     written to four anonymous temporary files, one per column
-    (:mod:`pipeline.spilled_columns`), and :meth:`finish` maps them read-only. Pass 2 reads the track in time order and releases the pages behind it
+    (:mod:`pipeline.spilled_columns`), and :meth:`finish` maps them read-only. Pass 2 reads
+    the track in time order and releases the pages behind it
     (:meth:`PoseTrack.release_before`), so the resident part of the track does not grow
     with the log: the page cache holds the rest, and the files vanish with the process,
     even a killed one (they are unlinked from the start). Measured before, when the track
