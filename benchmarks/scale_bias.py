@@ -18,7 +18,10 @@ best step and its neighbours:
   ``Σ_cone log(1 − p) + log(1 − Π_arc (1 − p))`` — with the occupancy ``p = (H + a·p₀) /
   (H + F + a)`` (``a = 1``, ``p₀ = 0.3``; ``H``, ``F`` the blurred hit and free counts)
   estimated from the *other* half of the readings (even against odd: cross-fitted, so no
-  reading scores against itself), summed over both halves.
+  reading scores against itself), summed over both halves;
+* ``range rate``: how range changes compare with the odometry's displacement along the
+  surface normal, with the *truth map's* normals (an oracle: :mod:`benchmarks.range_rate`),
+  the two robust fits that bracket it and the number of echo pairs they had.
 
 The drifted cases' true-pose logs are those of ``compare_methods --drifted`` (the
 buildings' are emulated into ``build/compare`` when missing; ``--work`` keeps the drifted
@@ -104,42 +107,51 @@ def peak(values: F64) -> float:
     return float(SCALES[i])
 
 
-def main(argv: list[str] | None = None) -> int:
-    from benchmarks.compare_methods import SYNTHETIC_DRIFT_CASES, _drift_cases
+def log_echoes(log: Path) -> tuple[tuple[np.ndarray, F64, F64, F64], Echoes]:
+    """The odometry track ``(t_ns, x, y, yaw)`` of ``log`` and the echoes refinement
+    collects from it (the default configuration)."""
     from formats import open_log
     from pipeline.config import Config
     from pipeline.pose_sync import pose_gap_limit_s
     from pipeline.refine import collect_echoes
     from pipeline.run import prepare
 
+    cfg = Config()
+    pr = cfg.pose_refinement
+    with open_log(log, cfg) as reader:
+        sv, sensors, _ = prepare(reader, cfg)
+        gap = round(pose_gap_limit_s(0, sv.track.median_interval_s()) * 1e9)
+        echoes = collect_echoes(sv.ordered_ranges(reader), sv.track, sensors,
+                                eps_max=cfg.mapper.eps_max, max_echo_range_m=pr.max_echo_range_m,
+                                arc_fraction=pr.arc_fraction, time_offset_ns=0, max_gap_ns=gap)
+    tr = sv.track
+    return (np.asarray(tr.t_ns), np.asarray(tr.x), np.asarray(tr.y), np.asarray(tr.yaw)), echoes
+
+
+def main(argv: list[str] | None = None) -> int:
+    from benchmarks.compare_methods import SYNTHETIC_DRIFT_CASES, _drift_cases
+    from benchmarks.range_rate import range_rate_scale
+    from pipeline.config import Config
+
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--cases", nargs="+", default=list(SYNTHETIC_DRIFT_CASES), metavar="NAME")
     ap.add_argument("--work", type=Path, default=Path("build/compare/drifted"))
     args = ap.parse_args(argv)
-    cfg = Config()
-    pr = cfg.pose_refinement
+    pr = Config().pose_refinement
     print("| true-pose log | echoes | consistency: peak k | consistency fine: peak k "
-          "| held-out likelihood: peak k |")
-    print("|---|---:|---:|---:|---:|")
-    for name, clean, _, _, _ in _drift_cases(args.work, tuple(args.cases)):
-        with open_log(clean, cfg) as reader:
-            sv, sensors, _ = prepare(reader, cfg)
-            gap = round(pose_gap_limit_s(0, sv.track.median_interval_s()) * 1e9)
-            echoes = collect_echoes(sv.ordered_ranges(reader), sv.track, sensors, eps_max=cfg.mapper.eps_max,
-                                    max_echo_range_m=pr.max_echo_range_m,
-                                    arc_fraction=pr.arc_fraction, time_offset_ns=0,
-                                    max_gap_ns=gap)
-        tr = sv.track
-        args_ = (np.asarray(tr.t_ns), np.asarray(tr.x), np.asarray(tr.y), np.asarray(tr.yaw),
-                 echoes)
+          "| held-out likelihood: peak k | range rate, truth normals: k fwd / rev (pairs) |")
+    print("|---|---:|---:|---:|---:|---|")
+    for name, clean, _, truth, _ in _drift_cases(args.work, tuple(args.cases)):
+        track, echoes = log_echoes(clean)
         scores: list[Callable[[float, float], float]] = [
-            _Consistency(*args_, res=2 * pr.field_resolution_m, sigma=pr.field_sigma_m),
-            _Consistency(*args_, res=0.02, sigma=0.03),
-            HeldOutLikelihood(*args_),
+            _Consistency(*track, echoes, res=2 * pr.field_resolution_m, sigma=pr.field_sigma_m),
+            _Consistency(*track, echoes, res=0.02, sigma=0.03),
+            HeldOutLikelihood(*track, echoes),
         ]
         peaks = [peak(np.array([s(float(k), 0.0) for k in SCALES])) for s in scores]
-        print(f"| {name} | {len(echoes)} | " + " | ".join(f"{p:+.3f}" for p in peaks) + " |",
-              flush=True)
+        rate = range_rate_scale(echoes, truth)
+        print(f"| {name} | {len(echoes)} | " + " | ".join(f"{p:+.3f}" for p in peaks)
+              + f" | {rate.k_forward:+.3f} / {rate.k_reverse:+.3f} ({rate.pairs}) |", flush=True)
     return 0
 
 

@@ -217,8 +217,14 @@ class PoseRefinementConfig:
     calibration_search: bool = doc_field("search the odometry calibration that makes the echoes "
                                     "sharpest before matching", default=True)
     calibration_max_scale: float = doc_field(
-        "... scale error searched in ± this by echo consistency (0: the heading bias only)",
+        "... scale error searched in ± this (0: the heading bias only)",
         default=0.0)
+    calibration_scale_score: str = doc_field(
+        "... the scale's estimator: 'surfaces' (ranges along surface normals, "
+        "pipeline/refine/surfaces.py) or 'consistency' (echo consistency)", default="surfaces")
+    calibration_max_slope: float = doc_field(
+        "... 'surfaces': a scale whose fixed-point slope reaches this is not applied (the "
+        "answer follows the association, not the data)", default=0.75)
     calibration_max_bias_deg_per_m: float = doc_field("... heading bias searched in ± this, deg/m",
                                                  default=3.0)
     calibration_min_gain: float = doc_field(
@@ -427,6 +433,11 @@ def _check_ranges(cfg: Config) -> None:
         need(v >= 1, f"pose_refinement.{key}", "must be >= 1", v)
     need(0 <= pr.calibration_max_scale < 0.5, "pose_refinement.calibration_max_scale",
          "must be in [0, 0.5)", pr.calibration_max_scale)
+    need(0 < pr.calibration_max_slope <= 1, "pose_refinement.calibration_max_slope",
+         "must be in (0, 1]", pr.calibration_max_slope)
+    need(pr.calibration_scale_score in ("consistency", "surfaces"),
+         "pose_refinement.calibration_scale_score", "must be 'consistency' or 'surfaces'",
+         pr.calibration_scale_score)
     need(math.isfinite(pr.calibration_min_gain) and 0 <= pr.calibration_min_gain < 1,
          "pose_refinement.calibration_min_gain", "must be in [0, 1)", pr.calibration_min_gain)
     need(0 < pr.calibration_max_bias_deg_per_m <= 45,

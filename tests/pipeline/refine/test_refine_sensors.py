@@ -38,8 +38,9 @@ LAYOUTS = {
 }
 
 
-def drifted_run(layout: str, tmp: Path) -> tuple[Any, Any, Trajectory]:
-    """The layout's drifted log: its odometry track, its echoes and the true trajectory."""
+def drifted_run(layout: str, tmp: Path, drift: bool = True) -> tuple[Any, Any, Trajectory]:
+    """The layout's drifted log (``drift = False``: its true poses): its odometry track, its
+    echoes and the true trajectory."""
     from formats import open_log
     from pipeline.config import Config
     from pipeline.run import prepare
@@ -47,7 +48,8 @@ def drifted_run(layout: str, tmp: Path) -> tuple[Any, Any, Trajectory]:
     mounts, rate = LAYOUTS[layout]
     sim = simulate(world_from_dict(WORLD), WAYPOINTS,
                    SimOptions(seed=3, speed=0.4, ring_rate_hz=rate, mounts=mounts,
-                              drift_scale=0.03, drift_heading_bias_deg_per_m=0.8))
+                              drift_scale=0.03 if drift else 0.0,
+                              drift_heading_bias_deg_per_m=0.8 if drift else 0.0))
     log = tmp / f"{layout}.mcap"
     write_simulation(sim, log, "mcap")
     cfg = Config()
@@ -60,12 +62,12 @@ def drifted_run(layout: str, tmp: Path) -> tuple[Any, Any, Trajectory]:
     return sv.track, echoes, truth
 
 
-def refined_errors(run: tuple[Any, Any, Trajectory], max_scale: float
-                   ) -> tuple[float, float, dict[str, Any]]:
+def refined_errors(run: tuple[Any, Any, Trajectory], max_scale: float,
+                   score: str = "surfaces") -> tuple[float, float, dict[str, Any]]:
     """ATE (m) of the odometry and of the refined track, and refinement's metrics."""
     track, echoes, truth = run
     ref = refine_track(track, echoes, PoseRefinementConfig(
-        enabled=True, calibration_max_scale=max_scale))
+        enabled=True, calibration_max_scale=max_scale, calibration_scale_score=score))
     t = np.asarray(track.t_ns)
 
     def ate(x: np.ndarray, y: np.ndarray, yaw: np.ndarray) -> float:
@@ -84,10 +86,17 @@ def test_refinement_finds_the_drift_with_each_sensor_layout(layout: str, tmp_pat
     assert after < before / 2, (before, after)
     assert metrics["search_heading_bias_deg_per_m"] == pytest.approx(0.8, abs=0.2)
     assert metrics["search_scale_error"] == 0.0
-    # With the scale searched too (calibration_max_scale > 0): the ring and the sweeping
-    # sonar see walls ahead and behind and recover the scale (measured 0.036 and 0.039;
-    # ATE 17x and 11x down); the 8 front sonars barely constrain it (0.007; 4.5x).
+    # With the scale searched too (calibration_max_scale > 0), by the surface patches (the
+    # default score): every layout's scale is found (measured 0.031-0.036 on the ring and
+    # the front sonars, 0.023 on the sweeping one), the fixed point well determined.
     _, scaled, metrics = refined_errors(run, 0.05)
+    assert scaled < before / 5, (before, scaled)
+    assert metrics["search_scale_error"] == pytest.approx(0.03, abs=0.01)
+    assert 0 < metrics["scale_fixed_point_slope"] < 0.75
+    # By echo consistency: the ring and the sweeping sonar see walls ahead and behind and
+    # recover the scale (measured 0.036 and 0.039; ATE 17x and 11x down); the 8 front
+    # sonars barely constrain it (0.007; 4.5x).
+    _, scaled, metrics = refined_errors(run, 0.05, "consistency")
     assert scaled < after, (after, scaled)
     assert metrics["search_heading_bias_deg_per_m"] == pytest.approx(0.8, abs=0.1)
     assert metrics["consistency_after"] > metrics["consistency_before"]

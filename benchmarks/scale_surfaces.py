@@ -1,0 +1,51 @@
+"""The scale error the surface-patch estimator (:mod:`pipeline.refine.surfaces`) finds on
+the true-pose and the drifted log of every drifted case, with the slope of its fixed-point
+line and ``f(k₀)`` itself (issue 17).
+
+Usage::
+
+    python -m benchmarks.scale_surfaces [--cases NAME ...] [--work DIR]
+
+The heading bias is the one refinement's default calibration finds (by sharpness, at
+``k = 0``), held per reported metre.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+from pipeline.refine.surfaces import K0S, SurfaceScale
+
+
+def main(argv: list[str] | None = None) -> int:
+    from benchmarks.compare_methods import SYNTHETIC_DRIFT_CASES, _drift_cases
+    from benchmarks.scale_bias import log_echoes
+    from pipeline.config import Config
+    from pipeline.refine.calibration import calibrate
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--cases", nargs="+", default=list(SYNTHETIC_DRIFT_CASES), metavar="NAME")
+    ap.add_argument("--work", type=Path, default=Path("build/compare/drifted"))
+    args = ap.parse_args(argv)
+    pr = Config().pose_refinement
+    print("| log | poses | echoes | heading bias found (°/m) | f(k₀) at k₀ = "
+          + ", ".join(f"{k:+.0%}" for k in K0S) + " | slope c | fixed point k |")
+    print("|---|---|---:|---:|---|---:|---:|")
+    for name, clean, drifted, _, _ in _drift_cases(args.work, tuple(args.cases)):
+        for which, log in (("true", clean), ("drifted", drifted)):
+            track, echoes = log_echoes(log)
+            bias = calibrate(*track, echoes, max_scale=0.0,
+                             max_bias=math.radians(pr.calibration_max_bias_deg_per_m),
+                             res=pr.field_resolution_m, sigma=pr.field_sigma_m,
+                             min_gain=pr.calibration_min_gain).heading_bias
+            fp = SurfaceScale(*track, echoes, bias).fixed_point()
+            print(f"| {name} | {which} | {len(echoes)} | {math.degrees(bias):.2f} | "
+                  + " ".join(f"{v:+.4f}" for v in fp.f)
+                  + f" | {fp.slope:.2f} | {fp.scale_error:+.4f} |", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

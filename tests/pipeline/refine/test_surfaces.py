@@ -1,0 +1,81 @@
+"""The scale error from surface patches (pipeline/refine/surfaces.py): the fixed point on
+true and drifted poses, the pull of the association towards its own scale, and the gate
+that keeps an undetermined scale out of the calibration."""
+
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from test_refine_sensors import drifted_run
+
+from formats.errors import ConfigError
+from pipeline.config import config_from_dict
+from pipeline.refine.calibration import calibrate
+from pipeline.refine.surfaces import K0S, SurfaceScale
+
+BIAS = math.radians(0.8) / 1.03  # the drift's heading bias per reported metre
+
+
+def _scale(run: tuple[Any, Any, Any], bias: float) -> SurfaceScale:
+    track, echoes, _ = run
+    return SurfaceScale(np.asarray(track.t_ns), np.asarray(track.x), np.asarray(track.y),
+                        np.asarray(track.yaw), echoes, bias)
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[Any, Any, Any]]:
+    runs = {}
+    for name in ("true", "drifted"):
+        tmp: Path = tmp_path_factory.mktemp(name)
+        runs[name] = drifted_run("ring16", tmp, drift=name == "drifted")
+    return runs
+
+
+def test_the_fixed_point_finds_no_scale_on_true_poses_and_the_drift_on_drifted_ones(
+        runs: dict[str, tuple[Any, Any, Any]]) -> None:
+    true = _scale(runs["true"], 0.0).fixed_point()
+    drifted = _scale(runs["drifted"], BIAS).fixed_point()
+    # measured: +0.005 and +0.036 (3 % of drift), slopes 0.38 and 0.32
+    assert true.scale_error == pytest.approx(0.0, abs=0.01)
+    assert drifted.scale_error == pytest.approx(0.03, abs=0.01)
+    assert 0 < true.slope < 0.75 and 0 < drifted.slope < 0.75
+    assert len(true.f) == len(K0S)
+
+
+def test_the_association_pulls_each_evaluation_towards_its_own_scale(
+        runs: dict[str, tuple[Any, Any, Any]]) -> None:
+    # f(k0) lies between k0 and the fixed point: the reason for the fixed point.
+    scale = _scale(runs["drifted"], BIAS)
+    fp = scale.fixed_point()
+    low, high = scale(-0.02), scale(0.06)
+    assert -0.02 < low < fp.scale_error < high < 0.06
+
+
+def test_a_scale_whose_fixed_point_is_not_determined_is_not_applied(
+        runs: dict[str, tuple[Any, Any, Any]]) -> None:
+    track, echoes, _ = runs["drifted"]
+    t, x, y, yaw = (np.asarray(v) for v in (track.t_ns, track.x, track.y, track.yaw))
+    common: dict[str, Any] = dict(max_scale=0.05, max_bias=math.radians(3.0), res=0.05,
+                                  sigma=0.1, min_gain=0.01, scale_score="surfaces")
+    applied = calibrate(t, x, y, yaw, echoes, **common)
+    gated = calibrate(t, x, y, yaw, echoes, **common, max_slope=0.05)
+    bias_only = calibrate(t, x, y, yaw, echoes, **{**common, "max_scale": 0.0})
+    assert applied.scale_error == pytest.approx(0.03, abs=0.01)
+    assert math.degrees(applied.heading_bias) == pytest.approx(0.8, abs=0.1)
+    assert gated.scale_error == 0.0
+    assert gated.heading_bias == bias_only.heading_bias
+    assert gated.scale_slope == pytest.approx(applied.scale_slope, abs=0.2)
+
+
+@pytest.mark.parametrize(("key", "value", "message"), [
+    ("calibration_scale_score", "sharpness", "must be 'consistency' or 'surfaces'"),
+    ("calibration_max_slope", 0.0, "must be in (0, 1]"),
+])
+def test_bad_scale_settings_are_refused_by_name(key: str, value: object, message: str) -> None:
+    with pytest.raises(ConfigError, match=rf"pose_refinement\.{key}.*{re.escape(message)}"):
+        config_from_dict({"pose_refinement": {key: value}})
