@@ -304,7 +304,7 @@ def _surface_calibration(
     best: tuple[float, float, float], *, max_scale: float, bias_step: float, max_slope: float,
     min_gain: float,
 ) -> Calibration:
-    """The scale by :mod:`pipeline.refine.surfaces`, alternated twice with the heading bias
+    """The scale by :mod:`pipeline.refine.surfaces`, alternated (at most twice) with the heading bias
     by sharpness at that scale (a bias found with the scale wrong partly makes up for it:
     0.58°/m of 0.8 on the office run; a new bias is taken, as at ``k = 0``, only when it
     sharpens the echoes by ``min_gain``). A fixed point whose slope reaches ``max_slope`` is
@@ -329,6 +329,7 @@ def _surface_calibration(
         for _ in range(3):
             found = _grid_max(sharp, at_k, found[2] + db * np.arange(-2, 3), found)
             db /= 4
-        if found[0] >= held * (1.0 + min_gain):
-            b = found[2]
+        if found[0] < held * (1.0 + min_gain):
+            break  # the bias stands: the scale found under it is the answer
+        b = found[2]
     return Calibration(k, b, sharp(k, b), base, scale_slope=slope)

@@ -12,7 +12,8 @@ only slide along a wall carry no information and no bias.
 One evaluation ``f(k₀)``, from the echoes alone:
 
 1. the echoes placed under ``k₀`` (the heading bias held per reported metre); the blurred
-   densities of their whole-cone arcs (``H``) and free cones (``F``) on 5 cm cells;
+   densities of their whole-cone arcs (``H``) and free cones (``F``, sampled along the
+   cone's edges and axis, weighted as the whole cone) on 5 cm cells;
 2. each echo's hit: the arc point of the best ``H / (H + F)`` (as the consistency score);
    its normal: the structure tensor of ``H`` there, turned towards the sonar;
 3. patches: hits binned in 0.3 m cells × 16 normal directions, a patch's normal the mean
@@ -43,6 +44,7 @@ from pipeline.se2 import transform_points
 CELL_M = 0.05
 SIGMA_M = 0.1
 ARC_POINTS = 15
+FREE_RAY_STRIDE = 7  # free cones sampled on the arc's two edges and its axis
 PATCH_M = 0.3
 NORMAL_BINS = 16
 MIN_PATCH_ECHOES = 3
@@ -74,11 +76,12 @@ class SurfaceScale:
         wx, wy = transform_points(pose[:, None, :], self.bx, self.by)
         ox, oy = transform_points(pose, e.sx, e.sy)
         steps = np.arange(1, int(e.range_m.max(initial=0.0) / CELL_M) + 1) * CELL_M
+        rays = wx[:, ::FREE_RAY_STRIDE], wy[:, ::FREE_RAY_STRIDE]
         free = steps[None, None, :] < (e.range_m[:, None, None] - 2 * SIGMA_M)
-        free = np.broadcast_to(free, (*wx.shape, steps.size))
+        free = np.broadcast_to(free, (*rays[0].shape, steps.size))
         frac = steps[None, None, :] / e.range_m[:, None, None]
-        fx = (ox[:, None, None] + (wx - ox[:, None])[..., None] * frac)[free]
-        fy = (oy[:, None, None] + (wy - oy[:, None])[..., None] * frac)[free]
+        fx = (ox[:, None, None] + (rays[0] - ox[:, None])[..., None] * frac)[free]
+        fy = (oy[:, None, None] + (rays[1] - oy[:, None])[..., None] * frac)[free]
         x0 = min(float(wx.min()), float(fx.min(initial=np.inf))) - 1.0
         y0 = min(float(wy.min()), float(fy.min(initial=np.inf))) - 1.0
         w = int((max(float(wx.max()), float(fx.max(initial=-np.inf))) + 1.0 - x0) / CELL_M) + 2
@@ -94,7 +97,8 @@ class SurfaceScale:
             return np.asarray(gaussian_filter(counts.reshape(h, w), SIGMA_M / CELL_M,
                                               mode="constant", truncate=3.0))
 
-        hit, fr = density(wx, wy), density(fx, fy)
+        # each free ray stands for FREE_RAY_STRIDE-odd of the arc's rays
+        hit, fr = density(wx, wy), density(fx, fy) * (wx.shape[1] / rays[0].shape[1])
         r, c = cells(wx, wy)
         seen = hit[r, c] + fr[r, c]
         ratio = np.where(seen >= 2.0, hit[r, c] / np.maximum(seen, 1e-12), -1.0)
