@@ -51,6 +51,10 @@ class Echoes:
     def __len__(self) -> int:
         return int(self.t_ns.shape[0])
 
+    def take(self, index: I64) -> Echoes:
+        """The echoes at ``index`` (in that order)."""
+        return Echoes(*(getattr(self, f.name)[index] for f in dataclasses.fields(self)))
+
 
 def collect_echoes(
     chunks: Iterable[RangeChunk],

@@ -37,10 +37,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from formats.arrays import F64, I64
-from pipeline.refine.calibration import _Placed
+from pipeline.refine.calibration import _Placed, _thin
 from pipeline.refine.echoes import Echoes
 from pipeline.se2 import transform_points
 
+# Echoes used (evenly thinned beyond): 16,000 hold ~40 MB of arcs and free-cone samples;
+# the logs measured have 1,000-6,500.
+MAX_ECHOES = 16_000
 CELL_M = 0.05
 SIGMA_M = 0.1
 ARC_POINTS = 15
@@ -57,6 +60,7 @@ class SurfaceScale:
     """``f(k₀)`` of the module docstring for one log's echoes."""
 
     def __init__(self, t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, bias: float):
+        echoes = echoes.take(_thin(len(echoes), MAX_ECHOES))  # memory and time bounded
         self.placed = _Placed(t_ns, x, y, yaw, echoes, len(echoes))
         self.echoes, self.bias = echoes, bias
         u = np.linspace(-1.0, 1.0, ARC_POINTS)

@@ -79,3 +79,26 @@ def test_a_scale_whose_fixed_point_is_not_determined_is_not_applied(
 def test_bad_scale_settings_are_refused_by_name(key: str, value: object, message: str) -> None:
     with pytest.raises(ConfigError, match=rf"pose_refinement\.{key}.*{re.escape(message)}"):
         config_from_dict({"pose_refinement": {key: value}})
+
+
+def test_too_few_echoes_for_any_patch_give_no_scale(runs: dict[str, tuple[Any, Any, Any]]) -> None:
+    # Two echoes make no patch of three: nothing to fit, NaN, and the calibration keeps
+    # the scale at 0 rather than inventing one.
+    track, echoes, _ = runs["drifted"]
+    t, x, y, yaw = (np.asarray(v) for v in (track.t_ns, track.x, track.y, track.yaw))
+    few = echoes.take(np.array([0, len(echoes) // 2]))
+    assert math.isnan(SurfaceScale(t, x, y, yaw, few, 0.0).fixed_point().scale_error)
+    cal = calibrate(t, x, y, yaw, few, max_scale=0.05, max_bias=math.radians(3.0), res=0.05,
+                    sigma=0.1, scale_score="surfaces")
+    assert cal.scale_error == 0.0
+
+
+def test_a_long_log_is_thinned_evenly(runs: dict[str, tuple[Any, Any, Any]],
+                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    import pipeline.refine.surfaces as surfaces
+
+    echoes = runs["drifted"][1]
+    monkeypatch.setattr(surfaces, "MAX_ECHOES", 1000)
+    scale = _scale(runs["drifted"], BIAS)
+    assert len(scale.echoes) == 1000
+    np.testing.assert_array_equal(scale.echoes.t_ns[[0, -1]], echoes.t_ns[[0, -1]])
