@@ -128,20 +128,28 @@ def log_echoes(log: Path) -> tuple[tuple[np.ndarray, F64, F64, F64], Echoes]:
     return (np.asarray(tr.t_ns), np.asarray(tr.x), np.asarray(tr.y), np.asarray(tr.yaw)), echoes
 
 
-def main(argv: list[str] | None = None) -> int:
+def drifted_cases(doc: str, argv: list[str] | None) -> list[tuple[str, Path, Path, Path, Path]]:
+    """The drifted cases ``--cases`` names (default: the synthetic ones), made in ``--work``
+    when missing: ``(name, true-pose log, drifted log, truth map, truth trajectory)``."""
     from benchmarks.compare_methods import SYNTHETIC_DRIFT_CASES, _drift_cases
-    from benchmarks.range_rate import range_rate_scale
-    from pipeline.config import Config
 
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(description=doc.split("\n\n")[0])
     ap.add_argument("--cases", nargs="+", default=list(SYNTHETIC_DRIFT_CASES), metavar="NAME")
     ap.add_argument("--work", type=Path, default=Path("build/compare/drifted"))
     args = ap.parse_args(argv)
+    return _drift_cases(args.work, tuple(args.cases))
+
+
+def main(argv: list[str] | None = None) -> int:
+    from benchmarks.range_rate import range_rate_scale
+    from pipeline.config import Config
+
+    cases = drifted_cases(__doc__ or "", argv)
     pr = Config().pose_refinement
     print("| true-pose log | echoes | consistency: peak k | consistency fine: peak k "
           "| held-out likelihood: peak k | range rate, truth normals: k fwd / rev (pairs) |")
     print("|---|---:|---:|---:|---:|---|")
-    for name, clean, _, truth, _ in _drift_cases(args.work, tuple(args.cases)):
+    for name, clean, _, truth, _ in cases:
         track, echoes = log_echoes(clean)
         scores: list[Callable[[float, float], float]] = [
             _Consistency(*track, echoes, res=2 * pr.field_resolution_m, sigma=pr.field_sigma_m),

@@ -12,28 +12,22 @@ The heading bias is the one refinement's default calibration finds (by sharpness
 
 from __future__ import annotations
 
-import argparse
 import math
-from pathlib import Path
 
 from pipeline.refine.surfaces import K0S, SurfaceScale
 
 
 def main(argv: list[str] | None = None) -> int:
-    from benchmarks.compare_methods import SYNTHETIC_DRIFT_CASES, _drift_cases
-    from benchmarks.scale_bias import log_echoes
+    from benchmarks.scale_bias import drifted_cases, log_echoes
     from pipeline.config import Config
     from pipeline.refine.calibration import calibrate
 
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--cases", nargs="+", default=list(SYNTHETIC_DRIFT_CASES), metavar="NAME")
-    ap.add_argument("--work", type=Path, default=Path("build/compare/drifted"))
-    args = ap.parse_args(argv)
+    cases = drifted_cases(__doc__ or "", argv)
     pr = Config().pose_refinement
     print("| log | poses | echoes | heading bias found (°/m) | f(k₀) at k₀ = "
           + ", ".join(f"{k:+.0%}" for k in K0S) + " | slope c | fixed point k |")
     print("|---|---|---:|---:|---|---:|---:|")
-    for name, clean, drifted, _, _ in _drift_cases(args.work, tuple(args.cases)):
+    for name, clean, drifted, _, _ in cases:
         for which, log in (("true", clean), ("drifted", drifted)):
             track, echoes = log_echoes(log)
             bias = calibrate(*track, echoes, max_scale=0.0,
