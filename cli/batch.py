@@ -89,8 +89,9 @@ def register(app: typer.Typer) -> None:
         ] = None,
         manifest: Annotated[
             list[Path] | None,
-            typer.Option("--manifest", help="File listing one log path per line "
-                         "(repeatable; same as @FILE).", dir_okay=False,
+            typer.Option("--manifest", help="File listing one log path per line, the files "
+                         "of one recording joined by ' + ' (repeatable; same as @FILE).",
+                         dir_okay=False,
                          metavar="FILE"),
         ] = None,
         workers: Annotated[
@@ -123,8 +124,10 @@ def register(app: typer.Typer) -> None:
         (has metadata.yaml) or a CSV log set is one log; any other directory is searched
         recursively for files whose content is a log (hidden entries, *.truth.* files and
         sonarmap's own outputs are skipped). A manifest (@FILE or --manifest FILE) lists
-        one path per line, relative to the manifest; lines starting with # are comments.
-        Equal names become <name>-<8 hex digits of the path's sha256>.
+        one path per line, relative to the manifest; lines starting with # are comments;
+        a line 'sonar.bag + odom.bag' is one recording in several files, mapped as one log
+        (into OUTPUT/odom+sonar/). Equal names become <name>-<8 hex digits of the path's
+        sha256>.
 
         Runs on Dask: a local cluster of --workers single-threaded processes on loopback,
         or an existing cluster with --scheduler. A finished log leaves

@@ -1,7 +1,9 @@
 """``run_batch()``: many logs mapped in parallel on Dask, one task per log.
 
 Each log is mapped exactly as ``sonarmap run`` would (:func:`pipeline.run.run`) into
-``OUT/<name>/``. The engine is ``dask.distributed``: a local cluster of single-threaded
+``OUT/<name>/``. A log is a file or bag directory, or — named on one manifest line with
+`` + `` between the paths — one recording in several files (split bags, separate sonar and
+odometry bags), read as one log like ``sonarmap run a.bag b.bag``. The engine is ``dask.distributed``: a local cluster of single-threaded
 worker processes (default), or an existing cluster reached by its scheduler address.
 Only paths, the configuration (a plain dict) and small result dicts travel through the
 scheduler; each worker opens and streams its own input.
@@ -31,6 +33,7 @@ import io
 import json
 import logging
 import os
+import re
 import secrets
 import time
 import traceback
@@ -60,6 +63,13 @@ SCHEDULER_TIMEOUT_S = 10.0
 MEMORY_LIMIT = "auto"  # connecting to an existing scheduler (--scheduler)
 
 BatchProgress = Callable[[int, int], None]  # (logs finished, logs total)
+# A log: a file or bag directory, or the files of one recording (a manifest line
+# ``a.bag + b.bag``).
+LogInput = Path | tuple[Path, ...]
+# What separates the files of one recording on a manifest line (as sonarmap names such a
+# recording in its messages and summary rows).
+RECORDING_SEPARATOR = " + "
+_SEPARATOR = re.compile(r"(?:^|\s)\+(?:\s|$)")  # ... a '+' with a blank (or the line's end) on each side
 
 # A file detected as CSV is only taken as a log when directory search finds it if it
 # is not one of these (looks_like_csv accepts any text with two fields per line).
@@ -127,19 +137,38 @@ class BatchResult:
 # --------------------------------------------------------------------------- finding logs
 
 
-def read_manifest(path: Path) -> list[Path]:
-    """The paths a manifest lists: one per line, ``#`` comments and blank lines ignored,
-    relative paths taken relative to the manifest's directory."""
+def read_manifest(path: Path) -> list[LogInput]:
+    """The logs a manifest lists: one per line, ``#`` comments and blank lines ignored,
+    relative paths taken relative to the manifest's directory; a line with `` + ``
+    between paths names one recording in several files (a tuple of its paths)."""
     # utf-8-sig: a byte-order mark is not a path
     text = read_text(path, "manifest", errors=(InputError, InputError), encoding="utf-8-sig")
-    out: list[Path] = []
-    for line in text.splitlines():
+    out: list[LogInput] = []
+    for number, line in enumerate(text.splitlines(), start=1):
         s = line.strip()
         if not s or s.startswith("#"):
             continue  # only whole-line comments: a path may contain '#'
-        p = Path(s).expanduser()
-        out.append(p if p.is_absolute() else Path(path).parent / p)
+        parts = [part.strip() for part in _SEPARATOR.split(s)]
+        if not all(parts):
+            raise InputError(f"line {number}: an empty path beside '+' in {s!r}", path)
+        files = tuple(_manifest_path(path, part) for part in parts)
+        out.append(files[0] if len(files) == 1 else files)
     return out
+
+
+def _manifest_path(manifest: Path, text: str) -> Path:
+    p = Path(text).expanduser()
+    return p if p.is_absolute() else Path(manifest).parent / p
+
+
+def log_files(log_input: LogInput) -> tuple[Path, ...]:
+    """The file(s) of a log."""
+    return log_input if isinstance(log_input, tuple) else (log_input,)
+
+
+def log_text(log_input: LogInput) -> str:
+    """A log as summary rows and messages name it: its path, or its files joined by `` + ``."""
+    return RECORDING_SEPARATOR.join(str(p) for p in log_files(log_input))
 
 
 def is_sonarmap_output(d: Path) -> bool:
@@ -223,37 +252,45 @@ def find_logs(
     *,
     manifests: Sequence[Path] = (),
     exclude: Sequence[Path] = (),
-) -> list[Path]:
+) -> list[LogInput]:
     """The logs a batch maps, deduplicated and sorted by absolute path.
 
     Files named directly or in a manifest are taken as they are (a failure to read them
-    is that log's failure). Directories are one log when they are a rosbag2 bag (a
+    is that log's failure); so is a manifest's recording in several files. Directories are one log when they are a rosbag2 bag (a
     ``metadata.yaml``) or a CSV log set, else searched recursively for files whose content
     is a log; hidden entries, ``*.truth.*`` files, sonarmap's own outputs and ``exclude``
     (the batch's output directory) are skipped.
     """
     skip = {Path(p).resolve() for p in exclude}
-    named = [Path(p) for p in inputs]
+    named: list[LogInput] = [Path(p) for p in inputs]
     for m in manifests:
         named += read_manifest(Path(m))
-    found: dict[Path, Path] = {}
+    found: dict[Path | tuple[Path, ...], LogInput] = {}
     for p in named:
+        if isinstance(p, tuple):
+            # In path order: a recording is read in time order whatever order names it,
+            # so its name and row do not depend on it either.
+            files = tuple(sorted((Path(os.path.abspath(f)) for f in p), key=str))
+            found.setdefault(tuple(sorted((f.resolve() for f in files), key=str)), files)
+            continue
         ap = Path(os.path.abspath(p))
         if ap.is_dir() and not _is_log_dir(ap, config):
             for f in _search(ap, config, skip):
                 found.setdefault(f.resolve(), Path(os.path.abspath(f)))
         else:
             found.setdefault(ap.resolve(), ap)
-    return sorted(found.values(), key=str)
+    return sorted(found.values(), key=log_text)
 
 
-def output_names(paths: Sequence[Path]) -> dict[Path, str]:
-    """Output directory name of each log: the file stem (or directory name); names that
-    collide (case-insensitively, or with the summary files) all get ``-<8 hex of the
-    sha256 of the path>``, so a name depends only on its own path and its peers; a name
-    longer than MAX_NAME_BYTES is cut and gets the same suffix (its output directory and
-    the temporary sibling must fit the file system's 255-byte limit)."""
-    base = {p: (p.name if p.is_dir() else p.stem) or "log" for p in paths}
+def output_names(paths: Sequence[LogInput]) -> dict[LogInput, str]:
+    """Output directory name of each log: the file stem (or directory name), the stems
+    joined by ``+`` for a recording in several files; names that collide
+    (case-insensitively, or with the summary files) all get ``-<8 hex of the sha256 of the
+    path>``, so a name depends only on its own path and its peers; a name longer than
+    MAX_NAME_BYTES is cut and gets the same suffix (its output directory and the temporary
+    sibling must fit the file system's 255-byte limit)."""
+    base = {p: "+".join((f.name if f.is_dir() else f.stem) or "log" for f in log_files(p))
+            for p in paths}
     counts: dict[str, int] = {}
     for n in base.values():
         counts[n.casefold()] = counts.get(n.casefold(), 0) + 1
@@ -261,7 +298,7 @@ def output_names(paths: Sequence[Path]) -> dict[Path, str]:
     for p, n in base.items():
         long = len(os.fsencode(n)) > MAX_NAME_BYTES
         if counts[n.casefold()] > 1 or n in _RESERVED_NAMES or n.startswith(".") or long:
-            digest = hashlib.sha256(str(p).encode()).hexdigest()[:8]
+            digest = hashlib.sha256(log_text(p).encode()).hexdigest()[:8]
             n = f"{_clip(n, MAX_NAME_BYTES - 9)}-{digest}"
         out[p] = n
     return out
@@ -277,21 +314,24 @@ def _clip(name: str, max_bytes: int) -> str:
 
 
 def _map_one(
-    path: str, out_dir: str, name: str, config: dict[str, Any], rerun: bool
+    path: str | list[str], out_dir: str, name: str, config: dict[str, Any], rerun: bool
 ) -> dict[str, Any]:
-    """Map one log into ``out_dir/name`` (runs on a Dask worker); never raises.
+    """Map one log (a path, or the files of one recording) into ``out_dir/name`` (runs on
+    a Dask worker); never raises.
 
     Returns a :class:`LogOutcome` as a dict, plus ``traceback`` (text) for unexpected
     exceptions.
     """
     t0 = time.perf_counter()
+    files = tuple(Path(p) for p in ([path] if isinstance(path, str) else path))
+    label = log_text(files)
     try:
-        row = _map_one_checked(Path(path), Path(out_dir), name, config, rerun)
+        row = _map_one_checked(files, Path(out_dir), name, config, rerun)
     except SonarmapError as err:
-        row = LogOutcome(path, name, "failed", error=str(err))
+        row = LogOutcome(label, name, "failed", error=str(err))
     except Exception as err:  # a bug or an unforeseen library error: record, go on
         msg = " ".join(f"{type(err).__name__}: {err}".split())
-        return {**asdict(LogOutcome(path, name, "failed", error=msg,
+        return {**asdict(LogOutcome(label, name, "failed", error=msg,
                                     seconds=time.perf_counter() - t0)),
                 "traceback": traceback.format_exc()}
     row.seconds = time.perf_counter() - t0
@@ -299,26 +339,28 @@ def _map_one(
 
 
 def _map_one_checked(
-    path: Path, out_dir: Path, name: str, config: dict[str, Any], rerun: bool
+    files: tuple[Path, ...], out_dir: Path, name: str, config: dict[str, Any], rerun: bool
 ) -> LogOutcome:
-    from pipeline.metrics import sha256_of
     from pipeline.run import run
+    from pipeline.run_input import files_sha256
 
     cfg = config_from_dict(config)
-    if not path.exists():
-        raise InputError("no such file or directory", path)
+    for f in files:
+        if not f.exists():
+            raise InputError("no such file or directory", f)
+    path = log_text(files)
     final = out_dir / name
     config_hash = cfg.hash()
     marker = None if rerun else read_marker(final)
     if (
         marker is not None
         and marker.get("config_hash") == config_hash
-        and marker.get("input_sha256") == sha256_of(path)  # hashed only when it can matter
+        and marker.get("input_sha256") == files_sha256(files)  # hashed only when it can matter
     ):
         saved = marker.get("row")
         saved = saved if isinstance(saved, dict) else {}
         return LogOutcome.from_dict(
-            {**saved, "path": str(path), "name": name, "status": "skipped", "error": None}
+            {**saved, "path": path, "name": name, "status": "skipped", "error": None}
         )
     from formats.writers.atomic import atomic_write_text
 
@@ -329,7 +371,7 @@ def _map_one_checked(
         m = read_metrics(tmp_dir / "metrics.json")
         inp, counts = m.get("input", {}), m.get("counts", {})
         row = LogOutcome(
-            path=str(path),
+            path=path,
             name=name,
             status="ok",
             duration_s=finite(inp.get("duration_s")),
@@ -343,7 +385,8 @@ def _map_one_checked(
         )
         marker_data = {
             "marker_version": MARKER_VERSION,
-            "input_sha256": inp["sha256"],
+            # the run's own for one file; for several, independent of their order
+            "input_sha256": inp["sha256"] if len(files) == 1 else files_sha256(files),
             "config_hash": config_hash,
             "tool_version": m.get("run", {}).get("tool_version"),
             "row": {k: v for k, v in asdict(row).items()
@@ -354,7 +397,8 @@ def _map_one_checked(
 
     # The run's own OutputDir stages, commits and replaces: only a previous sonarmap
     # output of this log is ever replaced, never an input or the user's files.
-    run(path, final, cfg, force=True, on_complete=add_marker)
+    run(files[0] if len(files) == 1 else list(files), final, cfg, force=True,
+        on_complete=add_marker)
     return outcome[0]
 
 
@@ -486,8 +530,9 @@ def run_batch(
         progress(0, total)
     with _client(workers, scheduler, memory_limit) as client:
         futures = {
-            client.submit(_map_one, str(p), str(out_dir), names[p], cfg_dict, rerun,
-                          pure=False, key=f"sonarmap-{names[p]}-{secrets.token_hex(4)}"): p
+            client.submit(_map_one, [str(f) for f in log_files(p)], str(out_dir), names[p],
+                          cfg_dict, rerun, pure=False,
+                          key=f"sonarmap-{names[p]}-{secrets.token_hex(4)}"): p
             for p in logs
         }
         try:
@@ -504,17 +549,18 @@ def run_batch(
     return BatchResult(out_dir, rows, pq_path, md_path)
 
 
-def _collect(fut: Any, path: Path, name: str) -> LogOutcome:
+def _collect(fut: Any, path: LogInput, name: str) -> LogOutcome:
     """A finished task's outcome; a task that died (worker killed) is a failed row."""
     try:
         d = fut.result()
     except Exception as err:
-        log.error("%s: task failed on the cluster: %s: %s", path, type(err).__name__, err)
-        return LogOutcome(str(path), name, "failed",
+        log.error("%s: task failed on the cluster: %s: %s", log_text(path), type(err).__name__,
+                  err)
+        return LogOutcome(log_text(path), name, "failed",
                           error=" ".join(f"{type(err).__name__}: {err}".split()))
     tb = d.pop("traceback", None)
     if tb:
-        log.error("%s: unexpected error while mapping\n%s", path, tb.rstrip())
+        log.error("%s: unexpected error while mapping\n%s", log_text(path), tb.rstrip())
     return LogOutcome.from_dict(d)
 
 

@@ -25,6 +25,15 @@ def log_paths(log: str | Path | Sequence[str | Path]) -> list[Path]:
     return [Path(p) for p in log]
 
 
+def files_sha256(paths: Sequence[Path]) -> str:
+    """sha256 of a log's input: of its one file (or bag directory), or for several files
+    of their hashes, sorted — the same files named in any order (or moved) hash the same."""
+    if len(paths) == 1:
+        return sha256_of(paths[0])
+    lines = sorted(f"{sha256_of(p)}\n" for p in paths)
+    return hashlib.sha256("".join(lines).encode()).hexdigest()
+
+
 def log_label(paths: Sequence[Path]) -> Path:
     """The log as messages name it: its path, or every file joined by `` + ``."""
     return paths[0] if len(paths) == 1 else Path(" + ".join(str(p) for p in paths))
