@@ -8,6 +8,8 @@ the tests compare it with (``tests/pipeline/mapper/test_kernels_*``):
   (the attribution method's loops, :mod:`pipeline.mapper.cone_kernels`, use it too).
 * :mod:`.ellipse` — covariance ellipses as row spans; the occupied layer (§5).
 * :mod:`.free_space` — a scan's free-space scan as a window mask; the free-layer update.
+* :mod:`.free_unions` — a group's free-space scans packed, and their free-layer update
+  (scan-local: the default method computes them on its feeding thread).
 * :mod:`.feature_index` — the feature set's storage, hash grid and Kalman merge (§2).
 * :mod:`.correction` — the touched test and the particle correction (§4).
 * :mod:`.andersone_scans` — the per-scan loop of the andersone mapper (§6 order).
