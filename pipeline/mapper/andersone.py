@@ -21,8 +21,9 @@ which depend on the map state), so the default method's feeding thread can do th
 while the paper's thread does the second (:mod:`~pipeline.mapper.paper_thread`).
 
 The particle generator is ``np.random.Generator(np.random.PCG64(config.seed))``, drawn from
-in scan order (the kernels draw from the same generator with numpy's algorithms), so the
-same scans and configuration give the same state, bit for bit.
+in scan order (the kernels draw the same numbers from its state with numpy's algorithms,
+:mod:`~pipeline.mapper.kernels.normals`), so the same scans and configuration give the same
+state, bit for bit.
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ from pipeline.mapper.free_space import free_space_scans
 from pipeline.mapper.kernels import andersone_scans
 from pipeline.mapper.kernels.ellipse import occupied_cells
 from pipeline.mapper.kernels.free_unions import FreeUnions, add_free_unions, free_unions
+from pipeline.mapper.kernels.normals import pcg64_words, set_pcg64_words
 from pipeline.mapper.occupancy import FreeLayer, final_probability, occupied_layer
 from pipeline.mapper.reading_features import ReadingFeatures, reading_features
 from pipeline.mapper.scan_group import ScanGroup, scan_groups
@@ -130,14 +132,16 @@ class AndersoneMapper:
         assert isinstance(self.features, FeatureStore)
         self.features.reserve(len(feats))
         counts = np.zeros(len(_KERNEL_COUNTERS), dtype=np.int64)
+        pcg = pcg64_words(self.rng)  # the kernel draws on from the generator's state
         andersone_scans.integrate_scans(
             self.features.arrays, feats.mean, feats.cov, feats.t_ns, work.fcut, work.unions,
             g.origin_x, g.origin_y, g.resolution, g.width, g.height, cfg.match_distance,
-            cfg.feature_correction, self.rng, cfg.n_particles,
+            cfg.feature_correction, pcg, cfg.n_particles,
             cfg.keep_fraction * cfg.n_particles, cfg.protect_times,
             cfg.sigma_floor(g.resolution) ** 2, cfg.split_guard, cfg.refit_positions == "cell",
             counts,
         )
+        set_pcg64_words(self.rng, pcg)
         for name, value in zip(_KERNEL_COUNTERS, counts.tolist(), strict=True):
             setattr(self.counters, name, getattr(self.counters, name) + value)
 

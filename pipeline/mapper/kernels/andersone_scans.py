@@ -25,12 +25,13 @@ from pipeline.mapper.kernels.free_unions import FreeUnions, union_of
 def integrate_scans(fa: FeatureArrays, feat_mean: np.ndarray, feat_cov: np.ndarray,
                     feat_t: np.ndarray, feat_cut: np.ndarray, unions: FreeUnions, gx: float,
                     gy: float, res: float, width: int, height: int, match_distance: float,
-                    correction: bool, rng: np.random.Generator, n_particles: int,
+                    correction: bool, pcg: np.ndarray, n_particles: int,
                     keep_n: float, protect_times: int, floor2: float, split_guard: bool,
                     refit_cells: bool, counters: np.ndarray) -> None:
     """Integrate scans ``k`` = 0.. ``len(feat_cut) − 2``: features ``feat_cut[k]:feat_cut[k+1]``,
-    free-space scan ``union_of(unions, k)``; the feature store and ``counters``
-    (correction.CREATED..CELLS_FREED) are updated in place (the free layer is not)."""
+    free-space scan ``union_of(unions, k)``; the feature store, the particles' PCG64 state
+    ``pcg`` (:mod:`.normals`) and ``counters`` (correction.CREATED..CELLS_FREED) are
+    updated in place (the free layer is not)."""
     for k in range(feat_cut.shape[0] - 1):
         created, merged = merge_readings(fa, feat_mean, feat_cov, feat_t, feat_cut[k],
                                          feat_cut[k + 1], match_distance)
@@ -41,7 +42,7 @@ def integrate_scans(fa: FeatureArrays, feat_mean: np.ndarray, feat_cov: np.ndarr
             continue
         if correction:
             correct_features(fa, row0, col0, col1, starts, c0s, c1s, gx, gy, res, width, height,
-                             rng, n_particles, keep_n, protect_times, floor2, split_guard,
+                             pcg, n_particles, keep_n, protect_times, floor2, split_guard,
                              refit_cells, counters)
             compact_if_half_dead(fa)
         counters[CELLS_FREED] += count
