@@ -32,6 +32,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from pipeline.config import MapperConfig
 from pipeline.mapper.correction import correct_features
@@ -44,7 +45,7 @@ from pipeline.mapper.kernels.free_unions import FreeUnions, add_free_unions, fre
 from pipeline.mapper.kernels.normals import pcg64_words, set_pcg64_words
 from pipeline.mapper.occupancy import FreeLayer, final_probability, occupied_layer
 from pipeline.mapper.reading_features import ReadingFeatures, reading_features
-from pipeline.mapper.scan_group import ScanGroup, scan_groups
+from pipeline.mapper.scan_group import ScanGroup, count_group, scan_groups
 from pipeline.mapper.types import I64, B, FeatureTable, GridSpec, MapperCounters, MapSnapshot, Scan
 
 # The kernels' counters array, in its order (kernels.correction.CREATED..CELLS_FREED).
@@ -56,9 +57,11 @@ _KERNEL_COUNTERS = ("features_created", "features_merged", "features_corrected",
 class PreparedGroup:
     """A group's scan-local half (:meth:`AndersoneMapper.prepare`): what does not depend on
     the map state — reading features (``fcut``: scan k's are rows ``fcut[k]:fcut[k+1]``)
-    and each scan's free-space scan."""
+    and each scan's free-space scan; the readings' classes for the counters. Not the
+    readings or cones themselves (a queue of prepared groups holds only this)."""
 
-    group: ScanGroup
+    codes: npt.NDArray[np.int8]
+    n_scans: int
     feats: ReadingFeatures
     fcut: I64
     unions: FreeUnions
@@ -117,7 +120,8 @@ class AndersoneMapper:
         rows, cones, up_down = group.free_cones
         unions = free_unions(cones, up_down, np.searchsorted(rows, group.bounds), g.origin_x,
                              g.origin_y, g.resolution, g.width, g.height)
-        return PreparedGroup(group, feats, np.searchsorted(feats.row, group.bounds), unions)
+        return PreparedGroup(group.codes, group.n_scans, feats,
+                             np.searchsorted(feats.row, group.bounds), unions)
 
     def add_free_space(self, work: PreparedGroup) -> None:
         """Eq. 11 for every scan of the group: integer counts, the same in any order, and
@@ -128,7 +132,7 @@ class AndersoneMapper:
         """Merge and correct the group's scans in order (§6; the free layer is
         :meth:`add_free_space`'s): the part that depends on the map state."""
         cfg, g, feats = self.config, self.grid, work.feats
-        work.group.count(self.counters)
+        count_group(work.codes, work.n_scans, self.counters)
         assert isinstance(self.features, FeatureStore)
         self.features.reserve(len(feats))
         counts = np.zeros(len(_KERNEL_COUNTERS), dtype=np.int64)
