@@ -11,12 +11,22 @@ log's mapping gives does not depend on it.
 
 from __future__ import annotations
 
+import logging
+
+log = logging.getLogger("sonarmap.batch")
+
 
 def dask_setup(worker: object) -> None:
-    """Warm this process (Dask calls it in each worker before the worker registers)."""
-    from formats.writers import map_mcap
-    from pipeline import run  # noqa: F401  (the pipeline's imports)
-    from pipeline.mapper.kernels.warm import warm
+    """Warm this process (Dask calls it in each worker before the worker registers).
 
-    warm()
-    map_mcap.warm()
+    A failure is logged, not raised: the worker still starts, and its first log pays the
+    warm-up (or fails as that log's row, with its own message)."""
+    try:
+        from formats.writers import map_mcap
+        from pipeline import run  # noqa: F401  (the pipeline's imports)
+        from pipeline.mapper.kernels.warm import warm
+
+        warm()
+        map_mcap.warm()
+    except Exception as err:  # a worker that cannot warm up must still map (or fail) logs
+        log.warning("batch worker warm-up failed: %s: %s", type(err).__name__, err)

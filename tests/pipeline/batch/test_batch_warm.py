@@ -38,3 +38,17 @@ def test_local_clusters_preload_the_warm_up(monkeypatch: pytest.MonkeyPatch) -> 
     with pytest.raises(Stop), batch._client(1, None):
         pass
     assert seen["preload"] == [batch.WORKER_PRELOAD] == ["pipeline.batch_warm"]
+
+
+def test_a_failed_warm_up_is_logged_and_the_worker_starts(
+    monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    from pipeline.mapper.kernels import warm
+
+    def broken() -> float:
+        raise OSError("cache directory not writable")
+
+    monkeypatch.setattr(warm, "warm", broken)
+    with caplog.at_level("WARNING", logger="sonarmap.batch"):
+        batch_warm.dask_setup(None)  # does not raise
+    assert "warm-up failed: OSError: cache directory not writable" in caplog.text
