@@ -7,8 +7,10 @@ Usage: ``python -m benchmarks.bench_cost_growth [--firings 3000] [--repeat 3]``
 Input: the first ``--firings`` ring firings of the mapper benchmark's synthetic room
 (:mod:`pipeline.mapper.synthetic`), two per scan. CPU seconds (``time.process_time``), best
 of ``--repeat``; "paper's mapper" is the time spent in
-:meth:`~pipeline.mapper.andersone.AndersoneMapper.integrate_group` during the same runs (the
-default method runs it in its first pass for ``features.parquet``). Prints a Markdown table
+:class:`~pipeline.mapper.andersone.AndersoneMapper`'s ``prepare``, ``add_free_space`` and
+``integrate_prepared`` (the parts of ``integrate_group``) during the same runs (the default
+method runs it in its first pass for ``features.parquet``; inline, ``threads = 1``, so that
+process CPU time splits between the two). Prints a Markdown table
 (benchmarks/RESULTS.md, "How the cost grows").
 """
 
@@ -19,6 +21,7 @@ import dataclasses
 import os
 import time
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -28,20 +31,23 @@ from pipeline.config import MapperConfig
 from pipeline.mapper import make_mapper
 from pipeline.mapper.andersone import AndersoneMapper
 from pipeline.mapper.kernels.warm import warm
-from pipeline.mapper.scan_group import ScanGroup
 from pipeline.mapper.synthetic import ring_scans, room_grid
 from pipeline.mapper.types import Scan
 
+# The paper's mapper's steps (integrate_group calls all three; the default method's
+# second thread calls them apart).
+_PAPER_STEPS = ("prepare", "add_free_space", "integrate_prepared")
 
-def _timed_paper(inner: list[float]) -> Callable[[AndersoneMapper, ScanGroup], None]:
-    original = AndersoneMapper.integrate_group
 
-    def integrate_group(self: AndersoneMapper, group: ScanGroup) -> None:
+def _timed(original: Callable[..., Any], inner: list[float]) -> Callable[..., Any]:
+    def timed(self: AndersoneMapper, arg: Any) -> Any:
         c0 = time.process_time()
-        original(self, group)
-        inner[0] += time.process_time() - c0
+        try:
+            return original(self, arg)
+        finally:
+            inner[0] += time.process_time() - c0
 
-    return integrate_group
+    return timed
 
 
 def cpu_per_scan(cfg: MapperConfig, grid: GridSpec, scans: list[Scan], repeat: int,
@@ -69,12 +75,14 @@ def main(argv: list[str] | None = None) -> None:
     args = ap.parse_args(argv)
     warm()
     inner = [0.0]
-    original = AndersoneMapper.integrate_group
-    AndersoneMapper.integrate_group = _timed_paper(inner)  # type: ignore[method-assign]
+    originals = {name: getattr(AndersoneMapper, name) for name in _PAPER_STEPS}
+    for name, original in originals.items():
+        setattr(AndersoneMapper, name, _timed(original, inner))
     try:
         _table(args.firings, args.repeat, inner)
     finally:
-        AndersoneMapper.integrate_group = original  # type: ignore[method-assign]
+        for name, original in originals.items():
+            setattr(AndersoneMapper, name, original)
 
 
 def _table(firings: int, repeat: int, inner: list[float]) -> None:
@@ -85,7 +93,7 @@ def _table(firings: int, repeat: int, inner: list[float]) -> None:
     print("|---|---:|---:|---:|---:|---:|")
 
     def row(label: str, grid: GridSpec, scans: list[Scan], **kw: float) -> None:
-        total, paper, features = cpu_per_scan(MapperConfig(method="attribution", **kw), grid,
+        total, paper, features = cpu_per_scan(MapperConfig(method="attribution", threads=1, **kw), grid,
                                               scans, repeat, inner)
         classic, _, _ = cpu_per_scan(MapperConfig(method="classic", **kw), grid, scans,
                                      repeat, inner)

@@ -61,6 +61,9 @@ MAX_NAME_BYTES = 200  # an output name, so that OutputDir's temporary sibling fi
 SCHEDULER_TIMEOUT_S = 10.0
 # Memory per local worker process: Dask's "auto" is the machine's memory / the workers.
 MEMORY_LIMIT = "auto"  # connecting to an existing scheduler (--scheduler)
+# Local workers warm up (imports, compiled kernels) as the cluster starts, not in their
+# first log (:mod:`pipeline.batch_warm`).
+WORKER_PRELOAD = "pipeline.batch_warm"
 
 BatchProgress = Callable[[int, int], None]  # (logs finished, logs total)
 # A log: a file or bag directory, or the files of one recording (a manifest line
@@ -478,6 +481,7 @@ def _client_inner(
             # glitch, an absurd grid) has its worker restarted and fails as a row, instead
             # of the operating system killing whatever process it picks.
             memory_limit=memory_limit,
+            preload=[WORKER_PRELOAD],
         ) as cluster,
         Client(cluster, set_as_default=False) as client,
     ):

@@ -99,6 +99,14 @@ def _typestore() -> Any:
     return get_typestore(Stores.ROS2_HUMBLE)
 
 
+def warm() -> None:
+    """Build the type store and import the MCAP writer now (once per process), not in the
+    first :func:`write_map_mcap` (a batch worker warms up as its cluster starts)."""
+    import mcap.writer  # noqa: F401
+
+    _typestore()
+
+
 def measured_colours(measured_times: npt.ArrayLike) -> F64:
     """RGB in [0, 1] (N×3) for measurement counts: log scale from 1 to the largest count."""
     n = np.maximum(np.asarray(measured_times, dtype=np.float64), 1.0)

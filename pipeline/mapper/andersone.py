@@ -13,18 +13,26 @@ run per scan in machine code), and the numpy reference (``reference=True``:
 :mod:`~pipeline.mapper.feature_set`, :mod:`~pipeline.mapper.free_space`,
 :mod:`~pipeline.mapper.correction`), which states the method readably. Both prepare what
 does not depend on the map state (reading classes, reading features, cone geometry) with
-numpy, for groups of scans at once (:mod:`~pipeline.mapper.scan_group`).
+numpy, for groups of scans at once (:mod:`~pipeline.mapper.scan_group`). The compiled path
+splits a group into its scan-local half — :meth:`~AndersoneMapper.prepare` (reading
+features, each scan's free-space scan) and :meth:`~AndersoneMapper.add_free_space` (the free
+layer's counts) — and :meth:`~AndersoneMapper.integrate_prepared` (merge and correction,
+which depend on the map state), so the default method's feeding thread can do the first
+while the paper's thread does the second (:mod:`~pipeline.mapper.paper_thread`).
 
 The particle generator is ``np.random.Generator(np.random.PCG64(config.seed))``, drawn from
-in scan order (the kernels draw from the same generator with numpy's algorithms), so the
-same scans and configuration give the same state, bit for bit.
+in scan order (the kernels draw the same numbers from its state with numpy's algorithms,
+:mod:`~pipeline.mapper.kernels.normals`), so the same scans and configuration give the same
+state, bit for bit.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from pipeline.config import MapperConfig
 from pipeline.mapper.correction import correct_features
@@ -33,14 +41,30 @@ from pipeline.mapper.feature_store import FeatureStore
 from pipeline.mapper.free_space import free_space_scans
 from pipeline.mapper.kernels import andersone_scans
 from pipeline.mapper.kernels.ellipse import occupied_cells
+from pipeline.mapper.kernels.free_unions import FreeUnions, add_free_unions, free_unions
+from pipeline.mapper.kernels.normals import pcg64_words, set_pcg64_words
 from pipeline.mapper.occupancy import FreeLayer, final_probability, occupied_layer
 from pipeline.mapper.reading_features import ReadingFeatures, reading_features
-from pipeline.mapper.scan_group import ScanGroup, scan_groups
+from pipeline.mapper.scan_group import ScanGroup, count_group, scan_groups
 from pipeline.mapper.types import I64, B, FeatureTable, GridSpec, MapperCounters, MapSnapshot, Scan
 
 # The kernels' counters array, in its order (kernels.correction.CREATED..CELLS_FREED).
 _KERNEL_COUNTERS = ("features_created", "features_merged", "features_corrected",
                     "features_deleted", "features_protected", "features_split", "cells_freed")
+
+
+@dataclass(frozen=True)
+class PreparedGroup:
+    """A group's scan-local half (:meth:`AndersoneMapper.prepare`): what does not depend on
+    the map state — reading features (``fcut``: scan k's are rows ``fcut[k]:fcut[k+1]``)
+    and each scan's free-space scan; the readings' classes for the counters. Not the
+    readings or cones themselves (a queue of prepared groups holds only this)."""
+
+    codes: npt.NDArray[np.int8]
+    n_scans: int
+    feats: ReadingFeatures
+    fcut: I64
+    unions: FreeUnions
 
 
 class AndersoneMapper:
@@ -76,31 +100,52 @@ class AndersoneMapper:
             self.integrate_group(group)
 
     def integrate_group(self, group: ScanGroup) -> None:
-        """Add a prepared group of scans in order (:mod:`~pipeline.mapper.scan_group`)."""
-        group.count(self.counters)
-        cat, bounds, codes = group.cat, group.bounds, group.codes
-        feats = reading_features(cat, codes, self.config)
-        fcut = np.searchsorted(feats.row, bounds)
+        """Add a group of scans in order (:mod:`~pipeline.mapper.scan_group`)."""
         if self.reference:
-            self._reference_group(cat, bounds, codes, feats, fcut)
-        else:
-            self._kernel_group(group, feats, fcut)
+            group.count(self.counters)
+            cat, bounds, codes = group.cat, group.bounds, group.codes
+            feats = reading_features(cat, codes, self.config)
+            self._reference_group(cat, bounds, codes, feats, np.searchsorted(feats.row, bounds))
+            return
+        work = self.prepare(group)
+        self.add_free_space(work)
+        self.integrate_prepared(work)
 
-    def _kernel_group(self, group: ScanGroup, feats: ReadingFeatures, fcut: I64) -> None:
-        cfg, g = self.config, self.grid
-        assert isinstance(self.features, FeatureStore)
+    def prepare(self, group: ScanGroup) -> PreparedGroup:
+        """The group's scan-local half (compiled path); changes nothing, so any thread may
+        prepare a group while another integrates earlier ones."""
+        assert not self.reference, "the numpy reference integrates whole groups"
+        g = self.grid
+        feats = reading_features(group.cat, group.codes, self.config)
         rows, cones, up_down = group.free_cones
-        ccut = np.searchsorted(rows, group.bounds)
+        unions = free_unions(cones, up_down, np.searchsorted(rows, group.bounds), g.origin_x,
+                             g.origin_y, g.resolution, g.width, g.height)
+        return PreparedGroup(group.codes, group.n_scans, feats,
+                             np.searchsorted(feats.row, group.bounds), unions)
+
+    def add_free_space(self, work: PreparedGroup) -> None:
+        """Eq. 11 for every scan of the group: integer counts, the same in any order, and
+        read only by :meth:`snapshot`, so it may run beside :meth:`integrate_prepared`."""
+        add_free_unions(self.free_layer.counts, work.unions)
+
+    def integrate_prepared(self, work: PreparedGroup) -> None:
+        """Merge and correct the group's scans in order (§6; the free layer is
+        :meth:`add_free_space`'s): the part that depends on the map state."""
+        cfg, g, feats = self.config, self.grid, work.feats
+        count_group(work.codes, work.n_scans, self.counters)
+        assert isinstance(self.features, FeatureStore)
         self.features.reserve(len(feats))
         counts = np.zeros(len(_KERNEL_COUNTERS), dtype=np.int64)
+        pcg = pcg64_words(self.rng)  # the kernel draws on from the generator's state
         andersone_scans.integrate_scans(
-            self.features.arrays, feats.mean, feats.cov, feats.t_ns, fcut, cones, up_down, ccut,
+            self.features.arrays, feats.mean, feats.cov, feats.t_ns, work.fcut, work.unions,
             g.origin_x, g.origin_y, g.resolution, g.width, g.height, cfg.match_distance,
-            cfg.feature_correction, self.rng, cfg.n_particles,
+            cfg.feature_correction, pcg, cfg.n_particles,
             cfg.keep_fraction * cfg.n_particles, cfg.protect_times,
             cfg.sigma_floor(g.resolution) ** 2, cfg.split_guard, cfg.refit_positions == "cell",
-            self.free_layer.counts, counts,
+            counts,
         )
+        set_pcg64_words(self.rng, pcg)
         for name, value in zip(_KERNEL_COUNTERS, counts.tolist(), strict=True):
             setattr(self.counters, name, getattr(self.counters, name) + value)
 

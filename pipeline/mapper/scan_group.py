@@ -36,6 +36,12 @@ def concat_scans(scans: Sequence[Scan]) -> tuple[Scan, I64]:
     return cat, bounds
 
 
+def count_group(codes: npt.NDArray[np.int8], n_scans: int, counters: MapperCounters) -> None:
+    """Add ``n_scans`` scans and their readings' classes ``codes`` to ``counters``."""
+    count_readings(codes, counters)
+    counters.scans += n_scans - 1  # count_readings counts one scan
+
+
 class ScanGroup:
     """Consecutive scans as one Scan (``cat``; scan k is rows ``bounds[k]:bounds[k + 1]``)
     with their reading classes and, on first use, their free cones."""
@@ -48,8 +54,7 @@ class ScanGroup:
 
     def count(self, counters: MapperCounters) -> None:
         """Add the group's scans and readings (skipped ones by reason) to ``counters``."""
-        count_readings(self.codes, counters)
-        counters.scans += self.n_scans - 1  # count_readings counts one scan
+        count_group(self.codes, self.n_scans, counters)
 
     @cached_property
     def free_radius(self) -> F64:

@@ -4,8 +4,9 @@ The compiled twin of :mod:`pipeline.mapper.correction` (read that module for the
 its decisions: the exact 3σ touched test, particles drawn as ``μ + L z`` with all x-draws
 then all y-draws of the scan's touched features from the mapper's ``Generator``, survivors
 refit from their own positions or cell centres, the split guard, protection). The particle
-normals come from the same ``numpy.random.Generator`` in the same order (numba draws from
-its bit generator with numpy's algorithms), the arithmetic is the reference's in its order,
+normals are the same ``numpy.random.Generator``'s numbers in the same order (its PCG64 state
+passed in as words and advanced by :mod:`.normals`, numpy's algorithms inlined), the
+arithmetic is the reference's in its order,
 and the sums over particles are numpy's pairwise summation (:func:`pairwise_sum`), so the
 kernel and the reference agree bit for bit.
 """
@@ -25,6 +26,7 @@ from pipeline.mapper.kernels.feature_index import (
     move_feature,
 )
 from pipeline.mapper.kernels.free_space import any_free, is_free
+from pipeline.mapper.kernels.normals import fill_standard_normal
 
 # As correction._SINGULAR: relative determinant below which a refit counts as singular.
 SINGULAR = 1e-12
@@ -166,19 +168,18 @@ def _free_at(row0: int, col0: int, col1: int, starts: np.ndarray, c0s: np.ndarra
 @njit(cache=True)
 def correct_features(fa: FeatureArrays, row0: int, col0: int, col1: int, starts: np.ndarray,
                      c0s: np.ndarray, c1s: np.ndarray, gx: float, gy: float, res: float,
-                     width: int, height: int, rng: np.random.Generator,
+                     width: int, height: int, pcg: np.ndarray,
                      n_particles: int, keep_n: float, protect_times: int, floor2: float,
                      split_guard: bool, refit_cells: bool, counters: np.ndarray) -> None:
-    """Apply §4 to every feature touched by the union; counts into ``counters``."""
+    """Apply §4 to every feature touched by the union; counts into ``counters``; the
+    normals come from (and advance) ``pcg``, a PCG64 state (:func:`.normals.pcg64_words`)."""
     slots = touched_slots(fa, row0, col0, col1, starts, c0s, c1s, gx, gy, res, width, height)
     f = slots.shape[0]
     if f == 0:
         return
     npart = n_particles
     z = np.empty((2, f, npart))
-    zf = z.reshape(-1)
-    for i in range(zf.shape[0]):
-        zf[i] = rng.standard_normal()
+    fill_standard_normal(pcg, z.reshape(-1))
     inv = 1.0 / res
     offx = float(col0 - 1)
     offy = float(row0 - 1)

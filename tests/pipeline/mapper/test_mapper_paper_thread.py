@@ -15,7 +15,7 @@ from formats.errors import ConfigError
 from pipeline.config import Config, MapperConfig
 from pipeline.mapper import AttributionMapper
 from pipeline.mapper import paper_thread as pt
-from pipeline.mapper.andersone import AndersoneMapper
+from pipeline.mapper.andersone import AndersoneMapper, PreparedGroup
 from pipeline.mapper.scan_group import ScanGroup
 from pipeline.mapper.synthetic import ring_scans, room_grid
 from pipeline.mapper.types import Scan
@@ -50,14 +50,14 @@ def test_threaded_features_equal_inline_when_pass_1_hands_over_most_groups(
     inline = _map(INLINE, scans)
     assert inline._paper_thread is None and len(inline.feature_table()) > 50
     # A slow paper's mapper and a one-group queue: pass 0 hands over only its first groups.
-    slow = AndersoneMapper.integrate_group
+    slow = AndersoneMapper.integrate_prepared
 
-    def integrate_slowly(self: AndersoneMapper, group: ScanGroup) -> None:
+    def integrate_slowly(self: AndersoneMapper, work: PreparedGroup) -> None:
         time.sleep(0.05)
-        slow(self, group)
+        slow(self, work)
 
     monkeypatch.setattr(pt, "QUEUE_GROUPS", 1)
-    monkeypatch.setattr(AndersoneMapper, "integrate_group", integrate_slowly)
+    monkeypatch.setattr(AndersoneMapper, "integrate_prepared", integrate_slowly)
     handed_in_pass_0: list[int] = []
     original_give = pt.PaperThread.give
 
@@ -83,10 +83,10 @@ def test_threaded_features_equal_inline_when_pass_0_hands_over_every_group() -> 
 def test_an_error_of_the_paper_thread_is_raised_to_the_caller(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    def fail(self: AndersoneMapper, group: ScanGroup) -> None:
+    def fail(self: AndersoneMapper, work: PreparedGroup) -> None:
         raise FloatingPointError("kernel failed")
 
-    monkeypatch.setattr(AndersoneMapper, "integrate_group", fail)
+    monkeypatch.setattr(AndersoneMapper, "integrate_prepared", fail)
     m = AttributionMapper(THREADED, room_grid())
     m.begin_pass(0)
     scans = ring_scans(300, seed=1)
