@@ -21,7 +21,11 @@ Two measures of agreement, for two jobs:
    true poses gains ≤ 0.2 % (office, corridor, four buildings; it still moves the poses
    of a large building by 0.1 m and costs up to 0.11 F1), on odometry with 0.8°/m of bias
    7-77 %.
-2. **Scale (and the bias again, jointly, near the first answer): echo consistency.**
+2. **Scale** (``max_scale > 0``), by ``scale_score``: ``"surfaces"`` (the default,
+   :mod:`pipeline.refine.surfaces`: echoes of one plane must agree on its offset; alternated
+   with the bias by sharpness at the scale found, see :func:`_surface_calibration`) or
+   ``"consistency"``, below: **the bias again, jointly, near the first answer, by echo
+   consistency.**
    Sharpness is *biased in scale*: a robot driving along a wall leaves echo points spaced
    by its travel, so a too-short scale packs the same wall into fewer cells and the
    density grows as ``1/(1 + k)`` with no wall moving into place (measured: every log's
@@ -257,10 +261,11 @@ def _grid_max(f: Callable[[float, float], float], ks: npt.ArrayLike, bs: npt.Arr
 def calibrate(
     t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *, max_scale: float,
     max_bias: float, res: float, sigma: float, min_gain: float = 0.0,
-    scale_score: str = "consistency", max_slope: float = 0.75,
+    scale_score: str = "surfaces", max_slope: float = 0.75,
 ) -> Calibration:
     """The calibration the echoes agree on (see the module docstring); ``max_scale = 0``
-    searches the heading bias alone (by sharpness). A heading bias that sharpens the
+    searches the heading bias alone (by sharpness), else the scale too by ``scale_score``
+    (``max_slope``: the surfaces' gate). A heading bias that sharpens the
     echoes by less than the fraction ``min_gain`` is not applied (bias 0)."""
     sharp = _Sharpness(t_ns, x, y, yaw, echoes, res=max(res, sigma), sigma=sigma)
     base = sharp(0.0, 0.0)

@@ -22,9 +22,10 @@ One evaluation ``f(k₀)``, from the echoes alone:
    ``k`` (0.5 % steps within ±5 % of ``k₀``); its minimum, placed by a parabola, is ``f(k₀)``.
 
 The association (steps 1-3) is made under ``k₀`` and pulls the answer towards it: ``f(k₀)
-≈ a + c·k₀`` with ``c`` = 0.4-0.95 measured (echoes of one wall seen from places far apart
-fall into different patches under a wrong scale, so the links that would contradict it are
-missing). The estimate is the fixed point ``a / (1 − c)`` of the line through ``f`` at
+≈ a + c·k₀`` with ``c`` = 0.4-0.95 measured. Half of the pull (on the office run) is the
+hits' rays — which ray of a 30° cone made an echo is chosen where the echoes agree under
+``k₀``, and ``1 − cos γ`` reaches 3.4 %, the size of the scale's effect — and half the
+patches themselves. The estimate is the fixed point ``a / (1 − c)`` of the line through ``f`` at
 ``k₀`` = −2 … +6 % (:data:`K0S`); ``c`` near 1 means the data hardly move the answer.
 Deterministic: no random draws.
 """
@@ -172,4 +173,3 @@ class FixedPoint:
     scale_error: float
     slope: float
     f: tuple[float, ...]
-
