@@ -3,8 +3,9 @@
 Each log is mapped exactly as ``sonarmap run`` would (:func:`pipeline.run.run`) into
 ``OUT/<name>/``. A log is a file or bag directory, or — named on one manifest line with
 `` + `` between the paths — one recording in several files (split bags, separate sonar and
-odometry bags), read as one log like ``sonarmap run a.bag b.bag``. The engine is ``dask.distributed``: a local cluster of single-threaded
-worker processes (default), or an existing cluster reached by its scheduler address.
+odometry bags), read as one log like ``sonarmap run a.bag b.bag``. The engine is
+``dask.distributed``: a local cluster of single-threaded worker processes (default), or an
+existing cluster reached by its scheduler address.
 Only paths, the configuration (a plain dict) and small result dicts travel through the
 scheduler; each worker opens and streams its own input.
 
@@ -67,12 +68,11 @@ WORKER_PRELOAD = "pipeline.batch_warm"
 
 BatchProgress = Callable[[int, int], None]  # (logs finished, logs total)
 # A log: a file or bag directory, or the files of one recording (a manifest line
-# ``a.bag + b.bag``).
+# ``a.bag + b.bag``, as sonarmap names such a recording: run_input.log_label).
 LogInput = Path | tuple[Path, ...]
-# What separates the files of one recording on a manifest line (as sonarmap names such a
-# recording in its messages and summary rows).
-RECORDING_SEPARATOR = " + "
-_SEPARATOR = re.compile(r"(?:^|\s)\+(?:\s|$)")  # ... a '+' with a blank (or the line's end) on each side
+# What separates the files of one recording on a manifest line: a '+' with a blank (or the
+# line's end) on each side.
+_SEPARATOR = re.compile(r"(?:^|\s)\+(?:\s|$)")
 
 # A file detected as CSV is only taken as a log when directory search finds it if it
 # is not one of these (looks_like_csv accepts any text with two fields per line).
@@ -170,8 +170,10 @@ def log_files(log_input: LogInput) -> tuple[Path, ...]:
 
 
 def log_text(log_input: LogInput) -> str:
-    """A log as summary rows and messages name it: its path, or its files joined by `` + ``."""
-    return RECORDING_SEPARATOR.join(str(p) for p in log_files(log_input))
+    """A log as summary rows and messages name it (:func:`pipeline.run_input.log_label`)."""
+    from pipeline.run_input import log_label
+
+    return str(log_label(log_files(log_input)))
 
 
 def is_sonarmap_output(d: Path) -> bool:
@@ -259,9 +261,9 @@ def find_logs(
     """The logs a batch maps, deduplicated and sorted by absolute path.
 
     Files named directly or in a manifest are taken as they are (a failure to read them
-    is that log's failure); so is a manifest's recording in several files. Directories are one log when they are a rosbag2 bag (a
-    ``metadata.yaml``) or a CSV log set, else searched recursively for files whose content
-    is a log; hidden entries, ``*.truth.*`` files, sonarmap's own outputs and ``exclude``
+    is that log's failure); so is a manifest's recording in several files. Directories are
+    one log when they are a rosbag2 bag (a ``metadata.yaml``) or a CSV log set, else
+    searched recursively for files whose content is a log; hidden entries, ``*.truth.*`` files, sonarmap's own outputs and ``exclude``
     (the batch's output directory) are skipped.
     """
     skip = {Path(p).resolve() for p in exclude}
@@ -345,7 +347,7 @@ def _map_one_checked(
     files: tuple[Path, ...], out_dir: Path, name: str, config: dict[str, Any], rerun: bool
 ) -> LogOutcome:
     from pipeline.run import run
-    from pipeline.run_input import files_sha256
+    from pipeline.run_input import files_sha256, hashes_sha256
 
     cfg = config_from_dict(config)
     for f in files:
@@ -388,8 +390,9 @@ def _map_one_checked(
         )
         marker_data = {
             "marker_version": MARKER_VERSION,
-            # the run's own for one file; for several, independent of their order
-            "input_sha256": inp["sha256"] if len(files) == 1 else files_sha256(files),
+            # files_sha256 of the input, from the hashes the run made (no file read again)
+            "input_sha256": inp["sha256"] if len(files) == 1 else hashes_sha256(
+                [f["sha256"] for f in inp["files"]]),
             "config_hash": config_hash,
             "tool_version": m.get("run", {}).get("tool_version"),
             "row": {k: v for k, v in asdict(row).items()

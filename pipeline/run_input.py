@@ -27,11 +27,16 @@ def log_paths(log: str | Path | Sequence[str | Path]) -> list[Path]:
 
 def files_sha256(paths: Sequence[Path]) -> str:
     """sha256 of a log's input: of its one file (or bag directory), or for several files
-    of their hashes, sorted — the same files named in any order (or moved) hash the same."""
+    :func:`hashes_sha256` of theirs — the same files named in any order (or moved) hash
+    the same."""
     if len(paths) == 1:
         return sha256_of(paths[0])
-    lines = sorted(f"{sha256_of(p)}\n" for p in paths)
-    return hashlib.sha256("".join(lines).encode()).hexdigest()
+    return hashes_sha256([sha256_of(p) for p in paths])
+
+
+def hashes_sha256(hashes: Sequence[str]) -> str:
+    """sha256 of several files' sha256 hex digests, sorted (independent of their order)."""
+    return hashlib.sha256("".join(f"{h}\n" for h in sorted(hashes)).encode()).hexdigest()
 
 
 def log_label(paths: Sequence[Path]) -> Path:
