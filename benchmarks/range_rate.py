@@ -28,6 +28,7 @@ import numpy as np
 
 from formats.arrays import F64, I64
 from pipeline.refine.echoes import Echoes
+from pipeline.se2 import transform_points
 
 LAG = 10
 MAX_TURN_DEG = 2.0
@@ -116,9 +117,7 @@ def range_rate_scale(echoes: Echoes, truth_map: Path) -> RangeRate:
     m = load_nav2_map(truth_map)
     normals = _Normals(m.classes == 1, m.grid.origin_x, m.grid.origin_y, m.grid.resolution)
     odo = echoes.odo
-    c, s = np.cos(odo[:, 2]), np.sin(odo[:, 2])
-    sx = odo[:, 0] + c * echoes.sx - s * echoes.sy
-    sy = odo[:, 1] + s * echoes.sx + c * echoes.sy
+    sx, sy = transform_points(odo, echoes.sx, echoes.sy)  # each sonar's position
     gx, gy, found = normals.gradients(sx, sy, odo[:, 2] + echoes.axis, echoes.half,
                                       echoes.range_m)
     mounts = np.column_stack([echoes.sx, echoes.sy, echoes.axis])

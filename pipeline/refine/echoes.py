@@ -40,11 +40,16 @@ class Echoes:
     half: F64  # (N,) half the beam width, rad
     range_m: F64  # (N,) the echo's range, m
 
-    def arc(self, fraction: float) -> tuple[F64, F64]:
-        """``ARC_SAMPLES`` points of each echo's arc over ``±fraction`` of its half beam,
-        in the base frame."""
-        u = np.linspace(-1.0, 1.0, ARC_SAMPLES) * fraction
-        ang = self.axis[:, None] + self.half[:, None] * u[None, :]
+    def arc_angles(self, fraction: float, samples: int = ARC_SAMPLES) -> F64:
+        """(N, ``samples``) directions of each echo's arc points over ``±fraction`` of its
+        half beam, in the base frame (rad)."""
+        u = np.linspace(-1.0, 1.0, samples) * fraction
+        return np.asarray(self.axis[:, None] + self.half[:, None] * u[None, :])
+
+    def arc(self, fraction: float, samples: int = ARC_SAMPLES) -> tuple[F64, F64]:
+        """``samples`` points of each echo's arc over ``±fraction`` of its half beam, in
+        the base frame."""
+        ang = self.arc_angles(fraction, samples)
         return (self.sx[:, None] + self.range_m[:, None] * np.cos(ang),
                 self.sy[:, None] + self.range_m[:, None] * np.sin(ang))
 

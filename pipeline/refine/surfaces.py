@@ -64,10 +64,8 @@ class SurfaceScale:
         echoes = echoes.take(_thin(len(echoes), MAX_ECHOES))  # memory and time bounded
         self.placed = _Placed(t_ns, x, y, yaw, echoes, len(echoes))
         self.echoes, self.bias = echoes, bias
-        u = np.linspace(-1.0, 1.0, ARC_POINTS)
-        self.phi = echoes.axis[:, None] + echoes.half[:, None] * u  # arc ray angles, base
-        self.bx = echoes.sx[:, None] + echoes.range_m[:, None] * np.cos(self.phi)
-        self.by = echoes.sy[:, None] + echoes.range_m[:, None] * np.sin(self.phi)
+        self.phi = echoes.arc_angles(1.0, ARC_POINTS)  # the whole cone's rays, base frame
+        self.bx, self.by = echoes.arc(1.0, ARC_POINTS)
 
     def poses(self, k: float) -> F64:
         return self.placed.poses(k, self.bias * (1.0 + k))
