@@ -218,13 +218,19 @@ class PoseRefinementConfig:
                                     "sharpest before matching", default=True)
     calibration_max_scale: float = doc_field(
         "... scale error searched in ± this (0: the heading bias only)",
-        default=0.0)
+        default=0.05)
     calibration_scale_score: str = doc_field(
         "... the scale's estimator: 'surfaces' (ranges along surface normals, "
         "pipeline/refine/surfaces.py) or 'consistency' (echo consistency)", default="surfaces")
     calibration_max_slope: float = doc_field(
         "... 'surfaces': a scale whose fixed-point slope reaches this is not applied (the "
         "answer follows the association, not the data)", default=0.75)
+    calibration_scale_min_z: float = doc_field(
+        "... 'surfaces': a scale is applied only when it lies this many errors from 0 (its "
+        "standard error and the systematic part in quadrature)", default=3.0)
+    calibration_scale_systematic: float = doc_field(
+        "... 'surfaces': the estimator's systematic error (fraction; its lean on true poses, "
+        "-0.1 to +0.7 % measured)", default=0.005)
     calibration_max_bias_deg_per_m: float = doc_field("... heading bias searched in ± this, deg/m",
                                                  default=3.0)
     calibration_min_gain: float = doc_field(
@@ -435,6 +441,10 @@ def _check_ranges(cfg: Config) -> None:
          "must be in [0, 0.5)", pr.calibration_max_scale)
     need(0 < pr.calibration_max_slope <= 1, "pose_refinement.calibration_max_slope",
          "must be in (0, 1]", pr.calibration_max_slope)
+    need(pr.calibration_scale_min_z >= 0, "pose_refinement.calibration_scale_min_z",
+         "must be >= 0", pr.calibration_scale_min_z)
+    need(pr.calibration_scale_systematic >= 0, "pose_refinement.calibration_scale_systematic",
+         "must be >= 0", pr.calibration_scale_systematic)
     need(pr.calibration_scale_score in ("consistency", "surfaces"),
          "pose_refinement.calibration_scale_score", "must be 'consistency' or 'surfaces'",
          pr.calibration_scale_score)

@@ -127,7 +127,8 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
             max_scale=cfg.calibration_max_scale, max_bias=math.radians(cfg.calibration_max_bias_deg_per_m),
             res=cfg.field_resolution_m, sigma=cfg.field_sigma_m,
             min_gain=cfg.calibration_min_gain, scale_score=cfg.calibration_scale_score,
-            max_slope=cfg.calibration_max_slope,
+            max_slope=cfg.calibration_max_slope, min_z=cfg.calibration_scale_min_z,
+            systematic=cfg.calibration_scale_systematic,
         )
         ox, oy, oyaw = cal0.correct(tx, ty, tyaw)
         look = interpolate_poses(PoseTrack(tt, ox, oy, oyaw, "", ""), echoes.t_ns,
@@ -139,6 +140,8 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
         metrics["sharpness_after"] = cal0.sharpness
         if math.isfinite(cal0.scale_slope):
             metrics["scale_fixed_point_slope"] = cal0.scale_slope
+        if math.isfinite(cal0.scale_z):
+            metrics["scale_z"] = cal0.scale_z
         if math.isfinite(cal0.consistency):
             metrics["consistency_before"] = cal0.consistency_uncalibrated
             metrics["consistency_after"] = cal0.consistency

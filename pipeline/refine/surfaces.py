@@ -132,42 +132,67 @@ class SurfaceScale:
         return idx, patch, (mx / norm)[patch], (my / norm)[patch], self.phi[idx, best[idx]]
 
     def __call__(self, k0: float) -> float:
+        return self.evaluate(k0)[0]
+
+    def evaluate(self, k0: float) -> tuple[float, float]:
+        """``f(k₀)`` and its standard error (NaN, NaN: no patch): the cluster-robust
+        sandwich variance of the M-estimate, ``Σ_patches (Σ ψ(r)·∂r/∂k)² / (Σ ψ'(r)·(∂r/∂k)²)²``,
+        patches as clusters (their echoes share the offset and the visit)."""
         idx, patch, nx, ny, phi = self._associate(k0)
         n = int(patch.max(initial=-1)) + 1
         if n == 0:
-            return math.nan
+            return math.nan, math.nan
         ks = k0 + STEP * np.arange(-10, 11)
-        residuals = []
+        rows = []
         for k in ks.tolist():
             pose = self.poses(k)[idx]
             ox, oy = transform_points(pose, self.echoes.sx[idx], self.echoes.sy[idx])
             ray = pose[:, 2] + phi
             q = nx * ox + ny * oy + self.echoes.range_m[idx] * (nx * np.cos(ray) + ny * np.sin(ray))
             mean = np.bincount(patch, q, n) / np.bincount(patch, minlength=n)
-            residuals.append(q - mean[patch])
-        scale = 2.385 * 1.4826 * float(np.median(np.abs(residuals[10]))) + 1e-9
-        loss = np.array([float(np.log1p((r / scale) ** 2).sum()) for r in residuals])
+            rows.append(q - mean[patch])
+        residuals = np.array(rows)
+        s = 2.385 * 1.4826 * float(np.median(np.abs(residuals[10]))) + 1e-9
+        loss = np.log1p((residuals / s) ** 2).sum(axis=1)
         i = int(np.argmin(loss))
+        k_hat = float(ks[i])
         if 0 < i < len(ks) - 1:
             a, b, c = loss[i - 1], loss[i], loss[i + 1]
             if a - 2 * b + c > 0:
-                return float(ks[i] + STEP * 0.5 * (a - c) / (a - 2 * b + c))
-        return float(ks[i])
+                k_hat = float(ks[i] + STEP * 0.5 * (a - c) / (a - 2 * b + c))
+        # The residuals are linear in k over a step: r and ∂r/∂k at k̂ from its neighbours.
+        j = int(np.clip(round((k_hat - float(ks[0])) / STEP), 1, len(ks) - 2))
+        dr_dk = (residuals[j + 1] - residuals[j - 1]) / (2 * STEP)
+        r = residuals[j] + dr_dk * (k_hat - float(ks[j]))
+        psi = 2 * r / (s * s + r * r)
+        dpsi = 2 * (s * s - r * r) / (s * s + r * r) ** 2
+        info = float((dpsi * dr_dk * dr_dk).sum())
+        score = np.bincount(patch, psi * dr_dk, n)
+        se = math.sqrt(float((score * score).sum())) / info if info > 0 else math.nan
+        return k_hat, se
 
     def fixed_point(self) -> FixedPoint:
-        """The estimate: the fixed point of ``f`` (module docstring)."""
-        fs = [self(k0) for k0 in K0S]
+        """The estimate: the fixed point of ``f`` (module docstring), its standard error
+        that of ``f`` nearest it amplified by ``1 / (1 − c)``."""
+        evaluated = [self.evaluate(k0) for k0 in K0S]
+        fs = [v[0] for v in evaluated]
         if not all(math.isfinite(v) for v in fs):
-            return FixedPoint(math.nan, math.nan, tuple(fs))
+            return FixedPoint(math.nan, math.nan, tuple(fs), math.nan)
         c, a = np.polyfit(np.array(K0S), np.array(fs), 1)
-        return FixedPoint(float(a / (1.0 - c)) if c < 1 else math.nan, float(c), tuple(fs))
+        if c >= 1:
+            return FixedPoint(math.nan, float(c), tuple(fs), math.nan)
+        k = float(a / (1.0 - c))
+        nearest = int(np.argmin(np.abs(np.array(K0S) - k)))
+        return FixedPoint(k, float(c), tuple(fs), evaluated[nearest][1] / (1.0 - c))
 
 
 @dataclass(frozen=True)
 class FixedPoint:
     """The scale error found (NaN: undetermined), the slope ``c`` of ``f(k₀)`` (near 1: the
-    data hardly move the answer) and ``f`` at :data:`K0S`."""
+    data hardly move the answer), ``f`` at :data:`K0S` and the scale's standard error
+    (statistical only: the estimator's lean is not in it)."""
 
     scale_error: float
     slope: float
     f: tuple[float, ...]
+    standard_error: float

@@ -72,9 +72,39 @@ def test_a_scale_whose_fixed_point_is_not_determined_is_not_applied(
     assert gated.scale_slope == pytest.approx(applied.scale_slope, abs=0.2)
 
 
+def test_the_standard_error_counts_patches_not_echoes(runs: dict[str, tuple[Any, Any, Any]]) -> None:
+    # The sandwich error clusters by patch: a ring firing 80 times a second repeats itself
+    # within a patch, so every other echo dropped leaves the error as it was (measured
+    # 0.00209 and 0.00208), where independent echoes would make it √2 larger.
+    track, echoes, _ = runs["drifted"]
+    t, x, y, yaw = (np.asarray(v) for v in (track.t_ns, track.x, track.y, track.yaw))
+    full = SurfaceScale(t, x, y, yaw, echoes, BIAS).fixed_point()
+    half = SurfaceScale(t, x, y, yaw, echoes.take(np.arange(0, len(echoes), 2)), BIAS).fixed_point()
+    assert 0 < full.standard_error < 0.005  # the 3 % drift stands > 6 errors from 0
+    assert half.standard_error == pytest.approx(full.standard_error, rel=0.2)
+
+
+def test_a_scale_within_min_z_errors_of_zero_is_not_applied(
+        runs: dict[str, tuple[Any, Any, Any]]) -> None:
+    track, echoes, _ = runs["drifted"]
+    t, x, y, yaw = (np.asarray(v) for v in (track.t_ns, track.x, track.y, track.yaw))
+    common: dict[str, Any] = dict(max_scale=0.05, max_bias=math.radians(3.0), res=0.05,
+                                  sigma=0.1, min_gain=0.01)
+    applied = calibrate(t, x, y, yaw, echoes, **common)
+    assert applied.scale_z >= 3.0 and applied.scale_error == pytest.approx(0.03, abs=0.01)
+    # The same estimate against a systematic error of 3 %: within 3 errors of 0, left out.
+    doubted = calibrate(t, x, y, yaw, echoes, **common, systematic=0.03)
+    assert 0.5 < doubted.scale_z < 1.5  # 0.031 / hypot(0.005, 0.03)
+    assert doubted.scale_error == 0.0
+    assert doubted.heading_bias == calibrate(t, x, y, yaw, echoes,
+                                             **{**common, "max_scale": 0.0}).heading_bias
+
+
 @pytest.mark.parametrize(("key", "value", "message"), [
     ("calibration_scale_score", "sharpness", "must be 'consistency' or 'surfaces'"),
     ("calibration_max_slope", 0.0, "must be in (0, 1]"),
+    ("calibration_scale_min_z", -1.0, "must be >= 0"),
+    ("calibration_scale_systematic", -0.01, "must be >= 0"),
 ])
 def test_bad_scale_settings_are_refused_by_name(key: str, value: object, message: str) -> None:
     with pytest.raises(ConfigError, match=rf"pose_refinement\.{key}.*{re.escape(message)}"):
