@@ -315,8 +315,8 @@ def _surface_calibration(
 ) -> Calibration:
     """The scale by :mod:`pipeline.refine.surfaces`, alternated (at most twice) with the heading bias
     by sharpness at that scale (a bias found with the scale wrong partly makes up for it:
-    0.58°/m of 0.8 on the office run; a new bias is taken, as at ``k = 0``, only when it
-    sharpens the echoes by ``min_gain``). Two gates keep a scale the data do not establish
+    0.58°/m of 0.8 on the office run; as at ``k = 0``, a bias is taken only when it
+    sharpens the echoes by ``min_gain`` over none at that scale). Two gates keep a scale the data do not establish
     out, and the bias at ``k = 0`` stays:
 
     * the fixed point's slope reaches ``max_slope``: the answer moves with the association
@@ -339,13 +339,15 @@ def _surface_calibration(
         b = b / (1.0 + k) * (1.0 + k_new)
         k = k_new
         at_k = np.full(1, k)
-        held = sharp(k, b)
-        found = (held, k, b)
+        found = (sharp(k, b), k, b)
         db = bias_step
         for _ in range(3):
             found = _grid_max(sharp, at_k, found[2] + db * np.arange(-2, 3), found)
             db /= 4
-        if found[0] < held * (1.0 + min_gain):
+        # As at k = 0: a bias only where it sharpens the echoes by min_gain over none.
+        b_new = found[2] if found[0] >= sharp(k, 0.0) * (1.0 + min_gain) else 0.0
+        moved = abs(b_new - b) > db  # more than the finest step searched
+        b = b_new
+        if not moved:
             break  # the bias stands: the scale found under it is the answer
-        b = found[2]
     return Calibration(k, b, sharp(k, b), base, scale_slope=slope, scale_z=z)
