@@ -2,11 +2,12 @@
 sign of either error, smaller and larger ones, and noise per step, on the office
 simulation and the Intel lab emulation. What refinement finds and what it gives.
 
-    python -m benchmarks.drift_variety [--work DIR] [--cases office intel-lab]
+    python -m benchmarks.drift_variety [--work DIR] [--cases office intel-lab] [--config TOML]
 
 Each row: the drift model, F1 of the default method on true poses / the drifted odometry /
 refined, refined/true, ATE drifted → refined (evo's SE(2)-aligned RMSE) and the
-calibration found (``metrics.json`` → ``pose_refinement``). A run's outputs are kept under
+calibration found (``metrics.json`` → ``pose_refinement``); ``--config`` sets the refined
+runs' ``[pose_refinement]``. A run's outputs are kept under
 ``--work`` (default ``build/drift_variety``); the drifted logs are made there when missing.
 """
 
@@ -26,6 +27,8 @@ MODELS = (
     ("+1.5 %, +0.4°/m", 0.015, 0.4, 0.0, 0.0),
     ("+5 %, -1.5°/m", 0.05, -1.5, 0.0, 0.0),
     ("0, +0.8°/m", 0.0, 0.8, 0.0, 0.0),
+    ("+3 %, +0.8°/m, noise 0.02 m/√m", 0.03, 0.8, 0.02, 0.0),
+    ("+3 %, +0.8°/m, noise 0.003 rad/√rad", 0.03, 0.8, 0.0, 0.003),
     ("+3 %, +0.8°/m, noise 0.01 m/√m, 0.01 rad/√rad", 0.03, 0.8, 0.01, 0.01),
 )
 
@@ -57,7 +60,7 @@ def _drifted(case: str, model: tuple[str, float, float, float, float], work: Pat
 
 
 def main(argv: list[str] | None = None) -> None:
-    from pipeline.config import Config
+    from pipeline.config import Config, load_config
     from pipeline.evaluate import evaluate_run
     from pipeline.run import run
 
@@ -65,10 +68,12 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--work", type=Path, default=REPO / "build" / "drift_variety")
     ap.add_argument("--cases", nargs="+", default=["office", "intel-lab"],
                     choices=["office", "intel-lab"])
+    ap.add_argument("--config", type=Path, help="TOML whose [pose_refinement] the refined runs use")
     args = ap.parse_args(argv)
     args.work.mkdir(parents=True, exist_ok=True)
     plain = Config()
-    refine = Config(pose_refinement=dataclasses.replace(plain.pose_refinement, enabled=True))
+    chosen = load_config(args.config).pose_refinement if args.config else plain.pose_refinement
+    refine = Config(pose_refinement=dataclasses.replace(chosen, enabled=True))
     print("| log | drift (scale, heading bias, noise) | F1 true | F1 drifted | F1 refined "
           "| refined/true | ATE drifted → refined (m) | scale, bias found (z) |")
     print("|---|---|---:|---:|---:|---:|---|---|")

@@ -231,6 +231,9 @@ class PoseRefinementConfig:
     calibration_scale_systematic: float = doc_field(
         "... 'surfaces': the estimator's systematic error (fraction; its lean on true poses, "
         "-0.1 to +0.7 % measured)", default=0.005)
+    calibration_scale_window_m: float = doc_field(
+        "... 'surfaces': a surface patch links echoes within one stretch of this much travel "
+        "(0: the whole run; longer links carry the odometry's random error)", default=30.0)
     calibration_max_bias_deg_per_m: float = doc_field("... heading bias searched in ± this, deg/m",
                                                  default=3.0)
     calibration_min_gain: float = doc_field(
@@ -445,6 +448,8 @@ def _check_ranges(cfg: Config) -> None:
          "must be >= 0", pr.calibration_scale_min_z)
     need(pr.calibration_scale_systematic >= 0, "pose_refinement.calibration_scale_systematic",
          "must be >= 0", pr.calibration_scale_systematic)
+    need(pr.calibration_scale_window_m >= 0, "pose_refinement.calibration_scale_window_m",
+         "must be >= 0 (0 = the whole run)", pr.calibration_scale_window_m)
     need(pr.calibration_scale_score in ("consistency", "surfaces"),
          "pose_refinement.calibration_scale_score", "must be 'consistency' or 'surfaces'",
          pr.calibration_scale_score)

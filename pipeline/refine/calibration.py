@@ -263,12 +263,12 @@ def calibrate(
     t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *, max_scale: float,
     max_bias: float, res: float, sigma: float, min_gain: float = 0.0,
     scale_score: str = "surfaces", max_slope: float = 0.75, min_z: float = 3.0,
-    systematic: float = 0.005,
+    systematic: float = 0.005, window_m: float = 30.0,
 ) -> Calibration:
     """The calibration the echoes agree on (see the module docstring); ``max_scale = 0``
     searches the heading bias alone (by sharpness), else the scale too by ``scale_score``
     (``max_slope``, ``min_z``, ``systematic``: the surfaces' gates, see
-    :func:`_surface_calibration`). A heading bias that sharpens the
+    :func:`_surface_calibration`; ``window_m``: their travel window). A heading bias that sharpens the
     echoes by less than the fraction ``min_gain`` is not applied (bias 0)."""
     sharp = _Sharpness(t_ns, x, y, yaw, echoes, res=max(res, sigma), sigma=sigma)
     base = sharp(0.0, 0.0)
@@ -291,7 +291,7 @@ def calibrate(
         return _surface_calibration(t_ns, x, y, yaw, echoes, sharp, base, best,
                                     max_scale=max_scale, bias_step=float(bs[1] - bs[0]),
                                     max_slope=max_slope, min_gain=min_gain, min_z=min_z,
-                                    systematic=systematic)
+                                    systematic=systematic, window_m=window_m)
     consistent = _Consistency(t_ns, x, y, yaw, echoes, res=2 * res, sigma=sigma)
     c_base = consistent(0.0, 0.0)
     n_k = max(1, math.ceil(max_scale / SCALE_STEP))
@@ -311,7 +311,7 @@ def calibrate(
 def _surface_calibration(
     t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, sharp: _Sharpness, base: float,
     best: tuple[float, float, float], *, max_scale: float, bias_step: float, max_slope: float,
-    min_gain: float, min_z: float, systematic: float,
+    min_gain: float, min_z: float, systematic: float, window_m: float,
 ) -> Calibration:
     """The scale by :mod:`pipeline.refine.surfaces`, alternated (at most twice) with the heading bias
     by sharpness at that scale (a bias found with the scale wrong partly makes up for it:
@@ -330,7 +330,7 @@ def _surface_calibration(
     k, b, slope, z = 0.0, best[2], math.nan, math.nan
     for _ in range(2):
         # The bias is held per reported metre while the scale varies.
-        fp = SurfaceScale(t_ns, x, y, yaw, echoes, b / (1.0 + k)).fixed_point()
+        fp = SurfaceScale(t_ns, x, y, yaw, echoes, b / (1.0 + k), window_m).fixed_point()
         slope = fp.slope
         z = abs(fp.scale_error) / math.hypot(fp.standard_error, systematic)
         if not (math.isfinite(z) and fp.slope < max_slope and z >= min_z):

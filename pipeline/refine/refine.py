@@ -129,6 +129,7 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
             min_gain=cfg.calibration_min_gain, scale_score=cfg.calibration_scale_score,
             max_slope=cfg.calibration_max_slope, min_z=cfg.calibration_scale_min_z,
             systematic=cfg.calibration_scale_systematic,
+            window_m=cfg.calibration_scale_window_m,
         )
         ox, oy, oyaw = cal0.correct(tx, ty, tyaw)
         look = interpolate_poses(PoseTrack(tt, ox, oy, oyaw, "", ""), echoes.t_ns,

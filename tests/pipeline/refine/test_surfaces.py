@@ -84,6 +84,22 @@ def test_the_standard_error_counts_patches_not_echoes(runs: dict[str, tuple[Any,
     assert half.standard_error == pytest.approx(full.standard_error, rel=0.2)
 
 
+@pytest.mark.parametrize("window_m", [0.0, 5.0])
+def test_patches_link_echoes_within_one_stretch_of_travel(
+        runs: dict[str, tuple[Any, Any, Any]], window_m: float) -> None:
+    track, echoes, _ = runs["drifted"]
+    t, x, y, yaw = (np.asarray(v) for v in (track.t_ns, track.x, track.y, track.yaw))
+    scale = SurfaceScale(t, x, y, yaw, echoes, BIAS, window_m)
+    idx, patch, *_ = scale._associate(0.0)
+    stretch = scale.stretch[idx]
+    for p in np.unique(patch):
+        assert np.unique(stretch[patch == p]).size == 1
+    # one stretch for the whole run, or one per 5 m of the odometry's travel (~28 m here)
+    travel = float(np.hypot(*np.diff(echoes.odo[:, :2], axis=0).T).sum())
+    assert int(scale.stretch.max()) == (0 if window_m == 0 else int(travel // window_m))
+    assert window_m == 0 or int(scale.stretch.max()) >= 4
+
+
 def test_a_scale_within_min_z_errors_of_zero_is_not_applied(
         runs: dict[str, tuple[Any, Any, Any]]) -> None:
     track, echoes, _ = runs["drifted"]
@@ -105,6 +121,7 @@ def test_a_scale_within_min_z_errors_of_zero_is_not_applied(
     ("calibration_max_slope", 0.0, "must be in (0, 1]"),
     ("calibration_scale_min_z", -1.0, "must be >= 0"),
     ("calibration_scale_systematic", -0.01, "must be >= 0"),
+    ("calibration_scale_window_m", -1.0, "must be >= 0"),
 ])
 def test_bad_scale_settings_are_refused_by_name(key: str, value: object, message: str) -> None:
     with pytest.raises(ConfigError, match=rf"pose_refinement\.{key}.*{re.escape(message)}"):
