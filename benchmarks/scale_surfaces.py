@@ -1,6 +1,7 @@
 """The scale error the surface-patch estimator (:mod:`pipeline.refine.surfaces`) finds on
 the true-pose and the drifted log of every drifted case, with the slope of its fixed-point
-line and ``f(k₀)`` itself (issue 17).
+line, ``f(k₀)`` itself, the estimate's standard error and ``z`` (the estimate over its
+error with the systematic part in quadrature: applied at ``calibration_scale_min_z``, 3).
 
 Usage::
 
@@ -25,8 +26,8 @@ def main(argv: list[str] | None = None) -> int:
     cases = drifted_cases(__doc__ or "", argv)
     pr = Config().pose_refinement
     print("| log | poses | echoes | heading bias found (°/m) | f(k₀) at k₀ = "
-          + ", ".join(f"{k:+.0%}" for k in K0S) + " | slope c | fixed point k |")
-    print("|---|---|---:|---:|---|---:|---:|")
+          + ", ".join(f"{k:+.0%}" for k in K0S) + " | slope c | fixed point k | error | z |")
+    print("|---|---|---:|---:|---|---:|---:|---:|---:|")
     for name, clean, drifted, _, _ in cases:
         for which, log in (("true", clean), ("drifted", drifted)):
             track, echoes = log_echoes(log)
@@ -34,10 +35,12 @@ def main(argv: list[str] | None = None) -> int:
                              max_bias=math.radians(pr.calibration_max_bias_deg_per_m),
                              res=pr.field_resolution_m, sigma=pr.field_sigma_m,
                              min_gain=pr.calibration_min_gain).heading_bias
-            fp = SurfaceScale(*track, echoes, bias).fixed_point()
+            fp = SurfaceScale(*track, echoes, bias, pr.calibration_scale_window_m).fixed_point()
+            z = abs(fp.value) / math.hypot(fp.standard_error, pr.calibration_scale_systematic)
             print(f"| {name} | {which} | {len(echoes)} | {math.degrees(bias):.2f} | "
                   + " ".join(f"{v:+.4f}" for v in fp.f)
-                  + f" | {fp.slope:.2f} | {fp.scale_error:+.4f} |", flush=True)
+                  + f" | {fp.slope:.2f} | {fp.value:+.4f} | {fp.standard_error:.4f} "
+                  f"| {z:.1f} |", flush=True)
     return 0
 
 

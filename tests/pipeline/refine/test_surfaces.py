@@ -40,11 +40,23 @@ def test_the_fixed_point_finds_no_scale_on_true_poses_and_the_drift_on_drifted_o
         runs: dict[str, tuple[Any, Any, Any]]) -> None:
     true = _scale(runs["true"], 0.0).fixed_point()
     drifted = _scale(runs["drifted"], BIAS).fixed_point()
-    # measured: +0.005 and +0.036 (3 % of drift), slopes 0.38 and 0.32
-    assert true.scale_error == pytest.approx(0.0, abs=0.01)
-    assert drifted.scale_error == pytest.approx(0.03, abs=0.01)
+    # measured: +0.005 and +0.033 (3 % of drift), slopes 0.37 and 0.31
+    assert true.value == pytest.approx(0.0, abs=0.01)
+    assert drifted.value == pytest.approx(0.03, abs=0.01)
     assert 0 < true.slope < 0.75 and 0 < drifted.slope < 0.75
     assert len(true.f) == len(K0S)
+
+
+@pytest.mark.parametrize("start_deg", [-0.2, 0.2])
+def test_the_patches_fix_the_heading_bias_at_a_given_scale(
+        runs: dict[str, tuple[Any, Any, Any]], start_deg: float) -> None:
+    # Started 0.2°/m off either way, the heading bias's fixed point lands on the drift's
+    # 0.8°/m (measured 0.83 / 0.80, slopes 0.50 / 0.39) and on 0 for true poses.
+    for name, k, truth in (("drifted", 0.03, 0.8), ("true", 0.0, 0.0)):
+        fp = _scale(runs[name], 0.0).bias_fixed_point(k, math.radians(truth + start_deg))
+        assert math.degrees(fp.value) == pytest.approx(truth, abs=0.06)
+        assert 0 < fp.slope < 0.75
+        assert 0 < math.degrees(fp.standard_error) < 0.02
 
 
 def test_the_association_pulls_each_evaluation_towards_its_own_scale(
@@ -53,7 +65,7 @@ def test_the_association_pulls_each_evaluation_towards_its_own_scale(
     scale = _scale(runs["drifted"], BIAS)
     fp = scale.fixed_point()
     low, high = scale(-0.02), scale(0.06)
-    assert -0.02 < low < fp.scale_error < high < 0.06
+    assert -0.02 < low < fp.value < high < 0.06
 
 
 def test_a_scale_whose_fixed_point_is_not_determined_is_not_applied(
@@ -75,7 +87,7 @@ def test_a_scale_whose_fixed_point_is_not_determined_is_not_applied(
 def test_the_standard_error_counts_patches_not_echoes(runs: dict[str, tuple[Any, Any, Any]]) -> None:
     # The sandwich error clusters by patch: a ring firing 80 times a second repeats itself
     # within a patch, so every other echo dropped leaves the error as it was (measured
-    # 0.00209 and 0.00208), where independent echoes would make it √2 larger.
+    # 0.0024 and 0.0022), where independent echoes would make it √2 larger.
     track, echoes, _ = runs["drifted"]
     t, x, y, yaw = (np.asarray(v) for v in (track.t_ns, track.x, track.y, track.yaw))
     full = SurfaceScale(t, x, y, yaw, echoes, BIAS).fixed_point()
@@ -90,7 +102,7 @@ def test_patches_link_echoes_within_one_stretch_of_travel(
     track, echoes, _ = runs["drifted"]
     t, x, y, yaw = (np.asarray(v) for v in (track.t_ns, track.x, track.y, track.yaw))
     scale = SurfaceScale(t, x, y, yaw, echoes, BIAS, window_m)
-    idx, patch, *_ = scale._associate(0.0)
+    idx, patch, *_ = scale._associate(scale.poses(0.0))
     stretch = scale.stretch[idx]
     for p in np.unique(patch):
         assert np.unique(stretch[patch == p]).size == 1
@@ -112,8 +124,10 @@ def test_a_scale_within_min_z_errors_of_zero_is_not_applied(
     doubted = calibrate(t, x, y, yaw, echoes, **common, systematic=0.03)
     assert 0.5 < doubted.scale_z < 1.5  # 0.031 / hypot(0.005, 0.03)
     assert doubted.scale_error == 0.0
-    assert doubted.heading_bias == calibrate(t, x, y, yaw, echoes,
-                                             **{**common, "max_scale": 0.0}).heading_bias
+    # the heading bias as at k = 0 (by sharpness, then the patches' fixed point there)
+    bias_only = calibrate(t, x, y, yaw, echoes, **{**common, "max_scale": 0.0})
+    assert doubted.heading_bias == pytest.approx(bias_only.heading_bias, abs=math.radians(0.1))
+    assert doubted.heading_bias != bias_only.heading_bias
 
 
 @pytest.mark.parametrize(("key", "value", "message"), [
@@ -134,7 +148,7 @@ def test_too_few_echoes_for_any_patch_give_no_scale(runs: dict[str, tuple[Any, A
     track, echoes, _ = runs["drifted"]
     t, x, y, yaw = (np.asarray(v) for v in (track.t_ns, track.x, track.y, track.yaw))
     few = echoes.take(np.array([0, len(echoes) // 2]))
-    assert math.isnan(SurfaceScale(t, x, y, yaw, few, 0.0).fixed_point().scale_error)
+    assert math.isnan(SurfaceScale(t, x, y, yaw, few, 0.0).fixed_point().value)
     cal = calibrate(t, x, y, yaw, few, max_scale=0.05, max_bias=math.radians(3.0), res=0.05,
                     sigma=0.1, scale_score="surfaces")
     assert cal.scale_error == 0.0
