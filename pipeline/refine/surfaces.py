@@ -15,8 +15,8 @@ One evaluation ``f(k₀)``, from the echoes alone:
    densities of their whole-cone arcs (``H``) and free cones (``F``, sampled along the
    cone's edges and axis, weighted as the whole cone) on 10 cm cells (σ = 0.1 m: one
    cell; measured against 5 cm cells on the twelve true and drifted logs: the leans on
-   true poses +0.3 … +5.2 % → −1.0 … +0.7 %, the drifted Freiburg 3.5 → 3.2 % and the
-   Intel at −3 % −2.9 → −3.3 %, the slopes lower, a third less time);
+   true poses +0.2 … +5.2 % → −1.0 … +0.7 %, the drifted Freiburg +3.5 → +3.2 %, the
+   slopes lower, a third to a half less time);
 2. each echo's hit: the arc point of the best ``H / (H + F)`` (as the consistency score);
    its normal: the structure tensor of ``H`` there (gradients smoothed over 15 cm),
    turned towards the sonar;
@@ -38,8 +38,9 @@ hits' rays — which ray of a 30° cone made an echo is chosen where the echoes 
 ``k₀``, and ``1 − cos γ`` reaches 3.4 %, the size of the scale's effect — and half the
 patches themselves. The estimate is the fixed point ``a / (1 − c)`` of the line through ``f`` at
 ``k₀`` = −4 … +4 % (:data:`K0S`, symmetric: a scale error has either sign; ``f`` bends
-away from the truth, so a line through −2 … +6 % put a −3 % drift on the Intel at −4.1 %,
-the symmetric one at −2.9 %); ``c`` near 1 means the data hardly move the answer.
+away from the truth, and with a line through −2 … +6 % the calibration put a −3 % drift
+on the Intel at −4.0 %, with this one at −3.2 %); ``c`` near 1 means the data hardly move
+the answer.
 Its standard error is the cluster-robust sandwich error of ``f`` (patches as clusters)
 amplified by ``1 / (1 − c)``; the calibration applies the scale only when it stands
 ``min_z`` errors clear of 0 (:func:`pipeline.refine.calibration._surface_calibration`).
