@@ -44,6 +44,9 @@ the answer.
 Its standard error is the cluster-robust sandwich error of ``f`` (patches as clusters)
 amplified by ``1 / (1 − c)``; the calibration applies the scale only when it stands
 ``min_z`` errors clear of 0 (:func:`pipeline.refine.calibration._surface_calibration`).
+The patches' offsets disagree under a wrong heading bias too: the same scan over the bias
+at a fixed scale, and its fixed point, give the bias where its slope says they determine
+it (:meth:`SurfaceScale.bias_fixed_point`).
 Deterministic: no random draws.
 """
 
@@ -79,7 +82,8 @@ B0S = tuple(math.radians(d) for d in (-0.2, -0.1, 0.0, 0.1, 0.2))  # around the 
 
 
 class SurfaceScale:
-    """``f(k₀)`` of the module docstring for one log's echoes."""
+    """``f(k₀)`` of the module docstring for one log's echoes, its fixed point, and the
+    same for the heading bias at a given scale."""
 
     def __init__(self, t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, bias: float,
                  window_m: float = WINDOW_M):
@@ -89,7 +93,8 @@ class SurfaceScale:
         self.phi = echoes.arc_angles(1.0, ARC_POINTS)  # the whole cone's rays, base frame
         self.bx, self.by = echoes.arc(1.0, ARC_POINTS)
         # each echo's stretch of travel (odometry, independent of the scale tested)
-        travel = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(echoes.odo[:, :2], axis=0).T))])
+        step = np.hypot(*np.diff(echoes.odo[:, :2], axis=0).T)
+        travel = np.concatenate([np.zeros(min(len(echoes), 1)), np.cumsum(step)])
         self.stretch = (np.floor(travel / window_m) if window_m > 0
                         else np.zeros(len(echoes))).astype(np.int64)
 
@@ -102,6 +107,9 @@ class SurfaceScale:
         from scipy.ndimage import gaussian_filter
 
         e = self.echoes
+        if len(e) == 0:
+            none = np.empty(0)
+            return np.empty(0, np.int64), np.empty(0, np.int64), none, none, none
         wx, wy = transform_points(pose[:, None, :], self.bx, self.by)
         ox, oy = transform_points(pose, e.sx, e.sy)
         steps = np.arange(1, int(e.range_m.max(initial=0.0) / CELL_M) + 1) * CELL_M
@@ -202,12 +210,12 @@ class SurfaceScale:
                 best = float(candidates[i] + step * 0.5 * (a - c) / (a - 2 * b + c))
         # The residuals are linear over a step: r and ∂r/∂θ at the best from its neighbours.
         j = int(np.clip(round((best - float(candidates[0])) / step), 1, len(candidates) - 2))
-        slope = (residuals[j + 1] - residuals[j - 1]) / (2 * step)
-        r = residuals[j] + slope * (best - float(candidates[j]))
+        dr = (residuals[j + 1] - residuals[j - 1]) / (2 * step)
+        r = residuals[j] + dr * (best - float(candidates[j]))
         psi = 2 * r / (s * s + r * r)
         dpsi = 2 * (s * s - r * r) / (s * s + r * r) ** 2
-        info = float((dpsi * slope * slope).sum())
-        score = np.bincount(patch, psi * slope, n)
+        info = float((dpsi * dr * dr).sum())
+        score = np.bincount(patch, psi * dr, n)
         se = math.sqrt(float((score * score).sum())) / info if info > 0 else math.nan
         return best, se
 

@@ -147,8 +147,10 @@ def test_too_few_echoes_for_any_patch_give_no_scale(runs: dict[str, tuple[Any, A
     # the scale at 0 rather than inventing one.
     track, echoes, _ = runs["drifted"]
     t, x, y, yaw = (np.asarray(v) for v in (track.t_ns, track.x, track.y, track.yaw))
-    few = echoes.take(np.array([0, len(echoes) // 2]))
-    assert math.isnan(SurfaceScale(t, x, y, yaw, few, 0.0).fixed_point().value)
+    none, few = echoes.take(np.array([], np.int64)), echoes.take(np.array([0, len(echoes) // 2]))
+    for subset in (none, few):
+        fp = SurfaceScale(t, x, y, yaw, subset, 0.0).fixed_point()
+        assert math.isnan(fp.value) and math.isnan(fp.standard_error)
     cal = calibrate(t, x, y, yaw, few, max_scale=0.05, max_bias=math.radians(3.0), res=0.05,
                     sigma=0.1, scale_score="surfaces")
     assert cal.scale_error == 0.0
