@@ -96,6 +96,7 @@ class MultiSource:
                 s.close()
             raise
         self._duplicates: dict[str, int] = {}
+        self._read = False  # a pass over the messages has counted the duplicates
 
     # -- MessageSource ---------------------------------------------------------------------
 
@@ -137,12 +138,31 @@ class MultiSource:
 
     @property
     def notes(self) -> list[str]:
-        """What reading the files as one did besides merging (duplicates read once)."""
-        if not self._duplicates:
+        """What reading the files as one did besides merging (duplicates read once); before
+        any pass, files that overlap in time on a topic they share (so the counts, summed
+        per file, may hold a message twice)."""
+        if self._duplicates:
+            what = ", ".join(f"{n} on {t}" for t, n in sorted(self._duplicates.items()))
+            return [f"messages in more than one file (same topic, log time and bytes) read "
+                    f"once: {what}"]
+        pair = None if self._read else self._overlapping_pair()
+        if pair is None:
             return []
-        what = ", ".join(f"{n} on {t}" for t, n in sorted(self._duplicates.items()))
-        return [f"messages in more than one file (same topic, log time and bytes) read "
-                f"once: {what}"]
+        return [f"{pair[0].path.name} and {pair[1].path.name} overlap in time on a topic they "
+                f"share: a message stored in both counts twice in these per-file counts; "
+                f"reading the log keeps one copy (duplicates_read_once in metrics.json)"]
+
+    def _overlapping_pair(self) -> tuple[MessageSource, MessageSource] | None:
+        """The first two files (in time order) whose spans overlap and share a topic."""
+        topics = [{c.topic for c in s.connections} for s in self._sources]
+        for i, a in enumerate(self._sources):
+            for j in range(i + 1, len(self._sources)):
+                b = self._sources[j]
+                if None in (a.end_ns, b.start_ns) or not topics[i] & topics[j]:
+                    continue
+                if b.start_ns <= a.end_ns:  # type: ignore[operator]
+                    return a, b
+        return None
 
     def close(self) -> None:
         for s in self._sources:
@@ -167,6 +187,7 @@ class MultiSource:
             kept = dedup.filter(index, piece)
             if kept is not None:
                 yield kept
+        self._read = True
 
     # -- opening -----------------------------------------------------------------------
 

@@ -248,6 +248,20 @@ def test_info_lists_every_file_and_counts_the_recording(logs: dict[str, list[Pat
                                                          for f in p["files"]]
 
 
+def test_info_says_when_its_counts_may_hold_a_copy_twice(logs: dict[str, list[Path]]) -> None:
+    # Two recorders of /sonar all along: info sums the files' counts (it reads no message),
+    # so it says so; files one after the other, or on topics of their own, get no note.
+    result = runner.invoke(app, ["info", *map(str, logs["sensors"]), "--json"])
+    assert result.exit_code == 0, result.output
+    notes = json.loads(result.stdout)["notes"]
+    assert ("even.mcap and odd.mcap overlap in time on a topic they share: a message stored "
+            "in both counts twice in these per-file counts; reading the log keeps one copy "
+            "(duplicates_read_once in metrics.json)") in notes
+    for pair in ("ros1_split", "topic"):
+        result = runner.invoke(app, ["info", *map(str, logs[pair]), "--json"])
+        assert not [n for n in json.loads(result.stdout)["notes"] if "overlap in time" in n]
+
+
 def _bag_times(path: str) -> list[int]:
     from rosbags.rosbag1 import Reader
 

@@ -140,6 +140,7 @@ def test_files_are_ordered_by_start_whatever_order_they_are_named_in() -> None:
     assert one == two
     assert [t for _, t, _ in one] == sorted(t for _, t, _ in one)
     merged = MultiSource([b, a], max_gap_s=1)
+    assert merged.notes == []  # one after the other: no message can be in both
     assert [f.path for f in merged.files] == ["run_0.mcap", "run_1.mcap"]
     assert str(merged.path) == "run_0.mcap + run_1.mcap"
     assert [c.topic for c in merged.connections] == ["/sonar"]
@@ -156,6 +157,11 @@ def test_identical_messages_in_two_files_are_read_once_and_counted() -> None:
     b = FakeSource("b.mcap", {"/sonar": changed, "/tf_static": [(T0, b"tf")]}, batch_s=0.7,
                    msgtypes={"/tf_static": "tf2_msgs/msg/TFMessage"})
     src = MultiSource([a, b], max_gap_s=1)
+    # Before any pass (what `info` sees): the per-file counts may hold a copy twice.
+    assert src.notes == ["a.mcap and b.mcap overlap in time on a topic they share: a message "
+                         "stored in both counts twice in these per-file counts; reading the "
+                         "log keeps one copy (duplicates_read_once in metrics.json)"]
+    assert src.connections[0].count + src.connections[1].count == 2 * (len(msgs) + 1)
     got = read_all(src)
     sonar = [(t, d) for tp, t, d in got if tp == "/sonar"]
     # Same topic, time and bytes: once; the changed messages of b (same time) are kept.
