@@ -331,7 +331,8 @@ class DriftRow:
     f1_refined_aligned: float = math.nan
 
 
-SYNTHETIC_DRIFT_CASES = ("office", "corridor", "intel-lab", "freiburg-101", "orebro", "fhw")
+SYNTHETIC_DRIFT_CASES = ("office", "corridor", "orchard", "intel-lab", "freiburg-101", "orebro",
+                         "fhw")
 REAL_ODOMETRY_CASES = ("intel-lab-odometry", "freiburg-101-odometry", "fhw-odometry")
 DRIFT_CASES = SYNTHETIC_DRIFT_CASES + REAL_ODOMETRY_CASES
 
@@ -353,7 +354,7 @@ def _drift_cases(work: Path, names: tuple[str, ...] = DRIFT_CASES
         real = case.endswith("-odometry")
         name = case.removesuffix("-odometry")
         drifted = work / f"{case}_drifted.mcap"
-        if name in ("office", "corridor"):
+        if name in ("office", "corridor", "orchard"):
             clean = REPO / "sample_logs" / name / f"{name}.mcap"
             if not drifted.exists():
                 run_simulation(REPO / "sample_logs" / "worlds" / f"{name}.toml", drifted, "mcap",
