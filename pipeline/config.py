@@ -237,8 +237,9 @@ class PoseRefinementConfig:
     calibration_max_bias_deg_per_m: float = doc_field("... heading bias searched in ± this, deg/m",
                                                  default=3.0)
     calibration_min_gain: float = doc_field(
-        "... a heading bias is applied only when it sharpens the echoes by at least this "
-        "fraction (true poses: <= 0.002 measured; 0.8 deg/m of bias: >= 0.07)", default=0.01)
+        "... a heading bias is applied only when it makes the echoes sharper and more "
+        "consistent by at least this fraction (true poses: <= 0.002 sharper but for a "
+        "lattice's aliases, never more consistent; 0.8 deg/m of bias: >= 0.07)", default=0.01)
     calibrate: bool = doc_field("estimate the odometry's scale error and heading bias", default=True)
     prior_scale: float = doc_field("σ of the scale error's prior (fraction)", default=0.1)
     prior_bias_deg_per_m: float = doc_field("σ of the heading bias's prior, deg/m", default=2.0)
