@@ -88,6 +88,7 @@ compare: $(STAMP) $(RADISH_LOGS)
 	  sample_logs/intel-lab/intel.mcap sample_logs/intel-lab/intel.laser.yaml \
 	  $(foreach b,$(RADISH),$(COMPARE_DIR)/$(b).mcap $(COMPARE_DIR)/$(b).laser.yaml)
 	$(BIN)/python -m benchmarks.compare_methods --drifted
+	$(BIN)/python -m benchmarks.drift_variety
 
 clean:
 	rm -rf $(VENV) demo_out build *.egg-info .pytest_cache .mypy_cache .ruff_cache
