@@ -47,6 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.config import Config, load_config
+from pipeline.drift import DriftModel
 from pipeline.methods import Method
 
 REPO = Path(__file__).resolve().parents[1]
@@ -339,50 +340,61 @@ DRIFT_CASES = SYNTHETIC_DRIFT_CASES + REAL_ODOMETRY_CASES
 
 def _drift_cases(work: Path, names: tuple[str, ...] = DRIFT_CASES
                  ) -> list[tuple[str, Path, Path, Path, Path]]:
-    """(name, true-pose log, drifted log, truth map, truth trajectory) per case: the office
-    and corridor simulations and the four real buildings, emulated with drift applied to
-    their corrected poses (the Radish logs' true-pose runs are ``make compare``'s
-    ``build/compare/<name>.mcap``, emulated here when missing)."""
-    from pipeline.drift import DriftModel
-    from pipeline.emulate import EmulateOptions, run_emulation
-    from pipeline.simulate import SimOptions, run_simulation
-
+    """(name, true-pose log, drifted log, truth map, truth trajectory) per case: the office,
+    corridor and orchard simulations and the four real buildings, emulated with drift
+    applied to their corrected poses (:func:`drifted_case`)."""
     drift = DriftModel(DRIFT_SCALE, DRIFT_BIAS_DEG_PER_M)
     work.mkdir(parents=True, exist_ok=True)
     cases = []
     for case in names:
-        real = case.endswith("-odometry")
-        name = case.removesuffix("-odometry")
         drifted = work / f"{case}_drifted.mcap"
-        if name in ("office", "corridor", "orchard"):
-            clean = REPO / "sample_logs" / name / f"{name}.mcap"
-            if not drifted.exists():
-                run_simulation(REPO / "sample_logs" / "worlds" / f"{name}.toml", drifted, "mcap",
-                               options=SimOptions(seed=1, speed=0.5, ring_rate_hz=5.0,
-                                                  drift_scale=DRIFT_SCALE,
-                                                  drift_heading_bias_deg_per_m=DRIFT_BIAS_DEG_PER_M))
-            cases.append((name, clean, drifted, clean.with_name(f"{name}.truth.yaml"),
-                          clean.with_name(f"{name}.truth.csv")))
-            continue
-        if name == "intel-lab":
-            src = REPO / "sample_logs" / "intel-lab" / "intel-corrected.log.gz"
-            clean = REPO / "sample_logs" / "intel-lab" / "intel.mcap"
-            truth, traj = clean.with_name("intel.laser.yaml"), clean.with_name("intel.truth.csv")
-        elif name in ("freiburg-101", "orebro", "fhw"):
-            src = REPO / "sample_logs" / "radish" / f"{name}-corrected.log.gz"
-            clean = REPO / "build" / "compare" / f"{name}.mcap"
-            if not clean.exists():
-                clean.parent.mkdir(parents=True, exist_ok=True)
-                run_emulation(src, clean, "mcap")
-            truth = clean.with_name(f"{name}.laser.yaml")
-            traj = clean.with_name(f"{name}.truth.csv")
-        else:
-            raise SystemExit(f"unknown drifted case {case!r}; known: {', '.join(DRIFT_CASES)}")
-        if not drifted.exists():
-            opts = EmulateOptions(raw_odometry=True) if real else EmulateOptions(drift=drift)
-            run_emulation(src, drifted, "mcap", options=opts)
+        clean, truth, traj = drifted_case(case, drifted, drift)
         cases.append((case, clean, drifted, truth, traj))
     return cases
+
+
+def drifted_case(case: str, drifted: Path, drift: DriftModel, drift_seed: int = 0
+                 ) -> tuple[Path, Path, Path]:
+    """(true-pose log, truth map, truth trajectory) of a drifted case, its drifted log
+    written to ``drifted`` when missing: a world simulated again with ``drift`` (the
+    simulation's seed draws its noise), a building emulated with ``drift`` applied to its
+    corrected poses (``drift_seed``), or for ``<building>-odometry`` its own wheel odometry
+    (the Radish logs' true-pose runs are ``make compare``'s ``build/compare/<name>.mcap``,
+    emulated here when missing)."""
+    from pipeline.emulate import EmulateOptions, run_emulation
+    from pipeline.simulate import SimOptions, run_simulation
+
+    real = case.endswith("-odometry")
+    name = case.removesuffix("-odometry")
+    if name in ("office", "corridor", "orchard") and not real:
+        clean = REPO / "sample_logs" / name / f"{name}.mcap"
+        if not drifted.exists():
+            run_simulation(REPO / "sample_logs" / "worlds" / f"{name}.toml", drifted, "mcap",
+                           options=SimOptions(seed=1, speed=0.5, ring_rate_hz=5.0,
+                                              drift_scale=drift.scale_error,
+                                              drift_heading_bias_deg_per_m=(
+                                                  drift.heading_bias_deg_per_m),
+                                              drift_xy=drift.noise_xy, drift_yaw=drift.noise_yaw))
+        return clean, clean.with_name(f"{name}.truth.yaml"), clean.with_name(f"{name}.truth.csv")
+    if name == "intel-lab":
+        src = REPO / "sample_logs" / "intel-lab" / "intel-corrected.log.gz"
+        clean = REPO / "sample_logs" / "intel-lab" / "intel.mcap"
+        truth, traj = clean.with_name("intel.laser.yaml"), clean.with_name("intel.truth.csv")
+    elif name in ("freiburg-101", "orebro", "fhw"):
+        src = REPO / "sample_logs" / "radish" / f"{name}-corrected.log.gz"
+        clean = REPO / "build" / "compare" / f"{name}.mcap"
+        if not clean.exists():
+            clean.parent.mkdir(parents=True, exist_ok=True)
+            run_emulation(src, clean, "mcap")
+        truth = clean.with_name(f"{name}.laser.yaml")
+        traj = clean.with_name(f"{name}.truth.csv")
+    else:
+        raise SystemExit(f"unknown drifted case {case!r}; known: {', '.join(DRIFT_CASES)}")
+    if not drifted.exists():
+        opts = (EmulateOptions(raw_odometry=True) if real
+                else EmulateOptions(drift=drift, drift_seed=drift_seed))
+        run_emulation(src, drifted, "mcap", options=opts)
+    return clean, truth, traj
 
 
 def drifted_comparison(work: Path, tolerance: float, names: tuple[str, ...] = DRIFT_CASES,

@@ -33,34 +33,10 @@ MODELS = (
 )
 
 
-def _drifted(case: str, model: tuple[str, float, float, float, float], work: Path,
-             index: int) -> tuple[Path, Path, Path, Path]:
-    """(true-pose log, drifted log, truth map, truth trajectory)."""
-    from pipeline.drift import DriftModel
-    from pipeline.emulate import EmulateOptions, run_emulation
-    from pipeline.simulate import SimOptions, run_simulation
-
-    _, k, b, nxy, nyaw = model
-    drifted = work / f"{case}_{index}.mcap"
-    if case == "office":
-        clean = REPO / "sample_logs" / "office" / "office.mcap"
-        if not drifted.exists():
-            run_simulation(REPO / "sample_logs" / "worlds" / "office.toml", drifted, "mcap",
-                           options=SimOptions(seed=1, speed=0.5, ring_rate_hz=5.0,
-                                              drift_scale=k, drift_heading_bias_deg_per_m=b,
-                                              drift_xy=nxy, drift_yaw=nyaw))
-        return (clean, drifted, clean.with_name("office.truth.yaml"),
-                clean.with_name("office.truth.csv"))
-    clean = REPO / "sample_logs" / "intel-lab" / "intel.mcap"
-    if not drifted.exists():
-        run_emulation(REPO / "sample_logs" / "intel-lab" / "intel-corrected.log.gz", drifted,
-                      "mcap", options=EmulateOptions(drift=DriftModel(k, b, nxy, nyaw),
-                                                     drift_seed=index))
-    return clean, drifted, clean.with_name("intel.laser.yaml"), clean.with_name("intel.truth.csv")
-
-
 def main(argv: list[str] | None = None) -> None:
+    from benchmarks.compare_methods import drifted_case
     from pipeline.config import Config, load_config
+    from pipeline.drift import DriftModel
     from pipeline.evaluate import evaluate_run
     from pipeline.run import run
 
@@ -80,7 +56,9 @@ def main(argv: list[str] | None = None) -> None:
     for case in args.cases:
         f1_true = math.nan
         for i, model in enumerate(MODELS):
-            clean, drifted, truth, traj = _drifted(case, model, args.work, i)
+            drifted = args.work / f"{case}_{i}.mcap"
+            clean, truth, traj = drifted_case(case, drifted, DriftModel(*model[1:]),
+                                              drift_seed=i)
             if i == 0:
                 out = args.work / case / "true"
                 run(clean, out, plain, force=True)
