@@ -293,6 +293,26 @@ def _most_consistent(consistent: _Consistency, k: float, b0: float, db: float) -
     return best[2]
 
 
+def _heading_bias(sharp: _Sharpness, consistent: _Consistency, k: float, b0: float,
+                  db: float, start: tuple[float, float, float], none: float,
+                  min_gain: float) -> float:
+    """The heading bias at the scale ``k``: the sharpest within ±2 steps ``db`` of ``b0``
+    (``start``: the best known before), refined twice (steps / 4); applied only when it
+    sharpens the echoes by ``min_gain`` over none (``none``: their sharpness without a
+    bias at ``k``) and makes them more consistent by as much
+    (:func:`_consistent`), its value then the most consistent near it
+    (:func:`_most_consistent`); else 0."""
+    at_k = np.full(1, k)
+    found, centre = start, b0
+    for step in (db, db / 4, db / 16):
+        found = _grid_max(sharp, at_k, centre + step * np.arange(-2, 3), found)
+        centre = found[2]
+    if found[0] < none * (1.0 + min_gain) or not _consistent(
+            consistent, k, found[2], min_gain):
+        return 0.0
+    return _most_consistent(consistent, k, found[2], db)
+
+
 def calibrate(
     t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *, max_scale: float,
     max_bias: float, res: float, sigma: float, min_gain: float = 0.0,
@@ -300,10 +320,10 @@ def calibrate(
     systematic: float = 0.005, window_m: float = 30.0,
 ) -> Calibration:
     """The calibration the echoes agree on (see the module docstring); ``max_scale = 0``
-    searches the heading bias alone (by sharpness), else the scale too by ``scale_score``
-    (``max_slope``, ``min_z``, ``systematic``: the surfaces' gates, see
-    :func:`_surface_calibration`; ``window_m``: their travel window). A heading bias that sharpens the
-    echoes by less than the fraction ``min_gain`` is not applied (bias 0)."""
+    searches the heading bias alone, else the scale too by ``scale_score`` (``max_slope``,
+    ``min_z``, ``systematic``: the surfaces' gates, see :func:`_surface_calibration`;
+    ``window_m``: their travel window). A heading bias that sharpens the echoes, or makes
+    them more consistent, by less than the fraction ``min_gain`` is not applied (bias 0)."""
     sharp = _Sharpness(t_ns, x, y, yaw, echoes, res=max(res, sigma), sigma=sigma)
     base = sharp(0.0, 0.0)
     bs = _bias_steps(x, y, max_bias)
@@ -311,19 +331,10 @@ def calibrate(
     # The coarse scan over the whole range on fewer echoes and cells; the refinements on all.
     scan = _BinnedSharpness(t_ns, x, y, yaw, echoes, sigma=sigma)
     b_scan = _grid_max(scan, zero, bs, (scan(0.0, 0.0), 0.0, 0.0))[2]
-    best = _grid_max(sharp, zero, b_scan + float(bs[1] - bs[0]) * np.arange(-2, 3),
-                     (base, 0.0, 0.0))
-    db = float(bs[1] - bs[0])
-    for _ in range(2):
-        db /= 4
-        best = _grid_max(sharp, zero, best[2] + db * np.arange(-2, 3), best)
     consistent = _Consistency(t_ns, x, y, yaw, echoes, res=2 * res, sigma=sigma)
-    c_base = consistent(0.0, 0.0)
-    if best[0] < base * (1.0 + min_gain) or not _consistent(consistent, 0.0, best[2], min_gain):
-        best = (base, 0.0, 0.0)  # no measurable gain: the odometry's heading is kept
-    else:
-        b = _most_consistent(consistent, 0.0, best[2], float(bs[1] - bs[0]))
-        best = (sharp(0.0, b), 0.0, b)
+    b = _heading_bias(sharp, consistent, 0.0, b_scan, float(bs[1] - bs[0]), (base, 0.0, 0.0),
+                      base, min_gain)
+    best = (sharp(0.0, b) if b else base, 0.0, b)
     if max_scale <= 0:
         return Calibration(0.0, best[2], best[0], base)
     if scale_score == "surfaces":
@@ -342,7 +353,7 @@ def calibrate(
         cbest = _grid_max(consistent, k0 + dk * np.arange(-3, 4), b0 + db * np.arange(-3, 4),
                           cbest)
     _, k, b = cbest
-    return Calibration(k, b, sharp(k, b), base, cbest[0], c_base)
+    return Calibration(k, b, sharp(k, b), base, cbest[0], consistent(0.0, 0.0))
 
 
 def _surface_calibration(
@@ -353,10 +364,9 @@ def _surface_calibration(
 ) -> Calibration:
     """The scale by :mod:`pipeline.refine.surfaces`; then the heading bias at that scale
     (a bias found with the scale wrong partly makes up for it: 0.58°/m of 0.8 on the office
-    run) by sharpness, taken as at ``k = 0`` only when it sharpens the echoes by
-    ``min_gain`` over none and makes them more consistent by as much
-    (:func:`_consistent`), its value then from the patches' own fixed point where that is
-    determined (:func:`_patch_bias`); when the bias moved, the scale once more under it.
+    run) by the rule of ``k = 0`` (:func:`_heading_bias`), its value then from the patches'
+    own fixed point where that is determined (:func:`_patch_bias`); when the bias moved,
+    the scale once more under it.
 
     Two gates keep a scale the data do not establish out (the bias is then found at
     ``k = 0`` the same way):
@@ -384,19 +394,11 @@ def _surface_calibration(
         k = k_new
         if rounds == 1:
             break  # the scale under the bias found at the first: the answer
-        at_k = np.full(1, k)
-        found = (sharp(k, b), k, b)
-        db = bias_step
-        for _ in range(3):
-            found = _grid_max(sharp, at_k, found[2] + db * np.arange(-2, 3), found)
-            db /= 4
-        # As at k = 0: a bias only where it sharpens the echoes by min_gain over none.
-        sharper = found[0] >= sharp(k, 0.0) * (1.0 + min_gain)
-        b_new = found[2] if sharper and _consistent(consistent, k, found[2], min_gain) else 0.0
-        if b_new != 0.0:
-            b_new = _most_consistent(consistent, k, b_new, bias_step)
+        # As at k = 0 (the same rule), then the patches' value where they determine it.
+        b_new = _heading_bias(sharp, consistent, k, b, bias_step, (sharp(k, b), k, b),
+                              sharp(k, 0.0), min_gain)
         b_new = _patch_bias(surfaces, k, b_new, max_slope, bias_step)
-        moved = abs(b_new - b) > db  # more than the finest step searched
+        moved = abs(b_new - b) > bias_step / 64  # a quarter of the finest step searched
         b = b_new
         if not moved:
             break  # the bias stands: the scale found under it is the answer
@@ -405,7 +407,7 @@ def _surface_calibration(
 
 def _patch_bias(surfaces: SurfaceScale, k: float, b: float, max_slope: float,
                 bias_step: float) -> float:
-    """The heading bias ``b`` (found by sharpness; 0: none) replaced by the surface patches'
+    """The heading bias ``b`` (:func:`_heading_bias`; 0: none) replaced by the surface patches'
     fixed point at the scale ``k`` where that is determined: its slope below
     ``max_slope`` and within two coarse bias steps of ``b`` (the office: 0.72 → 0.81°/m of
     0.8, where sharpness is flat within 1 % over 0.66-0.84; on the buildings the slope is
