@@ -28,13 +28,13 @@ import numpy as np
 
 from formats.arrays import F64, I64
 from pipeline.refine.echoes import Echoes
+from pipeline.refine.surfaces import TENSOR_SIGMA_CELLS, normal_angles
 from pipeline.se2 import transform_points
 
 LAG = 10
 MAX_TURN_DEG = 2.0
 HIT_TOLERANCE_M = 0.15
 RAYS = 31
-TENSOR_SIGMA_CELLS = 1.5
 
 
 @dataclass(frozen=True)
@@ -53,10 +53,7 @@ class _Normals:
         from scipy.ndimage import gaussian_filter
 
         self.occ, self.x0, self.y0, self.res = occupied, x0, y0, res
-        blurred = gaussian_filter(occupied.astype(np.float64), TENSOR_SIGMA_CELLS)
-        gy, gx = np.gradient(blurred)
-        sxx, syy, sxy = (gaussian_filter(v, TENSOR_SIGMA_CELLS) for v in (gx * gx, gy * gy, gx * gy))
-        angle = 0.5 * np.arctan2(2 * sxy, sxx - syy)
+        angle = normal_angles(gaussian_filter(occupied.astype(np.float64), TENSOR_SIGMA_CELLS))
         self.nx, self.ny = np.cos(angle), np.sin(angle)
 
     def cells(self, x: F64, y: F64) -> tuple[I64, I64, np.ndarray]:

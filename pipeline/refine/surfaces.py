@@ -81,6 +81,17 @@ BIAS_STEP = math.radians(0.03)  # rad per metre: the bias's inner scan
 B0S = tuple(math.radians(d) for d in (-0.2, -0.1, 0.0, 0.1, 0.2))  # around the bias given
 
 
+def normal_angles(density: F64) -> F64:
+    """Per cell, the direction (rad, modulo π) of ``density``'s structure tensor's main
+    axis — across a wall, its normal: the outer products of the gradient smoothed over
+    :data:`TENSOR_SIGMA_CELLS`."""
+    from scipy.ndimage import gaussian_filter
+
+    gy, gx = np.gradient(density)
+    sxx, syy, sxy = (gaussian_filter(v, TENSOR_SIGMA_CELLS) for v in (gx * gx, gy * gy, gx * gy))
+    return np.asarray(0.5 * np.arctan2(2 * sxy, sxx - syy))
+
+
 class SurfaceScale:
     """``f(k₀)`` of the module docstring for one log's echoes, its fixed point, and the
     same for the heading bias at a given scale."""
@@ -142,9 +153,7 @@ class SurfaceScale:
         best = ratio.argmax(axis=1)
         rows = np.arange(len(e))
         px, py = wx[rows, best], wy[rows, best]
-        gy, gx = np.gradient(hit)
-        sxx, syy, sxy = (gaussian_filter(v, TENSOR_SIGMA_CELLS) for v in (gx * gx, gy * gy, gx * gy))
-        angle = 0.5 * np.arctan2(2 * sxy, sxx - syy)
+        angle = normal_angles(hit)
         hr, hc = cells(px, py)
         nx, ny = np.cos(angle[hr, hc]), np.sin(angle[hr, hc])
         towards = np.where(nx * (ox - px) + ny * (oy - py) < 0, -1.0, 1.0)
