@@ -193,6 +193,8 @@ def run(
             f"mean feature variance {_fmt(pm['mean_feature_variance_m2'])} m²; "
             f"{m.map['cells_occupied']} occupied / {m.map['cells_free']} free cells"
         )
+        if m.pose_refinement is not None:
+            typer.echo(m.pose_refinement["summary"])
         for w in m.warnings:
             typer.echo(f"warning: {w}", err=True)
         typer.echo(f"outputs in {result.out_dir}")

@@ -88,6 +88,8 @@ class Calibration:
     consistency_uncalibrated: float = math.nan
     scale_slope: float = math.nan  # the surface estimator's fixed-point slope (surfaces.py)
     scale_z: float = math.nan  # ... its estimate over its error (applied at min_z and above)
+    scale_estimate: float = math.nan  # ... its estimate, applied or not
+    scale_standard_error: float = math.nan  # ... and that estimate's standard error
 
     def correct(self, x: F64, y: F64, yaw: F64) -> tuple[F64, F64, F64]:
         """Odometry poses with this calibration's error removed."""
@@ -377,9 +379,10 @@ def _surface_calibration(
       and ``systematic`` (the estimator's own lean, measured on true poses: −0.1 to +0.7 %
       on the dense logs) in quadrature: a scale is applied only when it is distinguishable
       from a calibrated odometry's (wrongly applied, +0.7 % costs a 40 m building 0.07 F1)."""
-    from pipeline.refine.surfaces import SurfaceScale
+    from pipeline.refine.surfaces import FixedPoint, SurfaceScale
 
     k, b, slope, z = 0.0, best[2], math.nan, math.nan
+    fp = FixedPoint(math.nan, math.nan, (), math.nan)
     for rounds in range(2):
         # The bias is held per reported metre while the scale varies.
         surfaces = SurfaceScale(t_ns, x, y, yaw, echoes, b / (1.0 + k), window_m)
@@ -388,7 +391,8 @@ def _surface_calibration(
         z = abs(fp.value) / math.hypot(fp.standard_error, systematic)
         if not (math.isfinite(z) and fp.slope < max_slope and z >= min_z):
             b0 = _patch_bias(surfaces, 0.0, best[2], max_slope, bias_step)
-            return Calibration(0.0, b0, sharp(0.0, b0), base, scale_slope=slope, scale_z=z)
+            return Calibration(0.0, b0, sharp(0.0, b0), base, scale_slope=slope, scale_z=z,
+                               scale_estimate=fp.value, scale_standard_error=fp.standard_error)
         k_new = float(np.clip(fp.value, -max_scale, max_scale))
         b = b / (1.0 + k) * (1.0 + k_new)
         k = k_new
@@ -402,7 +406,8 @@ def _surface_calibration(
         b = b_new
         if not moved:
             break  # the bias stands: the scale found under it is the answer
-    return Calibration(k, b, sharp(k, b), base, scale_slope=slope, scale_z=z)
+    return Calibration(k, b, sharp(k, b), base, scale_slope=slope, scale_z=z,
+                       scale_estimate=fp.value, scale_standard_error=fp.standard_error)
 
 
 def _patch_bias(surfaces: SurfaceScale, k: float, b: float, max_slope: float,

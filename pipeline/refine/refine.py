@@ -143,6 +143,9 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
             metrics["scale_fixed_point_slope"] = cal0.scale_slope
         if math.isfinite(cal0.scale_z):
             metrics["scale_z"] = cal0.scale_z
+        if math.isfinite(cal0.scale_estimate):  # applied or not (the gates: calibration.py)
+            metrics["scale_estimate"] = cal0.scale_estimate
+            metrics["scale_standard_error"] = cal0.scale_standard_error
         if math.isfinite(cal0.consistency):
             metrics["consistency_before"] = cal0.consistency_uncalibrated
             metrics["consistency_after"] = cal0.consistency
@@ -159,6 +162,7 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
                         "loop_closures_accepted": 0, "loop_closures_rejected": 0,
                         "cost_initial": None, "cost_final": None})
         metrics.update(_moved(tx, ty, tyaw, ox, oy, oyaw))
+        metrics["summary"] = summary(metrics, cfg)
         return Refinement(tt.copy(), ox.copy(), oy.copy(), oyaw.copy(), metrics)
     n = len(submaps)
     odo_anchor = np.array([s.anchor for s in submaps])
@@ -246,7 +250,38 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
         "heading_bias_deg_per_m": math.degrees(sol.heading_bias),
     })
     metrics.update(_moved(tx, ty, tyaw, rx, ry, ryaw))
+    metrics["summary"] = summary(metrics, cfg)
     return Refinement(tt.copy(), rx, ry, ryaw, metrics)
+
+
+def summary(metrics: dict[str, Any], cfg: PoseRefinementConfig) -> str:
+    """One line on what refinement did, from its ``metrics`` (``run`` prints it): the
+    scale and heading bias applied, or why the scale was not."""
+    parts = []
+    if "search_heading_bias_deg_per_m" not in metrics:
+        parts.append(f"no calibration ({metrics.get('echoes', 0)} echoes)")
+    elif metrics.get("search_scale_error"):
+        parts.append(f"scale error {metrics['search_scale_error']:+.1%} "
+                     f"(z {metrics.get('scale_z', math.nan):.1f})")
+    elif "scale_estimate" in metrics:
+        z = metrics.get("scale_z", math.nan)
+        why = (f"z {z:.1f} < {cfg.calibration_scale_min_z:g}"
+               if not z >= cfg.calibration_scale_min_z
+               else f"fixed-point slope {metrics['scale_fixed_point_slope']:.2f}")
+        parts.append(f"scale error not established ({metrics['scale_estimate']:+.1%} ± "
+                     f"{metrics['scale_standard_error']:.1%}, {why}), not applied")
+    elif "scale_fixed_point_slope" in metrics:
+        parts.append("scale error undetermined (fixed-point slope "
+                     f"{metrics['scale_fixed_point_slope']:.2f}), not applied")
+    bias = metrics.get("search_heading_bias_deg_per_m")
+    if bias is not None:
+        parts.append(f"heading bias {bias:+.2f}°/m" if bias else "no heading bias")
+    if metrics.get("cost_final") is not None:
+        parts.append(f"{metrics['matches_accepted']} matches, "
+                     f"{metrics['loop_closures_accepted']} loop closures")
+    parts.append(f"poses moved {metrics.get('moved_mean_m', 0.0):.2f} m mean, "
+                 f"{metrics.get('moved_max_m', 0.0):.2f} m max")
+    return "pose refinement: " + "; ".join(parts)
 
 
 def _moved(x0: F64, y0: F64, a0: F64, x1: F64, y1: F64, a1: F64) -> dict[str, float]:

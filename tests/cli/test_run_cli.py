@@ -64,6 +64,17 @@ def test_the_same_run_in_every_format_gives_the_same_map(runner, tmp_path):
     assert len(digests) == 1
 
 
+def test_refine_poses_prints_what_refinement_did(runner, tmp_path):
+    # The office sample's poses are true: nothing established, nothing applied, said so.
+    log = str(SAMPLES / "office" / "office.mcap")
+    result = _run(runner, ["run", log, "-o", str(tmp_path / "out"), "--refine-poses"])
+    assert result.exit_code == 0, result.output
+    line = next(v for v in result.output.splitlines() if v.startswith("pose refinement:"))
+    assert re.fullmatch(r"pose refinement: scale error not established \([+-]\d\.\d% ± "
+                        r"\d\.\d%, z \d\.\d < 3\), not applied; no heading bias; poses "
+                        r"moved 0\.00 m mean, 0\.00 m max", line), line
+
+
 def test_nav2_map_reloads_to_the_same_occupancy_classes(runner, tmp_path):
     out = tmp_path / "o"
     assert _run(runner, ["run", str(SAMPLES / "office" / "office.mcap"), "-o", str(out), "-q"]).exit_code == 0

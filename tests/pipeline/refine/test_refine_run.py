@@ -57,9 +57,11 @@ def test_refined_run_corrects_the_drift_and_is_deterministic(drifted_log: Path,
     assert pr["submaps"] >= 5 and pr["moved_max_m"] > 0.05
     assert pr["search_heading_bias_deg_per_m"] == pytest.approx(0.8, abs=0.3)
     assert "Pose refinement" in (tmp_path / "a" / "report.md").read_text()
+    assert pr["summary"].startswith("pose refinement: ") and "°/m" in pr["summary"]
     doc = json.loads((tmp_path / "a" / "metrics.json").read_text())
     for key in ("matches_accepted", "matches_rejected", "loop_closures_accepted",
-                "loop_closures_rejected", "cost_initial", "cost_final", "moved_mean_m"):
+                "loop_closures_rejected", "cost_initial", "cost_final", "moved_mean_m",
+                "scale_estimate", "scale_standard_error", "summary"):
         assert key in doc["pose_refinement"]
 
 
@@ -93,3 +95,27 @@ def test_refinement_on_true_poses_barely_moves_them(tmp_path: Path) -> None:
     assert pr["sharpness_after"] >= pr["sharpness_before"]
     np.testing.assert_allclose(  # TUM keeps 9 decimals
         read_trajectory(tmp_path / "run" / "odometry.csv").x, sim.poses.x, atol=1e-9)
+
+
+def test_summary_says_what_was_applied_and_why_a_scale_was_not() -> None:
+    from pipeline.refine.refine import summary
+
+    cfg = PoseRefinementConfig(enabled=True)
+    moved = {"moved_mean_m": 0.21, "moved_max_m": 0.645}
+    applied = {"search_scale_error": 0.0321, "scale_z": 5.46, "scale_estimate": 0.0321,
+               "scale_standard_error": 0.003, "search_heading_bias_deg_per_m": 0.8, **moved}
+    assert summary(applied, cfg) == ("pose refinement: scale error +3.2% (z 5.5); heading "
+                                     "bias +0.80°/m; poses moved 0.21 m mean, 0.65 m max")
+    doubted = {"search_scale_error": 0.0, "scale_z": 0.94, "scale_estimate": -0.0232,
+               "scale_standard_error": 0.0241, "scale_fixed_point_slope": 0.79,
+               "search_heading_bias_deg_per_m": -0.83, **moved}
+    assert ("scale error not established (-2.3% ± 2.4%, z 0.9 < 3), not applied; heading "
+            "bias -0.83°/m") in summary(doubted, cfg)
+    steep = {**doubted, "scale_z": 4.0, "search_heading_bias_deg_per_m": 0.0}
+    assert ("not established (-2.3% ± 2.4%, fixed-point slope 0.79), not applied; no "
+            "heading bias") in summary(steep, cfg)
+    undetermined = {"search_scale_error": 0.0, "scale_fixed_point_slope": 1.2,
+                    "search_heading_bias_deg_per_m": 0.0, **moved}
+    assert "scale error undetermined (fixed-point slope 1.20)" in summary(undetermined, cfg)
+    assert summary({"echoes": 12, **moved}, cfg).startswith(
+        "pose refinement: no calibration (12 echoes); poses moved")
