@@ -234,6 +234,10 @@ class PoseRefinementConfig:
     calibration_scale_window_m: float = doc_field(
         "... 'surfaces': a surface patch links echoes within one stretch of this much travel "
         "(0: the whole run; longer links carry the odometry's random error)", default=30.0)
+    calibration_far_range_m: float = doc_field(
+        "... 'surfaces': echoes out to this range (m) also estimate the scale, and replace the "
+        "near ones (max_echo_range_m) where they pass a specification test against them "
+        "(pipeline/refine/calibration.py _far_agrees; 0: the near echoes only)", default=5.0)
     calibration_max_bias_deg_per_m: float = doc_field("... heading bias searched in ± this, deg/m",
                                                  default=3.0)
     calibration_min_gain: float = doc_field(
@@ -451,6 +455,9 @@ def _check_ranges(cfg: Config) -> None:
          "must be >= 0", pr.calibration_scale_systematic)
     need(pr.calibration_scale_window_m >= 0, "pose_refinement.calibration_scale_window_m",
          "must be >= 0 (0 = the whole run)", pr.calibration_scale_window_m)
+    need(math.isfinite(pr.calibration_far_range_m) and pr.calibration_far_range_m >= 0,
+         "pose_refinement.calibration_far_range_m", "must be >= 0 (0 = off)",
+         pr.calibration_far_range_m)
     need(pr.calibration_scale_score in ("consistency", "surfaces"),
          "pose_refinement.calibration_scale_score", "must be 'consistency' or 'surfaces'",
          pr.calibration_scale_score)

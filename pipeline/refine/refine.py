@@ -117,9 +117,12 @@ def _rotate_cov(cov: F64, yaw: float) -> F64:
 
 
 def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) -> Refinement:
-    """Refine the odometry ``track`` from ``echoes`` (see the module docstring)."""
+    """Refine the odometry ``track`` from ``echoes`` (see the module docstring; echoes
+    beyond ``max_echo_range_m``, out to ``calibration_far_range_m``, serve the scale alone)."""
     tt = np.asarray(track.t_ns)
     tx, ty, tyaw = np.asarray(track.x), np.asarray(track.y), np.asarray(track.yaw)
+    far = echoes if cfg.calibration_far_range_m > cfg.max_echo_range_m else None
+    echoes = echoes.take(np.flatnonzero(echoes.range_m <= cfg.max_echo_range_m))
     metrics: dict[str, Any] = {"echoes": len(echoes)}
     if cfg.calibration_search and len(echoes) >= cfg.submap_min_echoes:
         cal0 = calibrate(
@@ -130,6 +133,8 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
             max_slope=cfg.calibration_max_slope, min_z=cfg.calibration_scale_min_z,
             systematic=cfg.calibration_scale_systematic,
             window_m=cfg.calibration_scale_window_m,
+            far_echoes=None if far is None else far.take(
+                np.flatnonzero(far.range_m <= cfg.calibration_far_range_m)),
         )
         ox, oy, oyaw = cal0.correct(tx, ty, tyaw)
         look = interpolate_poses(PoseTrack(tt, ox, oy, oyaw, "", ""), echoes.t_ns,
@@ -146,6 +151,7 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
         if math.isfinite(cal0.scale_estimate):  # applied or not (the gates: calibration.py)
             metrics["scale_estimate"] = cal0.scale_estimate
             metrics["scale_standard_error"] = cal0.scale_standard_error
+            metrics["scale_far_echoes"] = cal0.scale_far_echoes
         if math.isfinite(cal0.consistency):
             metrics["consistency_before"] = cal0.consistency_uncalibrated
             metrics["consistency_after"] = cal0.consistency
@@ -258,18 +264,20 @@ def summary(metrics: dict[str, Any], cfg: PoseRefinementConfig) -> str:
     """One line on what refinement did, from its ``metrics`` (``run`` prints it): the
     scale and heading bias applied, or why the scale was not."""
     parts = []
+    reach = (f", echoes to {cfg.calibration_far_range_m:g} m"
+             if metrics.get("scale_far_echoes") else "")
     if "search_heading_bias_deg_per_m" not in metrics:
         parts.append(f"no calibration ({metrics.get('echoes', 0)} echoes)")
     elif metrics.get("search_scale_error"):
         parts.append(f"scale error {metrics['search_scale_error']:+.1%} "
-                     f"(z {metrics.get('scale_z', math.nan):.1f})")
+                     f"(z {metrics.get('scale_z', math.nan):.1f}{reach})")
     elif "scale_estimate" in metrics:
         z = metrics.get("scale_z", math.nan)
         why = (f"z {z:.1f} < {cfg.calibration_scale_min_z:g}"
                if not z >= cfg.calibration_scale_min_z
                else f"fixed-point slope {metrics['scale_fixed_point_slope']:.2f}")
         parts.append(f"scale error not established ({metrics['scale_estimate']:+.1%} ± "
-                     f"{metrics['scale_standard_error']:.1%}, {why}), not applied")
+                     f"{metrics['scale_standard_error']:.1%}, {why}{reach}), not applied")
     elif "scale_fixed_point_slope" in metrics:
         parts.append("scale error undetermined (fixed-point slope "
                      f"{metrics['scale_fixed_point_slope']:.2f}), not applied")

@@ -130,24 +130,68 @@ def test_the_compiled_binned_sharpness_is_the_reference_bit_for_bit(
     assert compiled(0.0, math.radians(b_deg)) == want
 
 
-def test_a_lattice_that_sharpens_under_a_wrong_bias_keeps_its_true_heading() -> None:
-    # The orchard sample (true poses, rows of trunks 3 m apart, 1.5 m along a row): the
-    # echoes sharpen by over 1 % under +0.2°/m (an alias of the lattice), which would cost
-    # the map 0.36 F1; they are less consistent there, so no bias is applied.
+def sample_echoes(name: str, max_range_m: float) -> tuple[tuple[np.ndarray, ...], Echoes]:
+    """A sample log's pose track (t, x, y, yaw) and echoes out to ``max_range_m``."""
     from pathlib import Path
 
-    from pipeline.refine.calibration import calibrate
     from pipeline.run import prepare
 
-    log = Path(__file__).resolve().parents[3] / "sample_logs" / "orchard" / "orchard.mcap"
+    log = Path(__file__).resolve().parents[3] / "sample_logs" / name / f"{name}.mcap"
     cfg = Config()
     with open_log(log, cfg) as reader:
         sv, sensors, _ = prepare(reader, cfg)
         echoes = collect_echoes(sv.ordered_ranges(reader), sv.track, sensors,
-                                eps_max=cfg.mapper.eps_max, max_echo_range_m=3.0,
+                                eps_max=cfg.mapper.eps_max, max_echo_range_m=max_range_m,
                                 arc_fraction=0.8, time_offset_ns=0, max_gap_ns=10**9)
-    track = sv.track
-    t, x, y, yaw = (np.asarray(getattr(track, a)) for a in ("t_ns", "x", "y", "yaw"))
+    track = tuple(np.asarray(getattr(sv.track, a)) for a in ("t_ns", "x", "y", "yaw"))
+    return track, echoes
+
+
+def test_far_echoes_replace_the_near_ones_only_when_they_agree() -> None:
+    from pipeline.refine.calibration import _far_agrees
+    from pipeline.refine.surfaces import FixedPoint
+
+    def fp(value: float, error: float) -> FixedPoint:
+        return FixedPoint(value, 0.4, (), error)
+
+    # the drifted Freiburg 101: +4.2 ± 0.7 % near, +3.4 ± 0.24 % to 5 m
+    assert _far_agrees(fp(0.0421, 0.0067), fp(0.0344, 0.0024))
+    # the corridor's true poses: the far echoes widen the error (they lean, not inform)
+    assert not _far_agrees(fp(0.0071, 0.0104), fp(-0.0305, 0.0152))
+    # the drifted Örebro: 1.8 % apart, 2.4 errors of the difference (√(1.75² − 1.58²) %)
+    assert not _far_agrees(fp(0.0241, 0.0175), fp(0.0422, 0.0158))
+    assert _far_agrees(fp(0.0241, 0.0175), fp(0.0341, 0.0158))  # 1.3 errors
+    assert not _far_agrees(fp(math.nan, math.nan), fp(0.03, 0.002))
+
+
+@pytest.mark.parametrize(("name", "used"), [("office", True), ("corridor", False)])
+def test_the_far_echoes_scale_is_used_where_it_passes(name: str, used: bool) -> None:
+    # True poses: the office's walls seen to 5 m narrow the error (0.25 → 0.17 %); the
+    # corridor's far echoes (fore and aft sonars at its pillars and end walls) widen it.
+    from pipeline.refine.calibration import calibrate
+
+    track, far = sample_echoes(name, 5.0)
+    near = far.take(np.flatnonzero(far.range_m <= 3.0))
+    kwargs = dict(max_scale=0.05, max_bias=math.radians(3.0), res=0.05, sigma=0.1,
+                  min_gain=0.01)
+    alone = calibrate(*track, near, **kwargs)
+    cal = calibrate(*track, near, far_echoes=far, **kwargs)
+    assert cal.scale_far_echoes is used
+    assert (cal.scale_error, cal.heading_bias) == (0.0, 0.0)  # true poses: nothing applied
+    if used:
+        assert cal.scale_standard_error < 0.8 * alone.scale_standard_error
+    else:
+        assert (cal.scale_estimate, cal.scale_standard_error) == (
+            alone.scale_estimate, alone.scale_standard_error)
+
+
+def test_a_lattice_that_sharpens_under_a_wrong_bias_keeps_its_true_heading() -> None:
+    # The orchard sample (true poses, rows of trunks 3 m apart, 1.5 m along a row): the
+    # echoes sharpen by over 1 % under +0.2°/m (an alias of the lattice), which would cost
+    # the map 0.36 F1; they are less consistent there, so no bias is applied.
+    from pipeline.refine.calibration import calibrate
+
+    (t, x, y, yaw), echoes = sample_echoes("orchard", 3.0)
     alias = math.radians(0.2)
     sharp = _Sharpness(t, x, y, yaw, echoes, res=0.1, sigma=0.1)
     consistent = _Consistency(t, x, y, yaw, echoes, res=0.1, sigma=0.1)
