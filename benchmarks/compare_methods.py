@@ -353,14 +353,15 @@ def _drift_cases(work: Path, names: tuple[str, ...] = DRIFT_CASES
     return cases
 
 
-def drifted_case(case: str, drifted: Path, drift: DriftModel, drift_seed: int = 0
-                 ) -> tuple[Path, Path, Path]:
+def drifted_case(case: str, drifted: Path, drift: DriftModel, drift_seed: int = 0,
+                 preset: str | None = None) -> tuple[Path, Path, Path]:
     """(true-pose log, truth map, truth trajectory) of a drifted case, its drifted log
     written to ``drifted`` when missing: a world simulated again with ``drift`` (the
     simulation's seed draws its noise), a building emulated with ``drift`` applied to its
     corrected poses (``drift_seed``), or for ``<building>-odometry`` its own wheel odometry
     (the Radish logs' true-pose runs are ``make compare``'s ``build/compare/<name>.mcap``,
-    emulated here when missing)."""
+    emulated here when missing). ``preset``: a building's sonars emulated as that preset's
+    ring (formats/presets.py), its true-pose run beside ``drifted``."""
     from pipeline.emulate import EmulateOptions, run_emulation
     from pipeline.simulate import SimOptions, run_simulation
 
@@ -390,9 +391,15 @@ def drifted_case(case: str, drifted: Path, drift: DriftModel, drift_seed: int = 
         traj = clean.with_name(f"{name}.truth.csv")
     else:
         raise SystemExit(f"unknown drifted case {case!r}; known: {', '.join(DRIFT_CASES)}")
+    if preset is not None:
+        clean = drifted.with_name(f"{name}-{preset}.mcap")
+        if not clean.exists():
+            run_emulation(src, clean, "mcap", options=EmulateOptions(preset=preset))
+        truth = clean.with_name(f"{clean.stem}.laser.yaml")
+        traj = clean.with_name(f"{clean.stem}.truth.csv")
     if not drifted.exists():
-        opts = (EmulateOptions(raw_odometry=True) if real
-                else EmulateOptions(drift=drift, drift_seed=drift_seed))
+        opts = (EmulateOptions(raw_odometry=True, preset=preset) if real
+                else EmulateOptions(drift=drift, drift_seed=drift_seed, preset=preset))
         run_emulation(src, drifted, "mcap", options=opts)
     return clean, truth, traj
 

@@ -1,13 +1,16 @@
-"""Pose refinement on drift models other than ``make compare``'s (3 %, 0.8°/m): the other
+"""Pose refinement on drifted logs other than ``make compare``'s (3 %, 0.8°/m): the other
 sign of either error, smaller and larger ones, and noise per step, on the office
-simulation and the Intel lab emulation. What refinement finds and what it gives.
+simulation and the Intel lab emulation; then the same kinds of drift on the buildings,
+the corridor and the orchard, and the buildings' sonars emulated as the Udacity 8-sonar
+ring — logs the refinement was not developed on. What refinement finds and what it gives.
 
-    python -m benchmarks.drift_variety [--work DIR] [--cases office intel-lab] [--config TOML]
+    python -m benchmarks.drift_variety [--work DIR] [--cases office intel-lab ...] [--config TOML]
 
 Each row: the drift model, F1 of the default method on true poses / the drifted odometry /
-refined, refined/true, ATE drifted → refined (evo's SE(2)-aligned RMSE) and the
-calibration found (``metrics.json`` → ``pose_refinement``); ``--config`` sets the refined
-runs' ``[pose_refinement]``. A run's outputs are kept under
+refined, refined/true, F1 of the true poses refined (its cost), ATE drifted → refined
+(evo's SE(2)-aligned RMSE) and the calibration found (``metrics.json`` →
+``pose_refinement``: the scale applied or, in brackets, the estimate gated out; its z);
+``--config`` sets the refined runs' ``[pose_refinement]``. A run's outputs are kept under
 ``--work`` (default ``build/drift_variety``); the drifted logs are made there when missing.
 """
 
@@ -18,6 +21,7 @@ import dataclasses
 import math
 import sys
 from pathlib import Path
+from typing import Any
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -31,6 +35,30 @@ MODELS = (
     ("+3 %, +0.8°/m, noise 0.003 rad/√rad", 0.03, 0.8, 0.0, 0.003),
     ("+3 %, +0.8°/m, noise 0.01 m/√m, 0.01 rad/√rad", 0.03, 0.8, 0.01, 0.01),
 )
+# (case, sonar preset or None, model, drift seed): every model on the office and the Intel
+# (seeded by the model's row), then the others.
+ROWS: tuple[tuple[str, str | None, tuple[str, float, float, float, float], int], ...] = (
+    *((case, None, model, i) for case in ("office", "intel-lab") for i, model in enumerate(MODELS)),
+    ("fhw", None, MODELS[0], 3),
+    ("freiburg-101", None, MODELS[0], 3),
+    ("orebro", None, ("+2 %, -1.0°/m", 0.02, -1.0, 0.0, 0.0), 3),
+    ("freiburg-101", None, ("+3 %, +0.8°/m, noise 0.01 m/√m", 0.03, 0.8, 0.01, 0.0), 5),
+    ("fhw", None, MODELS[5], 5),
+    ("intel-lab", "udacity-8sonar", ("+3 %, +0.8°/m", 0.03, 0.8, 0.0, 0.0), 1),
+    ("fhw", "udacity-8sonar", ("+3 %, +0.8°/m", 0.03, 0.8, 0.0, 0.0), 1),
+    ("corridor", None, MODELS[0], 0),
+    ("orchard", None, MODELS[0], 0),
+)
+CASES = tuple(dict.fromkeys(row[0] for row in ROWS))
+
+
+def found(pr: dict[str, Any]) -> str:
+    """The calibration a refined run found: the scale applied, or [its estimate] gated out."""
+    scale = pr.get("search_scale_error", math.nan)
+    text = (f"{scale:+.3f}" if scale or "scale_estimate" not in pr
+            else f"[{pr['scale_estimate']:+.3f}]")
+    return (f"{text}, {pr.get('search_heading_bias_deg_per_m', math.nan):+.2f}°/m "
+            f"({pr.get('scale_z', math.nan):.1f})")
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -42,8 +70,7 @@ def main(argv: list[str] | None = None) -> None:
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--work", type=Path, default=REPO / "build" / "drift_variety")
-    ap.add_argument("--cases", nargs="+", default=["office", "intel-lab"],
-                    choices=["office", "intel-lab"])
+    ap.add_argument("--cases", nargs="+", default=list(CASES), choices=CASES)
     ap.add_argument("--config", type=Path, help="TOML whose [pose_refinement] the refined runs use")
     args = ap.parse_args(argv)
     args.work.mkdir(parents=True, exist_ok=True)
@@ -51,34 +78,42 @@ def main(argv: list[str] | None = None) -> None:
     chosen = load_config(args.config).pose_refinement if args.config else plain.pose_refinement
     refine = Config(pose_refinement=dataclasses.replace(chosen, enabled=True))
     print("| log | drift (scale, heading bias, noise) | F1 true | F1 drifted | F1 refined "
-          "| refined/true | ATE drifted → refined (m) | scale, bias found (z) |")
-    print("|---|---|---:|---:|---:|---:|---|---|")
-    for case in args.cases:
-        f1_true = math.nan
-        for i, model in enumerate(MODELS):
-            drifted = args.work / f"{case}_{i}.mcap"
-            clean, truth, traj = drifted_case(case, drifted, DriftModel(*model[1:]),
-                                              drift_seed=i)
-            if i == 0:
-                out = args.work / case / "true"
-                run(clean, out, plain, force=True)
-                f1_true = evaluate_run(out, truth, trajectory=traj, truth_trajectory=traj).f1
-            scores = {}
-            for key, cfg in (("drifted", plain), ("refined", refine)):
-                out = args.work / case / f"{i}_{key}"
-                result = run(drifted, out, cfg, force=True)
-                ev = evaluate_run(out, truth, trajectory=traj, truth_trajectory=traj)
-                ate = ev.trajectory_error["ate_rmse_m"] if ev.trajectory_error else math.nan
-                scores[key] = (ev.f1, float(ate), result.metrics.pose_refinement or {})
-            pr = scores["refined"][2]
-            print(f"| {case} | {model[0]} | {f1_true:.3f} | {scores['drifted'][0]:.3f} | "
-                  f"{scores['refined'][0]:.3f} | {scores['refined'][0] / f1_true:.2f} | "
-                  f"{scores['drifted'][1]:.3f} → {scores['refined'][1]:.3f} "
-                  f"({scores['drifted'][1] / scores['refined'][1]:.1f}×) | "
-                  f"{pr.get('search_scale_error', math.nan):+.3f}, "
-                  f"{pr.get('search_heading_bias_deg_per_m', math.nan):+.2f}°/m "
-                  f"({pr.get('scale_z', math.nan):.1f}) |", flush=True)
-        print(f"{case}: done", file=sys.stderr, flush=True)
+          "| refined/true | F1 true poses refined (cost) | ATE drifted → refined (m) "
+          "| scale [gated], bias found (z) |")
+    print("|---|---|---:|---:|---:|---:|---:|---|---|")
+    truths: dict[str, tuple[float, float]] = {}  # per log: F1 of true poses, refined
+    for i, (case, preset, model, seed) in enumerate(ROWS):
+        if case not in args.cases:
+            continue
+        log = case if preset is None else f"{case} ({preset})"
+        tag = case if preset is None else f"{case}-{preset}"
+        # the office's and the Intel's drifted logs keep their names of before (<case>_<model>)
+        stem = f"{case}_{seed}" if i < 2 * len(MODELS) else f"{tag}_row{i}"
+        drifted = args.work / f"{stem}.mcap"
+        clean, truth, traj = drifted_case(case, drifted, DriftModel(*model[1:]),
+                                          drift_seed=seed, preset=preset)
+        if tag not in truths:
+            f1s = []
+            for key, cfg in (("true", plain), ("true_refined", refine)):
+                out = args.work / tag / key
+                run(clean, out, cfg, force=True)
+                f1s.append(evaluate_run(out, truth, trajectory=traj, truth_trajectory=traj).f1)
+            truths[tag] = (f1s[0], f1s[1])
+        f1_true, f1_true_refined = truths[tag]
+        scores = {}
+        for key, cfg in (("drifted", plain), ("refined", refine)):
+            out = args.work / tag / f"{stem}_{key}"
+            result = run(drifted, out, cfg, force=True)
+            ev = evaluate_run(out, truth, trajectory=traj, truth_trajectory=traj)
+            ate = ev.trajectory_error["ate_rmse_m"] if ev.trajectory_error else math.nan
+            scores[key] = (ev.f1, float(ate), result.metrics.pose_refinement or {})
+        print(f"| {log} | {model[0]} | {f1_true:.3f} | {scores['drifted'][0]:.3f} | "
+              f"{scores['refined'][0]:.3f} | {scores['refined'][0] / f1_true:.2f} | "
+              f"{f1_true_refined:.3f} ({f1_true - f1_true_refined:.3f}) | "
+              f"{scores['drifted'][1]:.3f} → {scores['refined'][1]:.3f} "
+              f"({scores['drifted'][1] / scores['refined'][1]:.1f}×) | "
+              f"{found(scores['refined'][2])} |", flush=True)
+    print("drift_variety: done", file=sys.stderr, flush=True)
 
 
 if __name__ == "__main__":
