@@ -72,29 +72,74 @@ def apply_drift(
     ``rng`` is needed only when a noise term is non-zero. With a zero model the true poses
     are returned (as copies).
     """
-    x = np.asarray(x, dtype=np.float64)
-    y = np.asarray(y, dtype=np.float64)
-    yaw = np.asarray(yaw, dtype=np.float64)
-    n = x.shape[0]
-    if model.is_zero or n < 2:
-        return x.copy(), y.copy(), yaw.copy()
-    dx, dy = np.diff(x), np.diff(y)
-    dyaw = wrap_angle(np.diff(yaw))
-    c, s = np.cos(yaw[:-1]), np.sin(yaw[:-1])
-    lx, ly = c * dx + s * dy, -s * dx + c * dy  # the step in the robot frame
-    ds = np.hypot(dx, dy)
-    lx = lx * (1.0 + model.scale_error)
-    ly = ly * (1.0 + model.scale_error)
-    dyaw = dyaw + math.radians(model.heading_bias_deg_per_m) * ds
-    if model.noise_xy or model.noise_yaw:
-        if rng is None:
-            raise ValueError("apply_drift needs a random generator for a noisy drift model")
-        noise = rng.standard_normal((3, n - 1))
-        lx = lx + noise[0] * model.noise_xy * np.sqrt(ds)
-        ly = ly + noise[1] * model.noise_xy * np.sqrt(ds)
-        dyaw = dyaw + noise[2] * model.noise_yaw * np.sqrt(np.abs(wrap_angle(np.diff(yaw))))
-    heading = yaw[0] + np.concatenate([[0.0], np.cumsum(dyaw)])
-    c, s = np.cos(heading[:-1]), np.sin(heading[:-1])
-    ox = x[0] + np.concatenate([[0.0], np.cumsum(c * lx - s * ly)])
-    oy = y[0] + np.concatenate([[0.0], np.cumsum(s * lx + c * ly)])
-    return ox, oy, wrap_angle(heading)
+    return Steps.of(x, y, yaw).drifted(model, rng)
+
+
+@dataclass(frozen=True)
+class Steps:
+    """A trajectory's motion increments (the module docstring's ``Δs``, ``Δθ``, and the step
+    in the robot frame at the earlier pose), kept so that many drift models can be applied
+    to one trajectory without recomputing them (pose refinement's calibration search)."""
+
+    x: F64
+    y: F64
+    yaw: F64
+    lx: F64  # the step in the robot frame at the earlier pose, m
+    ly: F64
+    ds: F64  # its length, m
+    dyaw: F64  # its rotation, rad (wrapped)
+
+    @staticmethod
+    def of(x: F64, y: F64, yaw: F64) -> Steps:
+        x = np.asarray(x, dtype=np.float64)
+        y = np.asarray(y, dtype=np.float64)
+        yaw = np.asarray(yaw, dtype=np.float64)
+        dx, dy = np.diff(x), np.diff(y)
+        c, s = np.cos(yaw[:-1]), np.sin(yaw[:-1])
+        return Steps(x, y, yaw, c * dx + s * dy, -s * dx + c * dy, np.hypot(dx, dy),
+                     wrap_angle(np.diff(yaw)))
+
+    def drifted_many(self, models: list[DriftModel]) -> tuple[F64, F64, F64]:
+        """The poses under each of ``models`` (noise-free), one row per model: the same
+        arithmetic as :meth:`drifted`, so the same bits, in one pass over the steps."""
+        x, y, yaw = self.x, self.y, self.yaw
+        m, n = len(models), x.shape[0]
+        if n < 2 or m == 0:
+            return (np.tile(x, (m, 1)), np.tile(y, (m, 1)), np.tile(yaw, (m, 1)))
+        scale = 1.0 + np.array([v.scale_error for v in models])[:, None]
+        bias = np.array([math.radians(v.heading_bias_deg_per_m) for v in models])[:, None]
+        lx, ly = self.lx * scale, self.ly * scale
+        dyaw = self.dyaw + bias * self.ds
+        zero = np.zeros((m, 1))
+        heading = yaw[0] + np.concatenate([zero, np.cumsum(dyaw, axis=1)], axis=1)
+        c, s = np.cos(heading[:, :-1]), np.sin(heading[:, :-1])
+        ox = x[0] + np.concatenate([zero, np.cumsum(c * lx - s * ly, axis=1)], axis=1)
+        oy = y[0] + np.concatenate([zero, np.cumsum(s * lx + c * ly, axis=1)], axis=1)
+        oyaw = wrap_angle(heading)
+        same = np.array([v.is_zero for v in models])
+        ox[same], oy[same], oyaw[same] = x, y, yaw  # as drifted(): the poses themselves
+        return ox, oy, oyaw
+
+    def drifted(self, model: DriftModel, rng: np.random.Generator | None = None
+                ) -> tuple[F64, F64, F64]:
+        """The poses with ``model``'s error (:func:`apply_drift`)."""
+        x, y, yaw = self.x, self.y, self.yaw
+        n = x.shape[0]
+        if model.is_zero or n < 2:
+            return x.copy(), y.copy(), yaw.copy()
+        ds = self.ds
+        lx = self.lx * (1.0 + model.scale_error)
+        ly = self.ly * (1.0 + model.scale_error)
+        dyaw = self.dyaw + math.radians(model.heading_bias_deg_per_m) * ds
+        if model.noise_xy or model.noise_yaw:
+            if rng is None:
+                raise ValueError("apply_drift needs a random generator for a noisy drift model")
+            noise = rng.standard_normal((3, n - 1))
+            lx = lx + noise[0] * model.noise_xy * np.sqrt(ds)
+            ly = ly + noise[1] * model.noise_xy * np.sqrt(ds)
+            dyaw = dyaw + noise[2] * model.noise_yaw * np.sqrt(np.abs(self.dyaw))
+        heading = yaw[0] + np.concatenate([[0.0], np.cumsum(dyaw)])
+        c, s = np.cos(heading[:-1]), np.sin(heading[:-1])
+        ox = x[0] + np.concatenate([[0.0], np.cumsum(c * lx - s * ly)])
+        oy = y[0] + np.concatenate([[0.0], np.cumsum(s * lx + c * ly)])
+        return ox, oy, wrap_angle(heading)

@@ -61,7 +61,7 @@ import numpy as np
 import numpy.typing as npt
 
 from formats.arrays import F64, I64
-from pipeline.drift import DriftModel, apply_drift
+from pipeline.drift import DriftModel, Steps, apply_drift
 from pipeline.refine.echoes import Echoes
 from pipeline.se2 import transform_points
 
@@ -93,13 +93,17 @@ class Calibration:
     scale_standard_error: float = math.nan  # ... and that estimate's standard error
     scale_far_echoes: bool = False  # ... from the echoes out to the far range (_far_agrees)
 
-    def correct(self, x: F64, y: F64, yaw: F64) -> tuple[F64, F64, F64]:
-        """Odometry poses with this calibration's error removed."""
-        inverse = DriftModel(
+    @property
+    def inverse(self) -> DriftModel:
+        """The drift model that removes this calibration's error."""
+        return DriftModel(
             scale_error=1.0 / (1.0 + self.scale_error) - 1.0,
             heading_bias_deg_per_m=-math.degrees(self.heading_bias) / (1.0 + self.scale_error),
         )
-        return apply_drift(x, y, yaw, inverse)
+
+    def correct(self, x: F64, y: F64, yaw: F64) -> tuple[F64, F64, F64]:
+        """Odometry poses with this calibration's error removed."""
+        return apply_drift(x, y, yaw, self.inverse)
 
 
 def _thin(n: int, at_most: int) -> I64:
@@ -121,14 +125,22 @@ class _Placed:
         self.x = np.concatenate([x, odo[:, 0]])[order]
         self.y = np.concatenate([y, odo[:, 1]])[order]
         self.yaw = np.concatenate([yaw, odo[:, 2]])[order]
+        self.motion = Steps.of(self.x, self.y, self.yaw)  # re-integrated under each calibration
         where = np.empty(order.shape[0], np.int64)
         where[order] = np.arange(order.shape[0])
         self.echo_at = where[t_ns.shape[0]:]
         self.bx, self.by = echoes.bx[keep], echoes.by[keep]
         self.sx, self.sy = echoes.sx[keep], echoes.sy[keep]
 
+    def poses_many(self, ks: F64, bs: F64) -> F64:
+        """(len(ks), echoes, 3): the echoes' poses under each calibration ``(ks[j], bs[j])``."""
+        x, y, yaw = self.motion.drifted_many(
+            [Calibration(float(k), float(b)).inverse for k, b in zip(ks, bs, strict=True)])
+        i = self.echo_at
+        return np.stack([x[:, i], y[:, i], yaw[:, i]], axis=-1)
+
     def poses(self, k: float, b: float) -> F64:
-        x, y, yaw = Calibration(k, b).correct(self.x, self.y, self.yaw)
+        x, y, yaw = self.motion.drifted(Calibration(k, b).inverse)
         i = self.echo_at
         return np.column_stack([x[i], y[i], yaw[i]])
 
@@ -161,6 +173,21 @@ class _BinnedSharpness(_Placed):
         super().__init__(t_ns, x, y, yaw, echoes, MAX_ECHOES_SCAN)
         self.bin = 2 * sigma
         self.reference = reference
+
+    def scan(self, k: float, bs: F64, chunk: int = 64) -> list[float]:
+        """The score at ``k`` and each bias of ``bs`` (as calls would give, the poses
+        integrated ``chunk`` biases at a time)."""
+        from pipeline.refine.kernels import binned_sharpness
+
+        if self.reference:
+            return [self(k, float(b)) for b in bs]
+        out = []
+        for lo in range(0, len(bs), chunk):
+            part = bs[lo:lo + chunk]
+            for pose in self.poses_many(np.full(part.shape, k), part):
+                wx, wy = self.arcs(pose)
+                out.append(float(binned_sharpness(wx.ravel(), wy.ravel(), self.bin)))
+        return out
 
     def __call__(self, k: float, b: float) -> float:
         wx, wy = self.arcs(self.poses(k, b))
@@ -261,6 +288,15 @@ def _bias_steps(x: F64, y: F64, max_bias: float) -> F64:
     return np.linspace(-max_bias, max_bias, n_bias | 1)
 
 
+def _best_of(values: list[float], k: float, bs: F64, best: tuple[float, float, float]
+             ) -> tuple[float, float, float]:
+    """:func:`_grid_max`'s rule over scores already computed at ``k`` and each of ``bs``."""
+    for v, b in zip(values, np.asarray(bs, np.float64).tolist(), strict=True):
+        if v > best[0] + 1e-15:
+            best = (v, k, b)
+    return best
+
+
 def _grid_max(f: Callable[[float, float], float], ks: npt.ArrayLike, bs: npt.ArrayLike,
               best: tuple[float, float, float]) -> tuple[float, float, float]:
     """The best (value, k, b) of ``best`` and ``f`` over the grid ``ks × bs``."""
@@ -333,10 +369,9 @@ def calibrate(
     sharp = _Sharpness(t_ns, x, y, yaw, echoes, res=max(res, sigma), sigma=sigma)
     base = sharp(0.0, 0.0)
     bs = _bias_steps(x, y, max_bias)
-    zero = np.zeros(1)
     # The coarse scan over the whole range on fewer echoes and cells; the refinements on all.
     scan = _BinnedSharpness(t_ns, x, y, yaw, echoes, sigma=sigma)
-    b_scan = _grid_max(scan, zero, bs, (scan(0.0, 0.0), 0.0, 0.0))[2]
+    b_scan = _best_of(scan.scan(0.0, bs), 0.0, bs, (scan(0.0, 0.0), 0.0, 0.0))[2]
     consistent = _Consistency(t_ns, x, y, yaw, echoes, res=2 * res, sigma=sigma)
     b = _heading_bias(sharp, consistent, 0.0, b_scan, float(bs[1] - bs[0]), (base, 0.0, 0.0),
                       base, min_gain)

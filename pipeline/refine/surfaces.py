@@ -53,7 +53,6 @@ Deterministic: no random draws.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -180,28 +179,30 @@ class SurfaceScale:
     def evaluate(self, k0: float) -> tuple[float, float]:
         """``f(k₀)`` and its standard error (NaN, NaN: no patch)."""
         ks = np.asarray(k0 + STEP * np.arange(-10, 11), dtype=np.float64)
-        return self._fit(self._associate(self.poses(k0)), ks, self.poses)
+        return self._fit(self._associate(self.poses(k0)), ks,
+                         self.placed.poses_many(ks, self.bias * (1.0 + ks)))
 
     def evaluate_bias(self, k: float, b0: float) -> tuple[float, float]:
         """The heading bias (rad per metre, :class:`~pipeline.refine.calibration.Calibration`'s)
         the patches made under ``(k, b0)`` agree on at the scale ``k``, and its error."""
         bs = np.asarray(b0 + BIAS_STEP * np.arange(-10, 11), dtype=np.float64)
         return self._fit(self._associate(self.placed.poses(k, b0)), bs,
-                         lambda b: self.placed.poses(k, b))
+                         self.placed.poses_many(np.full(bs.shape, k), bs))
 
     def _fit(self, association: tuple[I64, I64, F64, F64, F64], candidates: F64,
-             poses_of: Callable[[float], F64]) -> tuple[float, float]:
+             poses: F64) -> tuple[float, float]:
         """The candidate (parabola-refined) minimising the patches' Cauchy loss, and its
         standard error: the cluster-robust sandwich variance of the M-estimate,
         ``Σ_patches (Σ ψ(r)·∂r/∂θ)² / (Σ ψ'(r)·(∂r/∂θ)²)²``, patches as clusters (their
-        echoes share the offset and the visit)."""
+        echoes share the offset and the visit). ``poses[j]``: the echoes' poses under
+        ``candidates[j]``."""
         idx, patch, nx, ny, phi = association
         n = int(patch.max(initial=-1)) + 1
         if n == 0:
             return math.nan, math.nan
         rows = []
-        for v in candidates.tolist():
-            pose = poses_of(v)[idx]
+        for j in range(len(candidates)):  # poses[j]: the echoes' poses under candidate j
+            pose = poses[j][idx]
             ox, oy = transform_points(pose, self.echoes.sx[idx], self.echoes.sy[idx])
             ray = pose[:, 2] + phi
             q = nx * ox + ny * oy + self.echoes.range_m[idx] * (nx * np.cos(ray) + ny * np.sin(ray))

@@ -105,3 +105,20 @@ def test_emulation_with_drift_keeps_the_poses_as_truth() -> None:
     np.testing.assert_allclose(drifted.content.poses.x, 1.05 * em.content.poses.x, atol=1e-12)
     assert np.array_equal(drifted.ranges, em.ranges)
     assert "odometry drifted" in drifted.notes[-1]
+
+
+def test_many_models_at_once_give_the_same_bits_as_one_at_a_time() -> None:
+    from pipeline.drift import Steps
+
+    rng = np.random.default_rng(4)
+    t = np.linspace(0.0, 20.0, 200)
+    x, y, yaw = 2 * np.cos(0.3 * t), np.sin(0.5 * t), np.unwrap(0.4 * t) + 0.1 * rng.random(200)
+    steps = Steps.of(x, y, yaw)
+    models = [DriftModel(0.03, 0.8), DriftModel(), DriftModel(-0.021, -1.3), DriftModel(0.0, 0.4)]
+    many = steps.drifted_many(models)
+    for j, model in enumerate(models):
+        one = apply_drift(x, y, yaw, model)
+        for a, b in zip(one, many, strict=True):
+            assert a.tobytes() == b[j].tobytes()
+    assert many[0].shape == (4, 200)
+    assert np.array_equal(many[0][1], x)  # the zero model: the poses themselves
