@@ -559,6 +559,7 @@ def _write_outputs(
     write_map_png(out.path("map.png"), snap, trajectory_xy=traj_xy, features=snap.features,
                   title=title)
     track = sv.track
+    drawn_odometry = None
     if odometry is not None:  # pose refinement: the odometry the trajectory started from
         from formats.writers.trajectory_png import write_trajectory_png
 
@@ -572,6 +573,7 @@ def _write_outputs(
         out.path("map.mcap"), probability=snap.probability, grid=snap.grid,
         features=snap.features, trajectory=traj, frame_id=track.parent_frame,
         stamp_ns=int(metrics.trajectory["end_ns"]), library=f"sonarmap {__version__}",
+        odometry=drawn_odometry,
     )
     write_features(
         out.path("features.parquet"),

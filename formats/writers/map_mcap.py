@@ -12,7 +12,10 @@ rosbags. One message per topic, all stamped at ``stamp_ns`` (the end of the log)
   feature whose footprint is its 2σ ellipse (scale 4σ_major × 4σ_minor, turned by the
   major axis), coloured by ``measured_times`` on a log scale from dark purple (measured
   once) to yellow (the most measured feature); marker id = feature id.
-* ``/trajectory`` — ``nav_msgs/msg/Path``, the poses with their own stamps.
+* ``/trajectory`` — ``nav_msgs/msg/Path``, the poses with their own stamps (with pose
+  refinement, the refined poses);
+* ``/odometry`` — ``nav_msgs/msg/Path``, only with pose refinement: the odometry the
+  refined poses started from, so a viewer shows the two side by side.
 
 The marker array and the path are serialised in bulk (:mod:`formats.writers.cdr_sequence`:
 rosbags' own bytes for a few elements, repeated with the fields patched in), byte for byte
@@ -45,6 +48,7 @@ from formats.writers.trajectory_tum import Trajectory
 __all__ = [
     "FEATURES_TOPIC",
     "MAP_TOPIC",
+    "ODOMETRY_TOPIC",
     "TRAJECTORY_TOPIC",
     "measured_colours",
     "write_map_mcap",
@@ -53,6 +57,7 @@ __all__ = [
 MAP_TOPIC = "/map"
 FEATURES_TOPIC = "/sonar_features"
 TRAJECTORY_TOPIC = "/trajectory"
+ODOMETRY_TOPIC = "/odometry"
 GRID_TYPE = "nav_msgs/msg/OccupancyGrid"
 MARKERS_TYPE = "visualization_msgs/msg/MarkerArray"
 PATH_TYPE = "nav_msgs/msg/Path"
@@ -259,13 +264,15 @@ def write_map_mcap(
     frame_id: str,
     stamp_ns: int,
     library: str = "sonarmap",
+    odometry: Trajectory | None = None,
 ) -> None:
     """Write ``map.mcap`` (see the module docstring) at ``path``, atomically.
 
     ``probability``: float32 H×W, row 0 at min y, NaN unknown (as for map.pgm);
     ``trajectory``: the poses for ``/trajectory``; ``frame_id``: the map frame (the frame
     the poses are in; ``"map"`` when the log names none); ``stamp_ns``: the stamp of every
-    message and header (the end of the log); ``library``: the MCAP header's writer name.
+    message and header (the end of the log); ``library``: the MCAP header's writer name;
+    ``odometry``: the poses for ``/odometry`` (None: no such topic).
     """
     from mcap.writer import CompressionType, Writer
 
@@ -280,7 +287,8 @@ def write_map_mcap(
                                                       GRID_TYPE))),
         (FEATURES_TOPIC, MARKERS_TYPE, _markers_cdr(m, features, frame, stamp_ns)),
         (TRAJECTORY_TOPIC, PATH_TYPE, _path_cdr(m, trajectory, frame, stamp_ns)),
-    )
+    ) + (() if odometry is None else (
+        (ODOMETRY_TOPIC, PATH_TYPE, _path_cdr(m, odometry, frame, stamp_ns)),))
     with atomic_open(Path(path)) as f:
         writer = Writer(f, compression=CompressionType.ZSTD)
         writer.start(profile="ros2", library=library)

@@ -160,3 +160,17 @@ def test_rosbags_anyreader_reads_it_from_the_embedded_schemas(written) -> None:
     assert np.asarray(msgs["/map"].data).reshape(3, 4).tolist()[0] == [100, 0, -1, -1]
     assert len(msgs["/sonar_features"].markers) == 3
     assert len(msgs["/trajectory"].poses) == 2
+
+
+def test_odometry_path_is_written_only_when_given(tmp_path: Path, features) -> None:
+    odometry = Trajectory(TRAJ.t_ns, TRAJ.x * 1.03, TRAJ.y + 0.1, TRAJ.yaw)
+    path = tmp_path / "map.mcap"
+    write_map_mcap(path, probability=PROB, grid=GRID, features=features, trajectory=TRAJ,
+                   frame_id="odom", stamp_ns=STAMP, odometry=odometry)
+    _header, topics = _read(path)
+    assert set(topics) == {"/map", "/sonar_features", "/trajectory", "/odometry"}
+    schema, _channel, message, msg = topics["/odometry"]
+    assert schema.name == "nav_msgs/msg/Path" and message.log_time == STAMP
+    assert msg.header.frame_id == "odom"
+    assert [(p.pose.position.x, p.pose.position.y) for p in msg.poses] == [
+        (0.0, pytest.approx(2.6)), (pytest.approx(0.515), pytest.approx(2.7))]

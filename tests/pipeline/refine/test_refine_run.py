@@ -65,6 +65,33 @@ def test_refined_run_corrects_the_drift_and_is_deterministic(drifted_log: Path,
         assert key in doc["pose_refinement"]
 
 
+def mcap_paths(run_dir: Path) -> dict[str, list[tuple[float, float]]]:
+    """map.mcap's nav_msgs/Path topics, read back with the mcap library and rosbags."""
+    from mcap.reader import make_reader
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_HUMBLE)
+    with (run_dir / "map.mcap").open("rb") as f:
+        return {c.topic: [(p.pose.position.x, p.pose.position.y)
+                          for p in ts.deserialize_cdr(m.data, s.name).poses]
+                for s, c, m in make_reader(f).iter_messages() if s.name == "nav_msgs/msg/Path"}
+
+
+def test_map_mcap_holds_the_refined_trajectory_beside_the_odometry(drifted_log: Path,
+                                                                  tmp_path: Path) -> None:
+    from pipeline.run import run
+
+    run(drifted_log, tmp_path / "r", Config(pose_refinement=PoseRefinementConfig(enabled=True)))
+    run(drifted_log, tmp_path / "plain", Config())
+    paths = mcap_paths(tmp_path / "r")
+    assert set(paths) == {"/trajectory", "/odometry"}
+    for topic, name in (("/trajectory", "trajectory.csv"), ("/odometry", "odometry.csv")):
+        csv = read_trajectory(tmp_path / "r" / name)
+        np.testing.assert_allclose(paths[topic], np.column_stack([csv.x, csv.y]), atol=1e-9)
+    assert np.hypot(*np.subtract(paths["/trajectory"][-1], paths["/odometry"][-1])) > 0.1
+    assert set(mcap_paths(tmp_path / "plain")) == {"/trajectory"}  # no refinement: no odometry
+
+
 def test_unrefined_run_writes_the_odometry_as_trajectory(drifted_log: Path,
                                                          tmp_path: Path) -> None:
     from pipeline.run import run
