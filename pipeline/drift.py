@@ -108,14 +108,8 @@ class Steps:
             return (np.tile(x, (m, 1)), np.tile(y, (m, 1)), np.tile(yaw, (m, 1)))
         scale = 1.0 + np.array([v.scale_error for v in models])[:, None]
         bias = np.array([math.radians(v.heading_bias_deg_per_m) for v in models])[:, None]
-        lx, ly = self.lx * scale, self.ly * scale
-        dyaw = self.dyaw + bias * self.ds
-        zero = np.zeros((m, 1))
-        heading = yaw[0] + np.concatenate([zero, np.cumsum(dyaw, axis=1)], axis=1)
-        c, s = np.cos(heading[:, :-1]), np.sin(heading[:, :-1])
-        ox = x[0] + np.concatenate([zero, np.cumsum(c * lx - s * ly, axis=1)], axis=1)
-        oy = y[0] + np.concatenate([zero, np.cumsum(s * lx + c * ly, axis=1)], axis=1)
-        oyaw = wrap_angle(heading)
+        ox, oy, oyaw = self._integrate(self.lx * scale, self.ly * scale,
+                                       self.dyaw + bias * self.ds)
         same = np.array([v.is_zero for v in models])
         ox[same], oy[same], oyaw[same] = x, y, yaw  # as drifted(): the poses themselves
         return ox, oy, oyaw
@@ -138,8 +132,14 @@ class Steps:
             lx = lx + noise[0] * model.noise_xy * np.sqrt(ds)
             ly = ly + noise[1] * model.noise_xy * np.sqrt(ds)
             dyaw = dyaw + noise[2] * model.noise_yaw * np.sqrt(np.abs(self.dyaw))
-        heading = yaw[0] + np.concatenate([[0.0], np.cumsum(dyaw)])
-        c, s = np.cos(heading[:-1]), np.sin(heading[:-1])
-        ox = x[0] + np.concatenate([[0.0], np.cumsum(c * lx - s * ly)])
-        oy = y[0] + np.concatenate([[0.0], np.cumsum(s * lx + c * ly)])
+        ox, oy, oyaw = self._integrate(lx[None], ly[None], dyaw[None])
+        return ox[0], oy[0], oyaw[0]
+
+    def _integrate(self, lx: F64, ly: F64, dyaw: F64) -> tuple[F64, F64, F64]:
+        """Rows of steps (robot frame, rotations) composed again from the first pose."""
+        zero = np.zeros((lx.shape[0], 1))
+        heading = self.yaw[0] + np.concatenate([zero, np.cumsum(dyaw, axis=1)], axis=1)
+        c, s = np.cos(heading[:, :-1]), np.sin(heading[:, :-1])
+        ox = self.x[0] + np.concatenate([zero, np.cumsum(c * lx - s * ly, axis=1)], axis=1)
+        oy = self.y[0] + np.concatenate([zero, np.cumsum(s * lx + c * ly, axis=1)], axis=1)
         return ox, oy, wrap_angle(heading)

@@ -422,10 +422,9 @@ def _surface_calibration(
 
     With ``far_echoes``, the first scale is also found from them, and they replace the
     near echoes for the scale (and the patches' bias) when they agree (:func:`_far_agrees`)."""
-    from pipeline.refine.surfaces import FixedPoint, SurfaceScale
+    from pipeline.refine.surfaces import SurfaceScale
 
     k, b, slope, z = 0.0, best[2], math.nan, math.nan
-    fp = FixedPoint(math.nan, math.nan, (), math.nan)
     far_used = False
     for rounds in range(2):
         # The bias is held per reported metre while the scale varies.

@@ -121,7 +121,8 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
     beyond ``max_echo_range_m``, out to ``calibration_far_range_m``, serve the scale alone)."""
     tt = np.asarray(track.t_ns)
     tx, ty, tyaw = np.asarray(track.x), np.asarray(track.y), np.asarray(track.yaw)
-    far = echoes if cfg.calibration_far_range_m > cfg.max_echo_range_m else None
+    far = (echoes.take(np.flatnonzero(echoes.range_m <= cfg.calibration_far_range_m))
+           if cfg.calibration_far_range_m > cfg.max_echo_range_m else None)
     echoes = echoes.take(np.flatnonzero(echoes.range_m <= cfg.max_echo_range_m))
     metrics: dict[str, Any] = {"echoes": len(echoes)}
     if cfg.calibration_search and len(echoes) >= cfg.submap_min_echoes:
@@ -133,8 +134,7 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
             max_slope=cfg.calibration_max_slope, min_z=cfg.calibration_scale_min_z,
             systematic=cfg.calibration_scale_systematic,
             window_m=cfg.calibration_scale_window_m,
-            far_echoes=None if far is None else far.take(
-                np.flatnonzero(far.range_m <= cfg.calibration_far_range_m)),
+            far_echoes=far,
         )
         ox, oy, oyaw = cal0.correct(tx, ty, tyaw)
         look = interpolate_poses(PoseTrack(tt, ox, oy, oyaw, "", ""), echoes.t_ns,

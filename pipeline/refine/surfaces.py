@@ -201,7 +201,7 @@ class SurfaceScale:
         if n == 0:
             return math.nan, math.nan
         rows = []
-        for j in range(len(candidates)):  # poses[j]: the echoes' poses under candidate j
+        for j in range(len(candidates)):
             pose = poses[j][idx]
             ox, oy = transform_points(pose, self.echoes.sx[idx], self.echoes.sy[idx])
             ray = pose[:, 2] + phi
