@@ -136,6 +136,8 @@ def test_a_scale_within_min_z_errors_of_zero_is_not_applied(
     ("calibration_scale_min_z", -1.0, "must be >= 0"),
     ("calibration_scale_systematic", -0.01, "must be >= 0"),
     ("calibration_scale_window_m", -1.0, "must be >= 0"),
+    ("calibration_far_range_m", -1.0, "must be >= 0 (0 = off)"),
+    ("calibration_far_range_m", float("nan"), "must be a finite number"),
 ])
 def test_bad_scale_settings_are_refused_by_name(key: str, value: object, message: str) -> None:
     with pytest.raises(ConfigError, match=rf"pose_refinement\.{key}.*{re.escape(message)}"):
