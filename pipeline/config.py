@@ -184,6 +184,14 @@ class PoseRefinementConfig:
 
     enabled: bool = doc_field("refine the poses before mapping (also: run --refine-poses)",
                          default=False)
+    local_corrections: bool = doc_field(
+        "after the calibration, correct each stretch of travel rigidly where the surface "
+        "patches its visits share say so (pipeline/refine/stretches.py)", default=True)
+    local_stretch_m: float = doc_field("... a stretch: this much travel, m", default=20.0)
+    local_iterations: int = doc_field("... solves, each after associating again", default=4)
+    local_min_gain: float = doc_field(
+        "... applied when the first solve lowers the patches' robust loss by this much per "
+        "correction parameter", default=1.0)
     match_submaps: bool = doc_field("after the calibration, match submaps and solve the pose "
                                "graph (off: measured worse on sonar, see RESULTS.md)",
                                default=False)
@@ -439,10 +447,12 @@ def _check_ranges(cfg: Config) -> None:
     for key in ("submap_travel_m", "max_echo_range_m", "field_resolution_m", "field_sigma_m",
                 "search_xy_m", "search_yaw_deg", "loop_radius_m", "loop_search_xy_m",
                 "loop_search_yaw_deg", "odometry_sigma_xy", "odometry_sigma_yaw_deg",
-                "prior_scale", "prior_bias_deg_per_m", "robust_scale", "reject_chi2"):
+                "prior_scale", "prior_bias_deg_per_m", "robust_scale", "reject_chi2",
+                "local_stretch_m"):
         v = getattr(pr, key)
         need(math.isfinite(v) and v > 0, f"pose_refinement.{key}", "must be > 0", v)
-    for key in ("submap_min_echoes", "submap_max_points", "local_map_submaps"):
+    for key in ("submap_min_echoes", "submap_max_points", "local_map_submaps",
+                "local_iterations"):
         v = getattr(pr, key)
         need(v >= 1, f"pose_refinement.{key}", "must be >= 1", v)
     need(0 <= pr.calibration_max_scale < 0.5, "pose_refinement.calibration_max_scale",
@@ -455,6 +465,8 @@ def _check_ranges(cfg: Config) -> None:
          "must be >= 0", pr.calibration_scale_systematic)
     need(pr.calibration_scale_window_m >= 0, "pose_refinement.calibration_scale_window_m",
          "must be >= 0 (0 = the whole run)", pr.calibration_scale_window_m)
+    need(math.isfinite(pr.local_min_gain) and pr.local_min_gain >= 0,
+         "pose_refinement.local_min_gain", "must be >= 0", pr.local_min_gain)
     need(math.isfinite(pr.calibration_far_range_m) and pr.calibration_far_range_m >= 0,
          "pose_refinement.calibration_far_range_m", "must be >= 0 (0 = off)",
          pr.calibration_far_range_m)

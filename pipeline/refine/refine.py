@@ -1,9 +1,11 @@
 """Pose refinement: the odometry corrected from the sonar echoes, before mapping.
 
 0. **Calibration** (:mod:`~pipeline.refine.calibration`, ``calibration_search``): the
-   odometry's scale error and heading bias that make all echoes sharpest; the rest works
-   on the odometry corrected by them. With ``match_submaps = false`` (the default, see
-   below) this is the refinement.
+   odometry's scale error and heading bias that the echoes agree on; the rest works on
+   the odometry corrected by them. Then, ``local_corrections``
+   (:mod:`~pipeline.refine.stretches`): a rigid correction per stretch of travel where the
+   surface patches that its visits share establish one (the odometry's random walk). With
+   ``match_submaps = false`` (the default, see below) this is the refinement.
 1. **Submaps** (:mod:`~pipeline.refine.submaps`): echoes pooled over ~1.5 m of odometry.
 2. **Sequential matching**: each submap is matched (:mod:`~pipeline.refine.matcher`) against
    the previous ``local_map_submaps`` submaps placed by their current estimates, around the
@@ -52,6 +54,7 @@ from pipeline.refine.graph import (
     sqrt_information,
 )
 from pipeline.refine.matcher import LikelihoodField, Match, SearchWindow, match
+from pipeline.refine.stretches import correct_stretches
 from pipeline.refine.submaps import Submap, build_submaps, path_length_at
 from pipeline.se2 import between, compose, inverse, transform_points
 
@@ -137,6 +140,13 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
             far_echoes=far,
         )
         ox, oy, oyaw = cal0.correct(tx, ty, tyaw)
+        if cfg.local_corrections:
+            local = correct_stretches(
+                tt, ox, oy, oyaw, echoes, stretch_m=cfg.local_stretch_m,
+                sigma_xy=cfg.odometry_sigma_xy, sigma_yaw=math.radians(cfg.odometry_sigma_yaw_deg),
+                iterations=cfg.local_iterations, min_gain=cfg.local_min_gain)
+            ox, oy, oyaw = local.x, local.y, local.yaw
+            metrics["local"] = local.metrics
         look = interpolate_poses(PoseTrack(tt, ox, oy, oyaw, "", ""), echoes.t_ns,
                                  np.iinfo(np.int64).max)
         echoes = dataclasses.replace(echoes, odo=np.column_stack([look.x, look.y, look.yaw]))

@@ -163,8 +163,7 @@ class SurfaceScale:
         key = np.column_stack([np.floor(px / PATCH_M), np.floor(py / PATCH_M),
                                direction % NORMAL_BINS, self.stretch]).astype(np.int64)
         idx = np.flatnonzero(ok)
-        _, patch = np.unique(key[idx], axis=0, return_inverse=True)
-        patch = patch.ravel()
+        patch = _row_ids(key[idx])
         big = np.bincount(patch)[patch] >= MIN_PATCH_ECHOES
         idx = idx[big]
         _, patch = np.unique(patch[big], return_inverse=True)  # numbered 0 … n − 1
@@ -241,6 +240,21 @@ class SurfaceScale:
         sharper than sharpness; on the buildings its slope is near 1 (undetermined)."""
         b0s = b + np.array(B0S)
         return _fixed_point(b0s, [self.evaluate_bias(k, b0) for b0 in b0s.tolist()])
+
+
+def _row_ids(key: I64) -> I64:
+    """Each row's rank among the distinct rows of ``key`` in lexicographic order (what
+    ``np.unique(key, axis=0, return_inverse=True)`` numbers them), by one integer per row."""
+    if key.shape[0] == 0:
+        return np.empty(0, np.int64)
+    low = key.min(axis=0)
+    span = key.max(axis=0) - low + 1
+    if float(np.prod(span.astype(np.float64))) >= 2.0**62:  # too wide for one int64
+        return np.unique(key, axis=0, return_inverse=True)[1].ravel()
+    flat = np.zeros(key.shape[0], np.int64)
+    for j in range(key.shape[1]):
+        flat = flat * span[j] + (key[:, j] - low[j])
+    return np.unique(flat, return_inverse=True)[1].ravel()
 
 
 def _fixed_point(x0: F64, evaluated: list[tuple[float, float]]) -> FixedPoint:

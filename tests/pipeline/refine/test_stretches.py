@@ -1,0 +1,73 @@
+"""Local corrections per stretch of travel (pipeline.refine.stretches): a revisit displaced
+by a random-walk-like jump is pulled back onto the walls its other visits saw; true poses
+are left exactly as they are (the gate)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from formats import open_log
+from pipeline.config import Config
+from pipeline.refine import Echoes, collect_echoes
+from pipeline.refine.stretches import correct_stretches
+from pipeline.simulate import SimOptions, simulate, write_simulation
+from pipeline.simulate.world import world_from_dict
+
+WORLD = {
+    "polygon": [{"points": [[0, 0], [10, 0], [10, 6], [0, 6]]}],
+    "segment": [{"from": [3, 0], "to": [3, 2.5]}, {"from": [6, 6], "to": [6, 3.5]},
+                {"from": [7.5, 1.5], "to": [8.5, 1.5]}, {"from": [4.5, 3], "to": [4.5, 4]}],
+}
+LOOP = [[1.5, 1.5], [8.5, 1.0], [8.5, 4.8], [1.5, 4.8]]
+KW = dict(stretch_m=6.0, sigma_xy=0.02, sigma_yaw=math.radians(0.5), iterations=4,
+          min_gain=1.0)
+
+
+@pytest.fixture(scope="module")
+def true_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[tuple[np.ndarray, ...], Echoes]:
+    from pipeline.run import prepare
+
+    sim = simulate(world_from_dict(WORLD), LOOP * 3 + [LOOP[0]],
+                   SimOptions(seed=5, speed=0.5, ring_rate_hz=5.0))
+    log = tmp_path_factory.mktemp("stretches") / "loops.mcap"
+    write_simulation(sim, log, "mcap")
+    cfg = Config()
+    with open_log(log, cfg) as reader:
+        sv, sensors, _ = prepare(reader, cfg)
+        echoes = collect_echoes(sv.ordered_ranges(reader), sv.track, sensors,
+                                eps_max=cfg.mapper.eps_max, max_echo_range_m=3.0,
+                                arc_fraction=0.8, time_offset_ns=0, max_gap_ns=10**9)
+    track = tuple(np.asarray(getattr(sv.track, a)) for a in ("t_ns", "x", "y", "yaw"))
+    return track, echoes
+
+
+def test_true_poses_are_left_exactly_as_they_are(true_run) -> None:
+    (t, x, y, yaw), echoes = true_run
+    out = correct_stretches(t, x, y, yaw, echoes, **KW)
+    assert out.metrics["iterations"] == 0 and out.metrics["stretches"] >= 8
+    assert out.metrics["gain_per_parameter"] < 1.0
+    assert out.metrics["note"].startswith("not applied: the patches' loss falls by")
+    assert out.x is x and out.y is y and out.yaw is yaw
+
+
+def test_a_displaced_second_lap_is_pulled_back_onto_the_first(true_run) -> None:
+    (t, x, y, yaw), echoes = true_run
+    travel = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(x), np.diff(y)))])
+    # from a third of the run on, the odometry wanders 0.15 m off (a random walk's jump)
+    ramp = np.clip((travel - travel[-1] / 3) / 4.0, 0.0, 1.0)
+    dx, dy = 0.12 * ramp, -0.09 * ramp
+    out = correct_stretches(t, x + dx, y + dy, yaw, echoes, **KW)
+    before = np.sqrt(np.mean(dx**2 + dy**2))
+    after = np.sqrt(np.mean((out.x - x) ** 2 + (out.y - y) ** 2))
+    assert out.metrics["gain_per_parameter"] > 1.0 and out.metrics["iterations"] == 4
+    assert after < 0.5 * before, (before, after)
+
+
+def test_too_short_a_run_for_two_stretches_is_left_alone(true_run) -> None:
+    (t, x, y, yaw), echoes = true_run
+    out = correct_stretches(t, x, y, yaw, echoes, **{**KW, "stretch_m": 1e4})
+    assert out.metrics == {"stretches": 0, "iterations": 0}
+    assert out.x is x
