@@ -63,6 +63,7 @@ import numpy.typing as npt
 from formats.arrays import F64, I64
 from pipeline.drift import DriftModel, Steps, apply_drift
 from pipeline.refine.echoes import Echoes
+from pipeline.refine.threads import parallel_map
 from pipeline.se2 import transform_points
 
 if TYPE_CHECKING:  # surfaces.py builds on this module's _Placed
@@ -181,13 +182,15 @@ class _BinnedSharpness(_Placed):
 
         if self.reference:
             return [self(k, float(b)) for b in bs]
-        out = []
-        for lo in range(0, len(bs), chunk):
+        def score(lo: int) -> list[float]:
             part = bs[lo:lo + chunk]
+            out = []
             for pose in self.poses_many(np.full(part.shape, k), part):
                 wx, wy = self.arcs(pose)
                 out.append(float(binned_sharpness(wx.ravel(), wy.ravel(), self.bin)))
-        return out
+            return out
+
+        return [v for part in parallel_map(score, range(0, len(bs), chunk)) for v in part]
 
     def __call__(self, k: float, b: float) -> float:
         wx, wy = self.arcs(self.poses(k, b))
@@ -299,12 +302,13 @@ def _best_of(values: list[float], k: float, bs: F64, best: tuple[float, float, f
 
 def _grid_max(f: Callable[[float, float], float], ks: npt.ArrayLike, bs: npt.ArrayLike,
               best: tuple[float, float, float]) -> tuple[float, float, float]:
-    """The best (value, k, b) of ``best`` and ``f`` over the grid ``ks × bs``."""
-    for k in np.asarray(ks, np.float64).tolist():
-        for b in np.asarray(bs, np.float64).tolist():
-            v = float(f(k, b))
-            if v > best[0] + 1e-15:
-                best = (v, k, b)
+    """The best (value, k, b) of ``best`` and ``f`` over the grid ``ks × bs`` (``ks``
+    outer; the first of equals wins), ``f`` evaluated on parallel threads."""
+    grid = [(k, b) for k in np.asarray(ks, np.float64).tolist()
+            for b in np.asarray(bs, np.float64).tolist()]
+    for (k, b), v in zip(grid, parallel_map(lambda kb: float(f(*kb)), grid), strict=True):
+        if v > best[0] + 1e-15:
+            best = (v, k, b)
     return best
 
 
@@ -422,19 +426,20 @@ def _surface_calibration(
 
     With ``far_echoes``, the first scale is also found from them, and they replace the
     near echoes for the scale (and the patches' bias) when they agree (:func:`_far_agrees`)."""
-    from pipeline.refine.surfaces import SurfaceScale
+    from pipeline.refine.surfaces import SurfaceScale, fixed_points
 
     k, b, slope, z = 0.0, best[2], math.nan, math.nan
     far_used = False
     for rounds in range(2):
         # The bias is held per reported metre while the scale varies.
         surfaces = SurfaceScale(t_ns, x, y, yaw, echoes, b / (1.0 + k), window_m)
-        fp = surfaces.fixed_point()
         if rounds == 0 and far_echoes is not None and len(far_echoes) > len(echoes):
             wide = SurfaceScale(t_ns, x, y, yaw, far_echoes, b, window_m)
-            fw = wide.fixed_point()
+            fp, fw = fixed_points([surfaces, wide])
             if _far_agrees(fp, fw):
                 surfaces, fp, echoes, far_used = wide, fw, far_echoes, True
+        else:
+            fp = surfaces.fixed_point()
         slope = fp.slope
         z = abs(fp.value) / math.hypot(fp.standard_error, systematic)
         if not (math.isfinite(z) and fp.slope < max_slope and z >= min_z):

@@ -1,4 +1,5 @@
-"""The calibration scores' inner loops compiled (numba, ``@njit(cache=True)``); the numpy
+"""The calibration scores' inner loops compiled (numba, ``@njit(cache=True, nogil=True)``:
+they release the GIL, so candidate calibrations score on parallel threads); the numpy
 versions in :mod:`pipeline.refine.calibration` stay as the reference the tests compare with.
 
 * :func:`consistency_score` — the echo consistency (``_Consistency``). The numpy version
@@ -37,7 +38,7 @@ def gaussian_weights(sd_cells: float, truncate: float = 3.0) -> F64:
     return np.asarray(phi / phi.sum())
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def consistency_score(wx: np.ndarray, wy: np.ndarray, ox: np.ndarray, oy: np.ndarray,
                       steps: np.ndarray, band: float, res: float, pad: float,
                       weights: np.ndarray, min_evidence: float) -> float:
@@ -127,7 +128,7 @@ def consistency_score(wx: np.ndarray, wy: np.ndarray, ox: np.ndarray, oy: np.nda
     return total / scored if scored > 0 else 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def binned_sharpness(x: np.ndarray, y: np.ndarray, size: float) -> float:
     """``Σ n² / (Σ n)²`` of the points' counts ``n`` in square bins of ``size``, averaged
     over two grids offset by half a bin (``_BinnedSharpness``)."""

@@ -60,6 +60,7 @@ import numpy as np
 from formats.arrays import F64, I64
 from pipeline.refine.calibration import _Placed, _thin
 from pipeline.refine.echoes import Echoes
+from pipeline.refine.threads import parallel_map
 from pipeline.se2 import transform_points
 
 # Echoes used (evenly thinned beyond): 16,000 hold ~40 MB of arcs and free-cone samples;
@@ -231,7 +232,7 @@ class SurfaceScale:
     def fixed_point(self) -> FixedPoint:
         """The scale: the fixed point of ``f`` (module docstring), its standard error that
         of ``f`` nearest it amplified by ``1 / (1 − c)``."""
-        return _fixed_point(np.array(K0S), [self.evaluate(k0) for k0 in K0S])
+        return fixed_points([self])[0]
 
     def bias_fixed_point(self, k: float, b: float) -> FixedPoint:
         """The heading bias at the scale ``k`` the same way, around ``b`` (±:data:`B0S`):
@@ -239,7 +240,17 @@ class SurfaceScale:
         (the office: 0.81°/m of 0.8, slope 0.55, where sharpness peaks at 0.72) it is
         sharper than sharpness; on the buildings its slope is near 1 (undetermined)."""
         b0s = b + np.array(B0S)
-        return _fixed_point(b0s, [self.evaluate_bias(k, b0) for b0 in b0s.tolist()])
+        return _fixed_point(b0s, parallel_map(lambda b0: self.evaluate_bias(k, b0),
+                                              b0s.tolist()))
+
+
+def fixed_points(estimators: list[SurfaceScale]) -> list[FixedPoint]:
+    """:meth:`SurfaceScale.fixed_point` of each, all their evaluations on parallel threads
+    (:func:`pipeline.refine.threads.parallel_map`)."""
+    done = parallel_map(lambda job: job[0].evaluate(job[1]),
+                        [(est, k0) for est in estimators for k0 in K0S])
+    n = len(K0S)
+    return [_fixed_point(np.array(K0S), done[i * n:(i + 1) * n]) for i in range(len(estimators))]
 
 
 def _row_ids(key: I64) -> I64:
