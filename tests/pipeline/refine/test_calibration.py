@@ -5,6 +5,7 @@ consistency peaks at the true calibration."""
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -16,6 +17,8 @@ from pipeline.refine import Echoes, collect_echoes
 from pipeline.refine.calibration import _Consistency, _Sharpness
 from pipeline.simulate import SimOptions, simulate, write_simulation
 from pipeline.simulate.world import world_from_dict
+
+SampleEchoes = Callable[[str, float], tuple[tuple[np.ndarray, ...], Echoes]]
 
 WORLD = {
     "polygon": [{"points": [[0, 0], [10, 0], [10, 6], [0, 6]]}],
@@ -130,23 +133,6 @@ def test_the_compiled_binned_sharpness_is_the_reference_bit_for_bit(
     assert compiled(0.0, math.radians(b_deg)) == want
 
 
-def sample_echoes(name: str, max_range_m: float) -> tuple[tuple[np.ndarray, ...], Echoes]:
-    """A sample log's pose track (t, x, y, yaw) and echoes out to ``max_range_m``."""
-    from pathlib import Path
-
-    from pipeline.run import prepare
-
-    log = Path(__file__).resolve().parents[3] / "sample_logs" / name / f"{name}.mcap"
-    cfg = Config()
-    with open_log(log, cfg) as reader:
-        sv, sensors, _ = prepare(reader, cfg)
-        echoes = collect_echoes(sv.ordered_ranges(reader), sv.track, sensors,
-                                eps_max=cfg.mapper.eps_max, max_echo_range_m=max_range_m,
-                                arc_fraction=0.8, time_offset_ns=0, max_gap_ns=10**9)
-    track = tuple(np.asarray(getattr(sv.track, a)) for a in ("t_ns", "x", "y", "yaw"))
-    return track, echoes
-
-
 def test_far_echoes_replace_the_near_ones_only_when_they_agree() -> None:
     from pipeline.refine.calibration import _far_agrees
     from pipeline.refine.surfaces import FixedPoint
@@ -165,7 +151,8 @@ def test_far_echoes_replace_the_near_ones_only_when_they_agree() -> None:
 
 
 @pytest.mark.parametrize(("name", "used"), [("office", True), ("corridor", False)])
-def test_the_far_echoes_scale_is_used_where_it_passes(name: str, used: bool) -> None:
+def test_the_far_echoes_scale_is_used_where_it_passes(name: str, used: bool,
+                                                     sample_echoes: SampleEchoes) -> None:
     # True poses: the office's walls seen to 5 m narrow the error (0.25 → 0.17 %); the
     # corridor's far echoes (fore and aft sonars at its pillars and end walls) widen it.
     from pipeline.refine.calibration import calibrate
@@ -185,7 +172,8 @@ def test_the_far_echoes_scale_is_used_where_it_passes(name: str, used: bool) -> 
             alone.scale_estimate, alone.scale_standard_error)
 
 
-def test_a_lattice_that_sharpens_under_a_wrong_bias_keeps_its_true_heading() -> None:
+def test_a_lattice_that_sharpens_under_a_wrong_bias_keeps_its_true_heading(
+        sample_echoes: SampleEchoes) -> None:
     # The orchard sample (true poses, rows of trunks 3 m apart, 1.5 m along a row): the
     # echoes sharpen by over 1 % under +0.2°/m (an alias of the lattice), which would cost
     # the map 0.36 F1; they are less consistent there, so no bias is applied.

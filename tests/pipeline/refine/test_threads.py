@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import pytest
@@ -19,9 +21,8 @@ def test_results_keep_the_items_order() -> None:
     assert parallel_map(lambda v: v, []) == []
 
 
-def test_the_calibration_is_the_same_on_one_thread(monkeypatch: pytest.MonkeyPatch) -> None:
-    from tests.pipeline.refine.test_calibration import sample_echoes
-
+def test_the_calibration_is_the_same_on_one_thread(monkeypatch: pytest.MonkeyPatch,
+                                                   sample_echoes: Callable[..., Any]) -> None:
     from pipeline.refine.calibration import calibrate
 
     track, far = sample_echoes("office", 5.0)

@@ -1,0 +1,37 @@
+"""Shared fixtures of the pose refinement tests."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from formats import open_log
+from pipeline.config import Config
+from pipeline.refine import Echoes, collect_echoes
+
+
+@pytest.fixture(scope="session")
+def sample_echoes() -> Callable[[str, float], tuple[tuple[np.ndarray, ...], Echoes]]:
+    """``load(name, max_range_m)``: a sample log's pose track (t, x, y, yaw) and its echoes
+    out to ``max_range_m`` (read once per session)."""
+    from pipeline.run import prepare
+
+    cache: dict[tuple[str, float], tuple[tuple[np.ndarray, ...], Echoes]] = {}
+
+    def load(name: str, max_range_m: float) -> tuple[tuple[np.ndarray, ...], Echoes]:
+        if (name, max_range_m) not in cache:
+            log = Path(__file__).resolve().parents[3] / "sample_logs" / name / f"{name}.mcap"
+            cfg = Config()
+            with open_log(log, cfg) as reader:
+                sv, sensors, _ = prepare(reader, cfg)
+                echoes = collect_echoes(sv.ordered_ranges(reader), sv.track, sensors,
+                                        eps_max=cfg.mapper.eps_max, max_echo_range_m=max_range_m,
+                                        arc_fraction=0.8, time_offset_ns=0, max_gap_ns=10**9)
+            track = tuple(np.asarray(getattr(sv.track, a)) for a in ("t_ns", "x", "y", "yaw"))
+            cache[(name, max_range_m)] = (track, echoes)
+        return cache[(name, max_range_m)]
+
+    return load
