@@ -34,7 +34,7 @@ lab with 0.02 m/√m or 0.003 rad/√rad of noise per step left after the calibr
 maps no better (aligned F1 0.696 → 0.661 on the Intel lab).
 
 Measured (``python -m benchmarks.drift_variety``): the Intel lab with 0.02 m/√m of noise
-per step, ATE 0.187 → 0.077 m and F1 0.56 → 0.96 of true poses; with 0.003 rad/√rad,
+per step, ATE 0.187 → 0.082 m and F1 0.56 → 0.96 of true poses; with 0.003 rad/√rad,
 0.179 → 0.054 m (aligned F1 0.83 → 0.98); every other drifted and true-pose log left as
 it was (gated). One solve costs one association and a dense system of 3 unknowns per
 stretch (the patches' offsets eliminated): ~0.05 s gated, ~0.17 s applied on the Intel.
