@@ -58,7 +58,6 @@ from pipeline.refine.echoes import Echoes
 from pipeline.se2 import transform_points
 
 IRLS_STEPS = 6
-CAUCHY = 2.385  # the Cauchy loss's scale in residual σ (95 % efficiency)
 
 
 @dataclass(frozen=True)
@@ -113,7 +112,7 @@ def _solve(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, travel: F64, cen
     solve; ``travel``: each pose's, ``centre``: each stretch's mean x, y and travel. The
     patches' offsets are eliminated (each is the weighted mean of its rows), which leaves
     a dense system of 3 unknowns per stretch."""
-    from pipeline.refine.surfaces import SurfaceScale
+    from pipeline.refine.surfaces import CAUCHY, MAD_SIGMA, SurfaceScale
 
     surfaces = SurfaceScale(t_ns, x, y, yaw, echoes, 0.0, window_m=0.0)
     poses = surfaces.poses(0.0)
@@ -148,7 +147,7 @@ def _solve(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, travel: F64, cen
     res = residuals(sol, w)
     scale = 1.0
     for _ in range(IRLS_STEPS):
-        sigma = 1.4826 * float(np.median(np.abs(res))) + 1e-6
+        sigma = MAD_SIGMA * float(np.median(np.abs(res))) + 1e-6
         scale = CAUCHY * sigma
         w = 1.0 / (1.0 + (res / scale) ** 2) / sigma**2
         # normal equations with the offsets eliminated: Gᵀ W G − Bᵀ D⁻¹ B + prior

@@ -78,6 +78,8 @@ K0S = (-0.04, -0.02, 0.0, 0.02, 0.04)
 STEP = 0.005
 WINDOW_M = 30.0
 BIAS_STEP = math.radians(0.03)  # rad per metre: the bias's inner scan
+CAUCHY = 2.385  # the Cauchy loss's scale in residual σ (95 % efficiency at a Gaussian)
+MAD_SIGMA = 1.4826  # σ of a Gaussian per median absolute deviation
 B0S = tuple(math.radians(d) for d in (-0.2, -0.1, 0.0, 0.1, 0.2))  # around the bias given
 
 
@@ -210,7 +212,7 @@ class SurfaceScale:
             rows.append(q - mean[patch])
         residuals = np.array(rows)
         mid, step = len(candidates) // 2, float(candidates[1] - candidates[0])
-        s = 2.385 * 1.4826 * float(np.median(np.abs(residuals[mid]))) + 1e-9
+        s = CAUCHY * MAD_SIGMA * float(np.median(np.abs(residuals[mid]))) + 1e-9
         loss = np.log1p((residuals / s) ** 2).sum(axis=1)
         i = int(np.argmin(loss))
         best = float(candidates[i])
