@@ -79,7 +79,8 @@ def correct_stretches(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
     metrics: dict[str, Any] = {"stretches": 0, "iterations": 0}
     for it in range(iterations):
         travel = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(x), np.diff(y)))])
-        stretch = np.floor(travel / stretch_m).astype(np.int64)
+        # stretches numbered 0 … n − 1 over the ones poses fall in (a jump may skip one)
+        stretch = np.unique(np.floor(travel / stretch_m).astype(np.int64), return_inverse=True)[1]
         n = int(stretch.max(initial=0)) + 1
         if n < 2 or len(echoes) == 0:
             break
@@ -89,7 +90,7 @@ def correct_stretches(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
         look = interpolate_poses(PoseTrack(t_ns, x, y, yaw, "", ""), echoes.t_ns,
                                  np.iinfo(np.int64).max)
         placed = dataclasses.replace(echoes, odo=np.column_stack([look.x, look.y, look.yaw]))
-        solved = _solve(t_ns, x, y, yaw, placed, travel, centre, stretch_m, sigma_xy,
+        solved = _solve(t_ns, x, y, yaw, placed, stretch, centre, stretch_m, sigma_xy,
                         sigma_yaw)
         if solved is None:
             break
@@ -105,11 +106,11 @@ def correct_stretches(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
     return Corrected(x, y, yaw, metrics)
 
 
-def _solve(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, travel: F64, centre: F64,
+def _solve(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, stretch: I64, centre: F64,
            stretch_m: float, sigma_xy: float, sigma_yaw: float
            ) -> tuple[F64, float, int] | None:
     """(corrections (stretches, 3), the loss's fall, the parameters) of one linearised
-    solve; ``travel``: each pose's, ``centre``: each stretch's mean x, y and travel. The
+    solve; ``stretch``: each pose's, ``centre``: each stretch's mean x, y and travel. The
     patches' offsets are eliminated (each is the weighted mean of its rows), which leaves
     a dense system of 3 unknowns per stretch."""
     from pipeline.refine.surfaces import CAUCHY, MAD_SIGMA, SurfaceScale
@@ -127,8 +128,8 @@ def _solve(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, travel: F64, cen
     ray = pose[:, 2] + phi
     dx, dy, r = np.cos(ray), np.sin(ray), e.range_m[idx]
     q = nx * ox + ny * oy + r * (nx * dx + ny * dy)
-    s = np.clip(np.floor(np.interp(e.t_ns[idx].astype(np.float64), t_ns.astype(np.float64),
-                                   travel) / stretch_m).astype(np.int64), 0, n - 1)
+    before = np.clip(np.searchsorted(t_ns, e.t_ns[idx], side="right") - 1, 0, len(t_ns) - 1)
+    s = stretch[before]  # an echo belongs to the stretch of the pose before it
     turn = nx * (centre[s, 1] - oy) + ny * (ox - centre[s, 0]) + r * (ny * dx - nx * dy)
     design = np.column_stack([nx, ny, turn]) * (s >= 1)[:, None]  # ∂q/∂(t_x, t_y, θ)
     col = 3 * np.maximum(s - 1, 0)[:, None] + np.arange(3)  # its stretch's unknowns
