@@ -294,6 +294,12 @@ def summary(metrics: dict[str, Any], cfg: PoseRefinementConfig) -> str:
     bias = metrics.get("search_heading_bias_deg_per_m")
     if bias is not None:
         parts.append(f"heading bias {bias:+.2f}°/m" if bias else "no heading bias")
+    local = metrics.get("local")
+    if local and "gain_per_parameter" in local:
+        gain = local["gain_per_parameter"]
+        parts.append(f"local corrections over {local['stretches']} stretches "
+                     f"({gain:.2f} per parameter)" if local["iterations"] else
+                     f"no local corrections ({gain:.2f} < {cfg.local_min_gain:g} per parameter)")
     if metrics.get("cost_final") is not None:
         parts.append(f"{metrics['matches_accepted']} matches, "
                      f"{metrics['loop_closures_accepted']} loop closures")

@@ -71,8 +71,9 @@ def test_refine_poses_prints_what_refinement_did(runner, tmp_path):
     assert result.exit_code == 0, result.output
     line = next(v for v in result.output.splitlines() if v.startswith("pose refinement:"))
     assert re.fullmatch(r"pose refinement: scale error not established \([+-]\d\.\d% ± "
-                        r"\d\.\d%, z \d\.\d < 3, echoes to 5 m\), not applied; no heading bias; poses "
-                        r"moved 0\.00 m mean, 0\.00 m max", line), line
+                        r"\d\.\d%, z \d\.\d < 3, echoes to 5 m\), not applied; no heading bias; no local "
+                        r"corrections \(0\.\d\d < 1 per parameter\); poses moved 0\.00 m mean, "
+                        r"0\.00 m max", line), line
 
 
 def test_nav2_map_reloads_to_the_same_occupancy_classes(runner, tmp_path):

@@ -144,5 +144,10 @@ def test_summary_says_what_was_applied_and_why_a_scale_was_not() -> None:
     undetermined = {"search_scale_error": 0.0, "scale_fixed_point_slope": 1.2,
                     "search_heading_bias_deg_per_m": 0.0, **moved}
     assert "scale error undetermined (fixed-point slope 1.20)" in summary(undetermined, cfg)
+    local = {**applied, "local": {"stretches": 25, "iterations": 4, "gain_per_parameter": 3.63}}
+    assert "heading bias +0.80°/m; local corrections over 25 stretches (3.63 per parameter);" \
+        in summary(local, cfg)
+    gated = {**applied, "local": {"stretches": 2, "iterations": 0, "gain_per_parameter": 0.75}}
+    assert "; no local corrections (0.75 < 1 per parameter);" in summary(gated, cfg)
     assert summary({"echoes": 12, **moved}, cfg).startswith(
         "pose refinement: no calibration (12 echoes); poses moved")
