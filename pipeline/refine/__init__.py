@@ -1,5 +1,6 @@
 """Pose refinement (``sonarmap run --refine-poses``): the odometry corrected from the sonar
-echoes themselves — submaps, matching, loop closures and a pose graph — before the final
+echoes themselves — its calibration (scale error, heading bias), local corrections per
+stretch of travel and, optionally, submap matching with a pose graph — before the final
 mapping pass. Works on the pose track and the readings; the mapper is not involved."""
 
 from pipeline.refine.echoes import Echoes, collect_echoes
