@@ -48,6 +48,11 @@ ROWS: tuple[tuple[str, str | None, tuple[str, float, float, float, float], int],
     ("fhw", "udacity-8sonar", ("+3 %, +0.8°/m", 0.03, 0.8, 0.0, 0.0), 1),
     ("corridor", None, MODELS[0], 0),
     ("orchard", None, MODELS[0], 0),
+    ("corridor", None, MODELS[4], 0),
+    ("orchard", None, MODELS[4], 0),
+    ("fhw", None, MODELS[4], 7),
+    ("freiburg-101", None,
+     ("-3 %, +0.5°/m, noise 0.02 m/√m, 0.002 rad/√rad", -0.03, 0.5, 0.02, 0.002), 8),
 )
 CASES = tuple(dict.fromkeys(row[0] for row in ROWS))
 
