@@ -141,9 +141,8 @@ class _Placed:
         return np.stack([x[:, i], y[:, i], yaw[:, i]], axis=-1)
 
     def poses(self, k: float, b: float) -> F64:
-        x, y, yaw = self.motion.drifted(Calibration(k, b).inverse)
-        i = self.echo_at
-        return np.column_stack([x[i], y[i], yaw[i]])
+        """(echoes, 3): the echoes' poses under the calibration ``(k, b)``."""
+        return np.asarray(self.poses_many(np.array([k]), np.array([b]))[0])
 
     def arcs(self, pose: F64) -> tuple[F64, F64]:
         return transform_points(pose[:, None, :], self.bx, self.by)
@@ -291,10 +290,11 @@ def _bias_steps(x: F64, y: F64, max_bias: float) -> F64:
     return np.linspace(-max_bias, max_bias, n_bias | 1)
 
 
-def _best_of(values: list[float], k: float, bs: F64, best: tuple[float, float, float]
-             ) -> tuple[float, float, float]:
-    """:func:`_grid_max`'s rule over scores already computed at ``k`` and each of ``bs``."""
-    for v, b in zip(values, np.asarray(bs, np.float64).tolist(), strict=True):
+def _best_of(grid: list[tuple[float, float]], values: list[float],
+             best: tuple[float, float, float]) -> tuple[float, float, float]:
+    """The best (value, k, b) of ``best`` and the scores ``values`` at ``grid``'s
+    calibrations, in their order (the first of equals wins)."""
+    for (k, b), v in zip(grid, values, strict=True):
         if v > best[0] + 1e-15:
             best = (v, k, b)
     return best
@@ -303,13 +303,10 @@ def _best_of(values: list[float], k: float, bs: F64, best: tuple[float, float, f
 def _grid_max(f: Callable[[float, float], float], ks: npt.ArrayLike, bs: npt.ArrayLike,
               best: tuple[float, float, float]) -> tuple[float, float, float]:
     """The best (value, k, b) of ``best`` and ``f`` over the grid ``ks × bs`` (``ks``
-    outer; the first of equals wins), ``f`` evaluated on parallel threads."""
+    outer), ``f`` evaluated on parallel threads (:func:`_best_of`)."""
     grid = [(k, b) for k in np.asarray(ks, np.float64).tolist()
             for b in np.asarray(bs, np.float64).tolist()]
-    for (k, b), v in zip(grid, parallel_map(lambda kb: float(f(*kb)), grid), strict=True):
-        if v > best[0] + 1e-15:
-            best = (v, k, b)
-    return best
+    return _best_of(grid, parallel_map(lambda kb: float(f(*kb)), grid), best)
 
 
 def _consistent(consistent: _Consistency, k: float, b: float, min_gain: float) -> bool:
@@ -375,7 +372,8 @@ def calibrate(
     bs = _bias_steps(x, y, max_bias)
     # The coarse scan over the whole range on fewer echoes and cells; the refinements on all.
     scan = _BinnedSharpness(t_ns, x, y, yaw, echoes, sigma=sigma)
-    b_scan = _best_of(scan.scan(0.0, bs), 0.0, bs, (scan(0.0, 0.0), 0.0, 0.0))[2]
+    b_scan = _best_of([(0.0, b) for b in bs.tolist()], scan.scan(0.0, bs),
+                      (scan(0.0, 0.0), 0.0, 0.0))[2]
     consistent = _Consistency(t_ns, x, y, yaw, echoes, res=2 * res, sigma=sigma)
     b = _heading_bias(sharp, consistent, 0.0, b_scan, float(bs[1] - bs[0]), (base, 0.0, 0.0),
                       base, min_gain)
