@@ -93,6 +93,7 @@ class Calibration:
     scale_estimate: float = math.nan  # ... its estimate, applied or not
     scale_standard_error: float = math.nan  # ... and that estimate's standard error
     scale_far_echoes: bool = False  # ... from the echoes out to the far range (_far_agrees)
+    bias_rejected: BiasRejected | None = None  # the sharpest bias, when it was not applied
 
     @property
     def inverse(self) -> DriftModel:
@@ -105,6 +106,17 @@ class Calibration:
     def correct(self, x: F64, y: F64, yaw: F64) -> tuple[F64, F64, F64]:
         """Odometry poses with this calibration's error removed."""
         return apply_drift(x, y, yaw, self.inverse)
+
+
+@dataclass(frozen=True)
+class BiasRejected:
+    """The sharpest heading bias (rad per metre) when it was not applied, and why: how much
+    sharper it makes the echoes than none, and how much more consistent (NaN: not asked,
+    the sharpness fell short); both must reach ``min_gain`` (:func:`_heading_bias`)."""
+
+    candidate: float
+    sharper: float
+    more_consistent: float
 
 
 def _thin(n: int, at_most: int) -> I64:
@@ -309,13 +321,14 @@ def _grid_max(f: Callable[[float, float], float], ks: npt.ArrayLike, bs: npt.Arr
     return _best_of(grid, parallel_map(lambda kb: float(f(*kb)), grid), best)
 
 
-def _consistent(consistent: _Consistency, k: float, b: float, min_gain: float) -> bool:
-    """Whether the heading bias ``b`` (at the scale ``k``) also makes the echoes more
-    consistent than none by the fraction ``min_gain``: sharpness rewards any alignment,
-    including a lattice's aliases (the orchard's true poses sharpen by 2.8-3.7 % under
-    ±0.2°/m, a bias that costs them 0.2-0.36 F1), while an echo placed where other readings
-    saw free space lowers the consistency (the orchard: 0.98 of none at +0.2°/m)."""
-    return b == 0.0 or consistent(k, b) >= consistent(k, 0.0) * (1.0 + min_gain)
+def _consistency_gain(consistent: _Consistency, k: float, b: float) -> float:
+    """How much more consistent (fraction) the heading bias ``b`` makes the echoes than none
+    at the scale ``k``; a bias must gain ``min_gain`` here too: sharpness rewards any
+    alignment, including a lattice's aliases (the orchard's true poses sharpen by 2.8-3.7 %
+    under ±0.2°/m, a bias that costs them 0.2-0.36 F1), while an echo placed where other
+    readings saw free space lowers the consistency (the orchard: 0.98 of none at +0.2°/m)."""
+    none = consistent(k, 0.0)
+    return consistent(k, b) / none - 1.0 if none > 0 else math.inf  # nothing to lose
 
 
 def _most_consistent(consistent: _Consistency, k: float, b0: float, db: float) -> float:
@@ -336,22 +349,27 @@ def _most_consistent(consistent: _Consistency, k: float, b0: float, db: float) -
 
 def _heading_bias(sharp: _Sharpness, consistent: _Consistency, k: float, b0: float,
                   db: float, start: tuple[float, float, float], none: float,
-                  min_gain: float) -> float:
+                  min_gain: float) -> tuple[float, BiasRejected | None]:
     """The heading bias at the scale ``k``: the sharpest within ±2 steps ``db`` of ``b0``
     (``start``: the best known before), refined twice (steps / 4); applied only when it
     sharpens the echoes by ``min_gain`` over none (``none``: their sharpness without a
     bias at ``k``) and makes them more consistent by as much
-    (:func:`_consistent`), its value then the most consistent near it
-    (:func:`_most_consistent`); else 0."""
+    (:func:`_consistency_gain`), its value then the most consistent near it
+    (:func:`_most_consistent`); else 0, with the sharpest and its gains."""
     at_k = np.full(1, k)
     found, centre = start, b0
     for step in (db, db / 4, db / 16):
         found = _grid_max(sharp, at_k, centre + step * np.arange(-2, 3), found)
         centre = found[2]
-    if found[0] < none * (1.0 + min_gain) or not _consistent(
-            consistent, k, found[2], min_gain):
-        return 0.0
-    return _most_consistent(consistent, k, found[2], db)
+    if found[2] == 0.0:
+        return 0.0, None
+    sharper = found[0] / none - 1.0
+    if sharper < min_gain:
+        return 0.0, BiasRejected(found[2], sharper, math.nan)
+    more_consistent = _consistency_gain(consistent, k, found[2])
+    if more_consistent < min_gain:
+        return 0.0, BiasRejected(found[2], sharper, more_consistent)
+    return _most_consistent(consistent, k, found[2], db), None
 
 
 def calibrate(
@@ -375,13 +393,14 @@ def calibrate(
     b_scan = _best_of([(0.0, b) for b in bs.tolist()], scan.scan(0.0, bs),
                       (scan(0.0, 0.0), 0.0, 0.0))[2]
     consistent = _Consistency(t_ns, x, y, yaw, echoes, res=2 * res, sigma=sigma)
-    b = _heading_bias(sharp, consistent, 0.0, b_scan, float(bs[1] - bs[0]), (base, 0.0, 0.0),
-                      base, min_gain)
+    b, rejected = _heading_bias(sharp, consistent, 0.0, b_scan, float(bs[1] - bs[0]),
+                                (base, 0.0, 0.0), base, min_gain)
     best = (sharp(0.0, b) if b else base, 0.0, b)
     if max_scale <= 0:
-        return Calibration(0.0, best[2], best[0], base)
+        return Calibration(0.0, best[2], best[0], base, bias_rejected=rejected)
     if scale_score == "surfaces":
         return _surface_calibration(t_ns, x, y, yaw, echoes, sharp, consistent, base, best,
+                                    rejected,
                                     max_scale=max_scale, bias_step=float(bs[1] - bs[0]),
                                     max_slope=max_slope, min_gain=min_gain, min_z=min_z,
                                     systematic=systematic, window_m=window_m,
@@ -402,15 +421,16 @@ def calibrate(
 
 def _surface_calibration(
     t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, sharp: _Sharpness,
-    consistent: _Consistency, base: float, best: tuple[float, float, float], *,
-    max_scale: float, bias_step: float, max_slope: float, min_gain: float, min_z: float,
+    consistent: _Consistency, base: float, best: tuple[float, float, float],
+    rejected: BiasRejected | None, *, max_scale: float, bias_step: float, max_slope: float, min_gain: float, min_z: float,
     systematic: float, window_m: float, far_echoes: Echoes | None = None,
 ) -> Calibration:
     """The scale by :mod:`pipeline.refine.surfaces`; then the heading bias at that scale
     (a bias found with the scale wrong partly makes up for it: 0.58°/m of 0.8 on the office
     run) by the rule of ``k = 0`` (:func:`_heading_bias`), its value then from the patches'
     own fixed point where that is determined (:func:`_patch_bias`); when the bias moved,
-    the scale once more under it.
+    the scale once more under it. ``best``: the calibration at ``k = 0``, ``rejected``: the
+    bias it did not apply.
 
     Two gates keep a scale the data do not establish out (the bias is then found at
     ``k = 0`` the same way):
@@ -444,15 +464,16 @@ def _surface_calibration(
             b0 = _patch_bias(surfaces, 0.0, best[2], max_slope, bias_step)
             return Calibration(0.0, b0, sharp(0.0, b0), base, scale_slope=slope, scale_z=z,
                                scale_estimate=fp.value, scale_standard_error=fp.standard_error,
-                               scale_far_echoes=far_used)
+                               scale_far_echoes=far_used, bias_rejected=rejected)
         k_new = float(np.clip(fp.value, -max_scale, max_scale))
         b = b / (1.0 + k) * (1.0 + k_new)
         k = k_new
         if rounds == 1:
             break  # the scale under the bias found at the first: the answer
         # As at k = 0 (the same rule), then the patches' value where they determine it.
-        b_new = _heading_bias(sharp, consistent, k, b, bias_step, (sharp(k, b), k, b),
-                              sharp(k, 0.0), min_gain)
+        b_new, again = _heading_bias(sharp, consistent, k, b, bias_step,
+                                     (sharp(k, b), k, b), sharp(k, 0.0), min_gain)
+        rejected = _sharper(rejected, again) if b_new == 0.0 else None
         b_new = _patch_bias(surfaces, k, b_new, max_slope, bias_step)
         moved = abs(b_new - b) > bias_step / 64  # a quarter of the finest step searched
         b = b_new
@@ -460,7 +481,15 @@ def _surface_calibration(
             break  # the bias stands: the scale found under it is the answer
     return Calibration(k, b, sharp(k, b), base, scale_slope=slope, scale_z=z,
                        scale_estimate=fp.value, scale_standard_error=fp.standard_error,
-                       scale_far_echoes=far_used)
+                       scale_far_echoes=far_used, bias_rejected=rejected)
+
+
+def _sharper(a: BiasRejected | None, b: BiasRejected | None) -> BiasRejected | None:
+    """Of two rejected heading biases, the one that sharpened the echoes more (the first of
+    equals): the summary reports the sharpest bias the search saw."""
+    if a is None or (b is not None and b.sharper > a.sharper):
+        return b
+    return a
 
 
 def _far_agrees(near: FixedPoint, far: FixedPoint) -> bool:

@@ -162,6 +162,13 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
             metrics["scale_estimate"] = cal0.scale_estimate
             metrics["scale_standard_error"] = cal0.scale_standard_error
             metrics["scale_far_echoes"] = cal0.scale_far_echoes
+        if cal0.bias_rejected is not None:  # the sharpest bias, and why it was not applied
+            rejected = cal0.bias_rejected
+            metrics["heading_bias_rejected"] = {
+                "candidate_deg_per_m": math.degrees(rejected.candidate),
+                "sharper": rejected.sharper,
+                **({"more_consistent": rejected.more_consistent}
+                   if math.isfinite(rejected.more_consistent) else {})}
         if math.isfinite(cal0.consistency):
             metrics["consistency_before"] = cal0.consistency_uncalibrated
             metrics["consistency_after"] = cal0.consistency
@@ -292,8 +299,11 @@ def summary(metrics: dict[str, Any], cfg: PoseRefinementConfig) -> str:
         parts.append("scale error undetermined (fixed-point slope "
                      f"{metrics['scale_fixed_point_slope']:.2f}), not applied")
     bias = metrics.get("search_heading_bias_deg_per_m")
-    if bias is not None:
-        parts.append(f"heading bias {bias:+.2f}°/m" if bias else "no heading bias")
+    if bias:
+        parts.append(f"heading bias {bias:+.2f}°/m")
+    elif bias is not None:
+        parts.append("no heading bias" + _why_no_bias(metrics.get("heading_bias_rejected"),
+                                                      cfg.calibration_min_gain))
     local = metrics.get("local")
     if local and "gain_per_parameter" in local:
         gain = local["gain_per_parameter"]
@@ -306,6 +316,20 @@ def summary(metrics: dict[str, Any], cfg: PoseRefinementConfig) -> str:
     parts.append(f"poses moved {metrics.get('moved_mean_m', 0.0):.2f} m mean, "
                  f"{metrics.get('moved_max_m', 0.0):.2f} m max")
     return "pose refinement: " + "; ".join(parts)
+
+
+def _why_no_bias(rejected: dict[str, float] | None, min_gain: float) -> str:
+    """Why the sharpest heading bias was not applied (``metrics`` ``heading_bias_rejected``),
+    as the summary's parenthesis; empty when the sharpest was none."""
+    if not rejected:
+        return ""
+    head = (f" (the sharpest, {rejected['candidate_deg_per_m']:+.2f}°/m, makes the echoes "
+            f"{rejected['sharper']:.1%} sharper")
+    if "more_consistent" not in rejected:
+        return f"{head}, < {min_gain:.0%})"
+    change = rejected["more_consistent"]
+    said = f"{change:.1%} more" if change >= 0 else f"{-change:.1%} less"
+    return f"{head} but {said} consistent, < {min_gain:.0%})"
 
 
 def _moved(x0: F64, y0: F64, a0: F64, x1: F64, y1: F64, a1: F64) -> dict[str, float]:

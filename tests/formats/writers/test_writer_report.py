@@ -63,6 +63,8 @@ def test_readable_values() -> None:
     assert label("tolerance_m") == "tolerance (m)" and label("in_pose_gap") == "in a pose gap"
     assert label("duration_s") == "duration"
     assert label("mean_feature_variance_m2") == "mean feature variance (m²)"
+    assert label("search_heading_bias_deg_per_m") == "search heading bias (°/m)"
+    assert label("turned_max_deg") == "turned max (°)"
 
 
 def test_summary_leads_with_the_answer(tmp_path: Path, features: FeatureTable) -> None:

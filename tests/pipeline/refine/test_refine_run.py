@@ -149,5 +149,13 @@ def test_summary_says_what_was_applied_and_why_a_scale_was_not() -> None:
         in summary(local, cfg)
     gated = {**applied, "local": {"stretches": 2, "iterations": 0, "gain_per_parameter": 0.75}}
     assert "; no local corrections (0.75 < 1 per parameter);" in summary(gated, cfg)
+    unsharp = {**steep, "heading_bias_rejected": {"candidate_deg_per_m": -0.081,
+                                                  "sharper": 0.0061}}
+    assert "; no heading bias (the sharpest, -0.08°/m, makes the echoes 0.6% sharper, < 1%);" \
+        in summary(unsharp, cfg)
+    alias = {**steep, "heading_bias_rejected": {"candidate_deg_per_m": 2.012, "sharper": 0.371,
+                                                "more_consistent": -0.101}}
+    assert ("; no heading bias (the sharpest, +2.01°/m, makes the echoes 37.1% sharper but "
+            "10.1% less consistent, < 1%);") in summary(alias, cfg)
     assert summary({"echoes": 12, **moved}, cfg).startswith(
         "pose refinement: no calibration (12 echoes); poses moved")
