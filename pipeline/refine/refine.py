@@ -162,6 +162,9 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
             metrics["scale_estimate"] = cal0.scale_estimate
             metrics["scale_standard_error"] = cal0.scale_standard_error
             metrics["scale_far_echoes"] = cal0.scale_far_echoes
+        if cal0.scale_disputed_by is not None:  # the far echoes' scale that kept it out
+            metrics["scale_far_estimate"] = cal0.scale_disputed_by.value
+            metrics["scale_far_standard_error"] = cal0.scale_disputed_by.standard_error
         if cal0.bias_rejected is not None:  # the sharpest bias, and why it was not applied
             rejected = cal0.bias_rejected
             metrics["heading_bias_rejected"] = {
@@ -290,7 +293,9 @@ def summary(metrics: dict[str, Any], cfg: PoseRefinementConfig) -> str:
                      f"(z {metrics.get('scale_z', math.nan):.1f}{reach})")
     elif "scale_estimate" in metrics:
         z = metrics.get("scale_z", math.nan)
-        why = (f"z {z:.1f} < {cfg.calibration_scale_min_z:g}"
+        why = (f"the far echoes disagree: {metrics['scale_far_estimate']:+.1%} ± "
+               f"{metrics['scale_far_standard_error']:.1%}" if "scale_far_estimate" in metrics
+               else f"z {z:.1f} < {cfg.calibration_scale_min_z:g}"
                if not z >= cfg.calibration_scale_min_z
                else f"fixed-point slope {metrics['scale_fixed_point_slope']:.2f}")
         parts.append(f"scale error not established ({metrics['scale_estimate']:+.1%} ± "

@@ -150,6 +150,49 @@ def test_far_echoes_replace_the_near_ones_only_when_they_agree() -> None:
     assert not _far_agrees(fp(math.nan, math.nan), fp(0.03, 0.002))
 
 
+def test_a_scale_is_established_only_clear_of_zero_flat_and_of_the_sign_asked() -> None:
+    from pipeline.refine.calibration import _established
+    from pipeline.refine.surfaces import FixedPoint
+
+    def fp(value: float, error: float, slope: float = 0.5) -> FixedPoint:
+        return FixedPoint(value, slope, (), error)
+
+    assert _established(fp(0.047, 0.0016), 0.053, 0.005, 3.0, 0.75)  # the office at +5 %
+    assert not _established(fp(0.007, 0.0042), 0.046, 0.005, 3.0, 0.75)  # z 1.1
+    assert not _established(fp(-0.047, 0.0016), 0.053, 0.005, 3.0, 0.75)  # the other sign
+    assert not _established(fp(0.047, 0.0016, slope=0.8), 0.053, 0.005, 3.0, 0.75)
+    assert not _established(fp(math.nan, math.nan), 0.05, 0.005, 3.0, 0.75)
+
+
+@pytest.mark.parametrize(("far", "applied"), [
+    ((0.0071, 0.0042), False),  # Freiburg 101's real odometry: the far scale not established
+    ((0.0800, 0.0020), True),  # as the office's +5 % row (+5.3 / +4.7 %): both establish it
+])
+def test_disagreeing_far_echoes_keep_the_near_scale_out_unless_they_establish_it_too(
+        far: tuple[float, float], applied: bool, sample_echoes: SampleEchoes,
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    # The far echoes more precise than the near ones and 3.4-3.9 % apart (the specification
+    # test fails): the near scale (z 3.4 here) is applied only when the far one also
+    # calls for a scale of its sign.
+    import pipeline.refine.surfaces as surfaces
+    from pipeline.refine.calibration import calibrate
+
+    near_fp = surfaces.FixedPoint(0.046, 0.5, (), 0.0125)
+    far_fp = surfaces.FixedPoint(far[0], 0.5, (), far[1])
+    monkeypatch.setattr(surfaces, "fixed_points",
+                        lambda ests: [near_fp, far_fp][:len(ests)] if len(ests) == 2
+                        else [near_fp])
+    track, wide = sample_echoes("office", 5.0)
+    near = wide.take(np.flatnonzero(wide.range_m <= 3.0))
+    cal = calibrate(*track, near, max_scale=0.05, max_bias=math.radians(3.0), res=0.05,
+                    sigma=0.1, min_gain=0.01, far_echoes=wide)
+    assert cal.scale_far_echoes is False and cal.scale_estimate == pytest.approx(0.046)
+    if applied:
+        assert cal.scale_error == pytest.approx(0.046) and cal.scale_disputed_by is None
+    else:
+        assert cal.scale_error == 0.0 and cal.scale_disputed_by is far_fp
+
+
 @pytest.mark.parametrize(("name", "used"), [("office", True), ("corridor", False)])
 def test_the_far_echoes_scale_is_used_where_it_passes(name: str, used: bool,
                                                      sample_echoes: SampleEchoes) -> None:

@@ -141,6 +141,10 @@ def test_summary_says_what_was_applied_and_why_a_scale_was_not() -> None:
     steep = {**doubted, "scale_z": 4.0, "search_heading_bias_deg_per_m": 0.0}
     assert ("not established (-2.3% ± 2.4%, fixed-point slope 0.79), not applied; no "
             "heading bias") in summary(steep, cfg)
+    disputed = {**doubted, "scale_z": 3.1, "scale_estimate": 0.046, "scale_standard_error": 0.0125,
+                "scale_far_estimate": 0.0071, "scale_far_standard_error": 0.0042}
+    assert ("scale error not established (+4.6% ± 1.2%, the far echoes disagree: +0.7% ± "
+            "0.4%), not applied;") in summary(disputed, cfg)
     undetermined = {"search_scale_error": 0.0, "scale_fixed_point_slope": 1.2,
                     "search_heading_bias_deg_per_m": 0.0, **moved}
     assert "scale error undetermined (fixed-point slope 1.20)" in summary(undetermined, cfg)
