@@ -423,8 +423,9 @@ def calibrate(
 def _surface_calibration(
     t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, sharp: _Sharpness,
     consistent: _Consistency, base: float, best: tuple[float, float, float],
-    rejected: BiasRejected | None, *, max_scale: float, bias_step: float, max_slope: float, min_gain: float, min_z: float,
-    systematic: float, window_m: float, far_echoes: Echoes | None = None,
+    rejected: BiasRejected | None, *, max_scale: float, bias_step: float, max_slope: float,
+    min_gain: float, min_z: float, systematic: float, window_m: float,
+    far_echoes: Echoes | None = None,
 ) -> Calibration:
     """The scale by :mod:`pipeline.refine.surfaces`; then the heading bias at that scale
     (a bias found with the scale wrong partly makes up for it: 0.58°/m of 0.8 on the office
@@ -469,7 +470,7 @@ def _surface_calibration(
         else:
             fp = surfaces.fixed_point()
         slope = fp.slope
-        z = abs(fp.value) / math.hypot(fp.standard_error, systematic)
+        z = _scale_z(fp, systematic)
         if disputed is not None or not _established(fp, fp.value, systematic, min_z, max_slope):
             b0 = _patch_bias(surfaces, 0.0, best[2], max_slope, bias_step)
             return Calibration(0.0, b0, sharp(0.0, b0), base, scale_slope=slope, scale_z=z,
@@ -508,9 +509,15 @@ def _established(fp: FixedPoint, sign: float, systematic: float, min_z: float,
     """Whether the fixed point ``fp`` establishes a scale error of the sign of ``sign``: its
     slope below ``max_slope`` and its value ``min_z`` errors clear of 0 (the standard error
     and ``systematic`` in quadrature; see :func:`_surface_calibration`)."""
-    z = abs(fp.value) / math.hypot(fp.standard_error, systematic)
+    z = _scale_z(fp, systematic)
     return (math.isfinite(z) and fp.slope < max_slope and z >= min_z
             and math.copysign(1.0, fp.value) == math.copysign(1.0, sign))
+
+
+def _scale_z(fp: FixedPoint, systematic: float) -> float:
+    """How many errors the scale ``fp`` lies from 0, its standard error and the estimator's
+    ``systematic`` lean in quadrature (NaN where undetermined)."""
+    return abs(fp.value) / math.hypot(fp.standard_error, systematic)
 
 
 def _far_agrees(near: FixedPoint, far: FixedPoint) -> bool:
