@@ -356,8 +356,9 @@ def _drift_cases(work: Path, names: tuple[str, ...] = DRIFT_CASES
 def drifted_case(case: str, drifted: Path, drift: DriftModel, drift_seed: int = 0,
                  preset: str | None = None) -> tuple[Path, Path, Path]:
     """(true-pose log, truth map, truth trajectory) of a drifted case, its drifted log
-    written to ``drifted`` when missing: a world simulated again with ``drift`` (the
-    simulation's seed draws its noise), a building emulated with ``drift`` applied to its
+    written to ``drifted`` when missing: a world of ``sample_logs/worlds`` simulated again
+    with ``drift`` (the simulation's seed draws its noise; its true run the sample log, or
+    for a world without one the same simulation undrifted beside ``drifted``), a building emulated with ``drift`` applied to its
     corrected poses (``drift_seed``), or for ``<building>-odometry`` its own wheel odometry
     (the Radish logs' true-pose runs are ``make compare``'s ``build/compare/<name>.mcap``,
     emulated here when missing). ``preset``: a building's sonars emulated as that preset's
@@ -367,15 +368,21 @@ def drifted_case(case: str, drifted: Path, drift: DriftModel, drift_seed: int = 
 
     real = case.endswith("-odometry")
     name = case.removesuffix("-odometry")
-    if name in ("office", "corridor", "orchard") and not real:
+    world = REPO / "sample_logs" / "worlds" / f"{name}.toml"
+    if world.exists() and not real:
+        # a sample log's true run where there is one, else the same simulation undrifted
         clean = REPO / "sample_logs" / name / f"{name}.mcap"
+        sim = SimOptions(seed=1, speed=0.5, ring_rate_hz=5.0)
+        if not clean.exists():
+            clean = drifted.with_name(f"{name}.mcap")
+            if not clean.exists():
+                run_simulation(world, clean, "mcap", options=sim)
         if not drifted.exists():
-            run_simulation(REPO / "sample_logs" / "worlds" / f"{name}.toml", drifted, "mcap",
-                           options=SimOptions(seed=1, speed=0.5, ring_rate_hz=5.0,
-                                              drift_scale=drift.scale_error,
-                                              drift_heading_bias_deg_per_m=(
-                                                  drift.heading_bias_deg_per_m),
-                                              drift_xy=drift.noise_xy, drift_yaw=drift.noise_yaw))
+            run_simulation(world, drifted, "mcap",
+                           options=dataclasses.replace(
+                               sim, drift_scale=drift.scale_error,
+                               drift_heading_bias_deg_per_m=drift.heading_bias_deg_per_m,
+                               drift_xy=drift.noise_xy, drift_yaw=drift.noise_yaw))
         return clean, clean.with_name(f"{name}.truth.yaml"), clean.with_name(f"{name}.truth.csv")
     if name == "intel-lab":
         src = REPO / "sample_logs" / "intel-lab" / "intel-corrected.log.gz"
