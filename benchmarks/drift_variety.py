@@ -2,8 +2,9 @@
 sign of either error, smaller and larger ones, and noise per step, on the office
 simulation and the Intel lab emulation; then the same kinds of drift on the buildings,
 the corridor and the orchard, and the buildings' sonars emulated as the Udacity 8-sonar
-ring — logs the refinement was not developed on — and two worlds of repeating structure
-(a warehouse's shelving, a hall of pillars). What refinement finds and what it gives.
+ring — logs the refinement was not developed on — two worlds of repeating structure
+(a warehouse's shelving, a hall of pillars) and two floors (a loop corridor, rooms off a
+corridor), all four in ``sample_logs/worlds``. What refinement finds and what it gives.
 
     python -m benchmarks.drift_variety [--work DIR] [--cases office intel-lab ...] [--config TOML]
 
@@ -59,6 +60,11 @@ ROWS: tuple[tuple[str, str | None, tuple[str, float, float, float, float], int],
     ("pillars", None, ("+3 %, +0.8°/m", 0.03, 0.8, 0.0, 0.0), 0),
     ("warehouse", None, ("-2.5 %, -1.0°/m, noise 0.01 m/√m", -0.025, -1.0, 0.01, 0.0), 0),
     ("pillars", None, ("-2.5 %, -1.0°/m, noise 0.01 m/√m", -0.025, -1.0, 0.01, 0.0), 0),
+    # two more floors made after the refinement was (a loop corridor, rooms off a corridor)
+    ("loop", None, ("+3 %, +0.8°/m", 0.03, 0.8, 0.0, 0.0), 0),
+    ("rooms", None, ("+3 %, +0.8°/m", 0.03, 0.8, 0.0, 0.0), 0),
+    ("loop", None, ("-2.5 %, -1.0°/m, noise 0.01 m/√m", -0.025, -1.0, 0.01, 0.0), 0),
+    ("rooms", None, ("-2.5 %, -1.0°/m, noise 0.01 m/√m", -0.025, -1.0, 0.01, 0.0), 0),
 )
 CASES = tuple(dict.fromkeys(row[0] for row in ROWS))
 
