@@ -358,11 +358,12 @@ def drifted_case(case: str, drifted: Path, drift: DriftModel, drift_seed: int = 
     """(true-pose log, truth map, truth trajectory) of a drifted case, its drifted log
     written to ``drifted`` when missing: a world of ``sample_logs/worlds`` simulated again
     with ``drift`` (the simulation's seed draws its noise; its true run the sample log, or
-    for a world without one the same simulation undrifted beside ``drifted``), a building emulated with ``drift`` applied to its
+    for a world without one, or with ``preset``'s sonars, the same simulation undrifted
+    beside ``drifted``), a building emulated with ``drift`` applied to its
     corrected poses (``drift_seed``), or for ``<building>-odometry`` its own wheel odometry
     (the Radish logs' true-pose runs are ``make compare``'s ``build/compare/<name>.mcap``,
-    emulated here when missing). ``preset``: a building's sonars emulated as that preset's
-    ring (formats/presets.py), its true-pose run beside ``drifted``."""
+    emulated here when missing). ``preset``: the sonars simulated or emulated as that
+    preset's ring (formats/presets.py), its true-pose run beside ``drifted``."""
     from pipeline.emulate import EmulateOptions, run_emulation
     from pipeline.simulate import SimOptions, run_simulation
 
@@ -371,12 +372,17 @@ def drifted_case(case: str, drifted: Path, drift: DriftModel, drift_seed: int = 
     world = REPO / "sample_logs" / "worlds" / f"{name}.toml"
     if world.exists() and not real:
         # a sample log's true run where there is one, else the same simulation undrifted
+        from formats.presets import PRESETS
+
         clean = REPO / "sample_logs" / name / f"{name}.mcap"
         sim = SimOptions(seed=1, speed=0.5, ring_rate_hz=5.0)
-        if not clean.exists():
+        if preset is not None:  # the world's sonars as that preset's ring
+            sim = dataclasses.replace(sim, mounts=PRESETS[preset])
+            clean = drifted.with_name(f"{name}-{preset}.mcap")
+        elif not clean.exists():
             clean = drifted.with_name(f"{name}.mcap")
-            if not clean.exists():
-                run_simulation(world, clean, "mcap", options=sim)
+        if not clean.exists():
+            run_simulation(world, clean, "mcap", options=sim)
         if not drifted.exists():
             run_simulation(world, drifted, "mcap",
                            options=dataclasses.replace(

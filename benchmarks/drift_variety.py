@@ -65,6 +65,9 @@ ROWS: tuple[tuple[str, str | None, tuple[str, float, float, float, float], int],
     ("rooms", None, ("+3 %, +0.8°/m", 0.03, 0.8, 0.0, 0.0), 0),
     ("loop", None, ("-2.5 %, -1.0°/m, noise 0.01 m/√m", -0.025, -1.0, 0.01, 0.0), 0),
     ("rooms", None, ("-2.5 %, -1.0°/m, noise 0.01 m/√m", -0.025, -1.0, 0.01, 0.0), 0),
+    # the floors seen by the Udacity 8-sonar ring
+    ("rooms", "udacity-8sonar", ("+3 %, +0.8°/m", 0.03, 0.8, 0.0, 0.0), 0),
+    ("loop", "udacity-8sonar", ("+3 %, +0.8°/m", 0.03, 0.8, 0.0, 0.0), 0),
 )
 CASES = tuple(dict.fromkeys(row[0] for row in ROWS))
 

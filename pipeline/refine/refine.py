@@ -144,7 +144,9 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
             local = correct_stretches(
                 tt, ox, oy, oyaw, echoes, stretch_m=cfg.local_stretch_m,
                 sigma_xy=cfg.odometry_sigma_xy, sigma_yaw=math.radians(cfg.odometry_sigma_yaw_deg),
-                iterations=cfg.local_iterations, min_gain=cfg.local_min_gain)
+                iterations=cfg.local_iterations, min_gain=cfg.local_min_gain,
+                min_consistency_gain=cfg.calibration_min_gain, res=cfg.field_resolution_m,
+                sigma=cfg.field_sigma_m)
             ox, oy, oyaw = local.x, local.y, local.yaw
             metrics["local"] = local.metrics
         look = interpolate_poses(PoseTrack(tt, ox, oy, oyaw, "", ""), echoes.t_ns,
@@ -312,9 +314,17 @@ def summary(metrics: dict[str, Any], cfg: PoseRefinementConfig) -> str:
     local = metrics.get("local")
     if local and "gain_per_parameter" in local:
         gain = local["gain_per_parameter"]
-        parts.append(f"local corrections over {local['stretches']} stretches "
-                     f"({gain:.2f} per parameter)" if local["iterations"] else
-                     f"no local corrections ({gain:.2f} < {cfg.local_min_gain:g} per parameter)")
+        if local.get("applied"):
+            parts.append(f"local corrections over {local['stretches']} stretches "
+                         f"({gain:.2f} per parameter)")
+        elif "consistency_gain" in local:
+            change = local["consistency_gain"]
+            parts.append(f"no local corrections ({gain:.2f} per parameter, but the echoes "
+                         f"{abs(change):.1%} {'more' if change >= 0 else 'less'} consistent, "
+                         f"< {cfg.calibration_min_gain:.0%})")
+        else:
+            parts.append(f"no local corrections ({gain:.2f} < {cfg.local_min_gain:g} per "
+                         "parameter)")
     if metrics.get("cost_final") is not None:
         parts.append(f"{metrics['matches_accepted']} matches, "
                      f"{metrics['loop_closures_accepted']} loop closures")

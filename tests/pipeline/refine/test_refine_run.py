@@ -148,9 +148,14 @@ def test_summary_says_what_was_applied_and_why_a_scale_was_not() -> None:
     undetermined = {"search_scale_error": 0.0, "scale_fixed_point_slope": 1.2,
                     "search_heading_bias_deg_per_m": 0.0, **moved}
     assert "scale error undetermined (fixed-point slope 1.20)" in summary(undetermined, cfg)
-    local = {**applied, "local": {"stretches": 25, "iterations": 4, "gain_per_parameter": 3.63}}
+    local = {**applied, "local": {"stretches": 25, "iterations": 4, "gain_per_parameter": 3.63,
+                                  "consistency_gain": 0.186, "applied": True}}
     assert "heading bias +0.80°/m; local corrections over 25 stretches (3.63 per parameter);" \
         in summary(local, cfg)
+    inconsistent = {**applied, "local": {"stretches": 7, "iterations": 4, "applied": False,
+                                         "gain_per_parameter": 1.2, "consistency_gain": -0.0068}}
+    assert ("; no local corrections (1.20 per parameter, but the echoes 0.7% less consistent, "
+            "< 1%);") in summary(inconsistent, cfg)
     gated = {**applied, "local": {"stretches": 2, "iterations": 0, "gain_per_parameter": 0.75}}
     assert "; no local corrections (0.75 < 1 per parameter);" in summary(gated, cfg)
     unsharp = {**steep, "heading_bias_rejected": {"candidate_deg_per_m": -0.081,

@@ -64,10 +64,48 @@ def test_a_displaced_second_lap_is_pulled_back_onto_the_first(true_run) -> None:
     after = np.sqrt(np.mean((out.x - x) ** 2 + (out.y - y) ** 2))
     assert out.metrics["gain_per_parameter"] > 1.0 and out.metrics["iterations"] == 4
     assert after < 0.5 * before, (before, after)
+    assert out.metrics["applied"] and out.metrics["consistency_gain"] > 0.01
+    # the second gate: corrections that fit the patches but leave the echoes no more
+    # consistent than the ask are refused, the poses returned as given
+    strict = correct_stretches(t, x + dx, y + dy, yaw, echoes,
+                               **{**KW, "min_consistency_gain": 1.0})
+    assert not strict.metrics["applied"] and strict.metrics["iterations"] == 4
+    assert strict.metrics["note"].startswith("not applied: the echoes would be ")
+    np.testing.assert_array_equal(strict.x, x + dx)
 
 
 def test_too_short_a_run_for_two_stretches_is_left_alone(true_run) -> None:
     (t, x, y, yaw), echoes = true_run
     out = correct_stretches(t, x, y, yaw, echoes, **{**KW, "stretch_m": 1e4})
-    assert out.metrics == {"stretches": 0, "iterations": 0}
+    assert out.metrics == {"stretches": 0, "iterations": 0, "applied": False}
     assert out.x is x
+
+
+def test_true_poses_the_patches_loss_would_move_are_kept_by_the_echoes_consistency(
+        tmp_path) -> None:
+    # The rooms floor (sample_logs/worlds) seen by the Udacity 8-sonar ring, true poses:
+    # the patches' loss falls by 1.2 per parameter (past the first gate), and the
+    # corrections would cost the map 0.30 F1; they leave the echoes less consistent, so
+    # the second gate keeps the poses as they are.
+    from pathlib import Path
+
+    from formats.presets import PRESETS
+    from pipeline.run import prepare
+    from pipeline.simulate import load_waypoints
+    from pipeline.simulate.world import load_world
+
+    worlds = Path(__file__).resolve().parents[3] / "sample_logs" / "worlds"
+    sim = simulate(load_world(worlds / "rooms.toml"), load_waypoints(worlds / "rooms.waypoints.csv"),
+                   SimOptions(seed=3, speed=0.5, ring_rate_hz=5.0, mounts=PRESETS["udacity-8sonar"]))
+    write_simulation(sim, tmp_path / "rooms.mcap", "mcap")
+    cfg = Config()
+    with open_log(tmp_path / "rooms.mcap", cfg) as reader:
+        sv, sensors, _ = prepare(reader, cfg)
+        echoes = collect_echoes(sv.ordered_ranges(reader), sv.track, sensors,
+                                eps_max=cfg.mapper.eps_max, max_echo_range_m=3.0,
+                                arc_fraction=0.8, time_offset_ns=0, max_gap_ns=10**9)
+    t, x, y, yaw = (np.asarray(getattr(sv.track, a)) for a in ("t_ns", "x", "y", "yaw"))
+    out = correct_stretches(t, x, y, yaw, echoes, **{**KW, "stretch_m": 20.0})
+    assert out.metrics["gain_per_parameter"] > 1.0 and out.metrics["iterations"] == 4
+    assert out.metrics["consistency_gain"] < 0.0 and not out.metrics["applied"]
+    assert out.x is x and out.y is y and out.yaw is yaw
