@@ -68,6 +68,8 @@ ROWS: tuple[tuple[str, str | None, tuple[str, float, float, float, float], int],
     # the floors seen by the Udacity 8-sonar ring
     ("rooms", "udacity-8sonar", ("+3 %, +0.8°/m", 0.03, 0.8, 0.0, 0.0), 0),
     ("loop", "udacity-8sonar", ("+3 %, +0.8°/m", 0.03, 0.8, 0.0, 0.0), 0),
+    ("warehouse", "udacity-8sonar", ("+3 %, +0.8°/m", 0.03, 0.8, 0.0, 0.0), 0),
+    ("pillars", "udacity-8sonar", ("+3 %, +0.8°/m", 0.03, 0.8, 0.0, 0.0), 0),
 )
 CASES = tuple(dict.fromkeys(row[0] for row in ROWS))
 

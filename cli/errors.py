@@ -7,6 +7,7 @@ sonarmap and keeps its traceback.
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import functools
 import signal
@@ -51,6 +52,14 @@ def sigterm_as_interrupt() -> Iterator[None]:
         signal.signal(signal.SIGTERM, previous)
 
 
+def _quiet_finalizers() -> None:
+    """After a signal, the one line said is the whole message: an interrupted native
+    library (numba compiling: llvmlite's ``ObjectRef.__del__``) may fail in its finalizers
+    at exit, which Python would print as "Exception ignored in …". Silenced at exit only
+    (``atexit`` runs before those finalizers), so an in-process caller keeps its hook."""
+    atexit.register(setattr, sys, "unraisablehook", lambda unraisable: None)
+
+
 def fail(message: str) -> typer.Exit:
     """Print ``sonarmap: error: <message>`` (one line) to stderr; return the Exit to raise."""
     print(f"sonarmap: error: {' '.join(message.split())}", file=sys.stderr)
@@ -70,9 +79,11 @@ def handle_errors(fn: Callable[P, R]) -> Callable[P, R]:
             raise fail(str(err)) from None
         except Terminated:
             print("sonarmap: terminated", file=sys.stderr)
+            _quiet_finalizers()
             raise typer.Exit(EXIT_TERMINATED) from None
         except KeyboardInterrupt:
             print("sonarmap: interrupted", file=sys.stderr)
+            _quiet_finalizers()
             raise typer.Exit(EXIT_INTERRUPTED) from None
 
     return wrapper

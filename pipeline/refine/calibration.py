@@ -23,11 +23,13 @@ Two measures of agreement, for two jobs:
    bias 7-77 %. Sharpness rewards any alignment, a lattice's aliases too (the orchard's
    true poses: +3.7 % under +0.23°/m), so the bias must also make the echoes more
    consistent (below) than none by ``min_gain``, and its value is the most consistent
-   near the sharpest (:func:`_consistency_gain`, :func:`_most_consistent`). Where
-   sharpness applies none, a coarse scan of the consistency over the whole range does
-   the finding (:func:`_consistent_bias`): in repeating structure (shelving, a hall of
-   pillars) the right bias can be *less* sharp than none, while it is always the most
-   consistent measured.
+   near the sharpest (:func:`_consistency_gain`, :func:`_most_consistent`). A coarse
+   scan of the consistency over the whole range checks the finding
+   (:func:`_consistent_bias`): where sharpness applies none, or a bias beyond the scan's
+   peak that is less consistent than it, the scan's bias is taken — in repeating
+   structure (shelving, a hall of pillars) the right bias can be *less* sharp than none,
+   and seen by 8 sonars an alias passes both gates, while the right one is the most
+   consistent on every log measured.
 2. **Scale** (``max_scale > 0``, the default 0.05), by ``scale_score``: ``"surfaces"`` (the
    default, :mod:`pipeline.refine.surfaces`: echoes of one plane must agree on its offset;
    applied only when its standard error establishes it, with the heading bias searched
@@ -374,7 +376,7 @@ def _most_consistent(consistent: _Consistency, k: float, b0: float, db: float) -
 def _consistent_bias(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes,
                      consistent: _Consistency, bs: F64, *, res: float, sigma: float,
                      min_gain: float) -> float:
-    """The heading bias where sharpness applied none: the most consistent over the whole
+    """The heading bias by echo consistency alone: the most consistent over the whole
     range, coarsely (every other step of ``bs``, :data:`MAX_ECHOES_CONSISTENCY_SCAN`
     echoes, cells and blur twice the score's, on parallel threads: the peak spans ±1.5
     steps on the Intel lab), applied when the full score (``consistent``) confirms it by
@@ -382,7 +384,9 @@ def _consistent_bias(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes,
     wrong bias folds the rows onto each other and the *right* one is less sharp than none
     (simulated, 3 % and 0.8°/m of drift: a warehouse's 5 % less sharp and 23 % more
     consistent, its sharpest bias −2.0°/m, an alias; a hall of pillars' 2 % less sharp, 17 %
-    more consistent, nothing sharper by 1 %). The scan finds every drifted log's bias
+    more consistent, nothing sharper by 1 %; the hall seen by 8 sonars: an alias at
+    −2.06°/m sharper and more consistent than none, the right bias more consistent still).
+    The scan finds every drifted log's bias
     within 0.05°/m, and 0 on every true-pose and real-odometry log measured (the office's
     +0.11°/m gains 0.8 % on the scan's echoes and loses 0.3 % on all). It costs 0.03-0.2 s
     (400 echoes instead of 800 mislead it)."""
@@ -444,12 +448,16 @@ def calibrate(
     consistent = _Consistency(t_ns, x, y, yaw, echoes, res=2 * res, sigma=sigma)
     b, rejected = _heading_bias(sharp, consistent, 0.0, b_scan, float(bs[1] - bs[0]),
                                 (base, 0.0, 0.0), base, min_gain)
-    by_consistency = False
-    if b == 0.0:  # sharpness found none: a lattice can make the right bias less sharp
-        b = _consistent_bias(t_ns, x, y, yaw, echoes, consistent, bs, res=res, sigma=sigma,
-                             min_gain=min_gain)
-        by_consistency = b != 0.0
-        rejected = None if by_consistency else rejected
+    # Echo consistency over the whole range too: where sharpness found none (a lattice can
+    # make the right bias less sharp than none), or an alias of it that a more consistent
+    # bias elsewhere beats.
+    db = float(bs[1] - bs[0])
+    b_c = _consistent_bias(t_ns, x, y, yaw, echoes, consistent, bs, res=res, sigma=sigma,
+                           min_gain=min_gain)
+    by_consistency = b_c != 0.0 and (b == 0.0 or (
+        abs(b_c - b) > CONSISTENT_SPAN * db and consistent(0.0, b_c) > consistent(0.0, b)))
+    if by_consistency:
+        b, rejected = b_c, None
     best = (sharp(0.0, b) if b else base, 0.0, b)
     if max_scale <= 0:
         return Calibration(0.0, best[2], best[0], base, bias_rejected=rejected)
