@@ -380,16 +380,18 @@ def _consistent_bias(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes,
     range, coarsely (every other step of ``bs``, :data:`MAX_ECHOES_CONSISTENCY_SCAN`
     echoes, cells and blur twice the score's, on parallel threads: the peak spans ±1.5
     steps on the Intel lab), applied when the full score (``consistent``) confirms it by
-    ``min_gain``, its value then refined there (:func:`_most_consistent`, ±8 steps); else 0. Where rows of shelves or pillars repeat, a
-    wrong bias folds the rows onto each other and the *right* one is less sharp than none
-    (simulated, 3 % and 0.8°/m of drift: a warehouse's 5 % less sharp and 23 % more
-    consistent, its sharpest bias −2.0°/m, an alias; a hall of pillars' 2 % less sharp, 17 %
-    more consistent, nothing sharper by 1 %; the hall seen by 8 sonars: an alias at
-    −2.06°/m sharper and more consistent than none, the right bias more consistent still).
-    The scan finds every drifted log's bias
+    ``min_gain``, its value then refined there (:func:`_most_consistent`, ±8 steps);
+    else 0.
+
+    Where rows of shelves or pillars repeat, a wrong bias folds the rows onto each other
+    and the *right* one is less sharp than none (simulated, 3 % and 0.8°/m of drift: a
+    warehouse's 5 % less sharp and 23 % more consistent, its sharpest bias −2.0°/m, an
+    alias; a hall of pillars' 2 % less sharp, 17 % more consistent, nothing sharper by
+    1 %; the hall seen by 8 sonars: an alias at −2.06°/m sharper and more consistent than
+    none, the right bias more consistent still). The scan finds every drifted log's bias
     within 0.05°/m, and 0 on every true-pose and real-odometry log measured (the office's
-    +0.11°/m gains 0.8 % on the scan's echoes and loses 0.3 % on all). It costs 0.03-0.2 s
-    (400 echoes instead of 800 mislead it)."""
+    +0.11°/m gains 0.8 % on the scan's echoes and loses 0.3 % on all). It costs
+    0.03-0.3 s (400 echoes instead of 800 mislead it)."""
     scan = _Consistency(t_ns, x, y, yaw, echoes, res=4 * res, sigma=2 * sigma,
                         at_most=MAX_ECHOES_CONSISTENCY_SCAN)
     coarse = bs[(len(bs) // 2) % 2::2]  # every other step, 0 among them
