@@ -389,7 +389,8 @@ def drifted_case(case: str, drifted: Path, drift: DriftModel, drift_seed: int = 
                                sim, drift_scale=drift.scale_error,
                                drift_heading_bias_deg_per_m=drift.heading_bias_deg_per_m,
                                drift_xy=drift.noise_xy, drift_yaw=drift.noise_yaw))
-        return clean, clean.with_name(f"{name}.truth.yaml"), clean.with_name(f"{name}.truth.csv")
+        return (clean, clean.with_name(f"{clean.stem}.truth.yaml"),
+                clean.with_name(f"{clean.stem}.truth.csv"))
     if name == "intel-lab":
         src = REPO / "sample_logs" / "intel-lab" / "intel-corrected.log.gz"
         clean = REPO / "sample_logs" / "intel-lab" / "intel.mcap"

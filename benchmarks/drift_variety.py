@@ -70,6 +70,9 @@ ROWS: tuple[tuple[str, str | None, tuple[str, float, float, float, float], int],
     ("loop", "udacity-8sonar", ("+3 %, +0.8°/m", 0.03, 0.8, 0.0, 0.0), 0),
     ("warehouse", "udacity-8sonar", ("+3 %, +0.8°/m", 0.03, 0.8, 0.0, 0.0), 0),
     ("pillars", "udacity-8sonar", ("+3 %, +0.8°/m", 0.03, 0.8, 0.0, 0.0), 0),
+    # ... and by the Pioneer's 8 front sonars
+    *((world, "pioneer-p3dx-front", ("+3 %, +0.8°/m", 0.03, 0.8, 0.0, 0.0), 0)
+      for world in ("office", "corridor", "rooms", "loop", "warehouse", "pillars")),
 )
 CASES = tuple(dict.fromkeys(row[0] for row in ROWS))
 

@@ -3,7 +3,8 @@
 ``pioneer-p3dx`` is the 16-sonar ring of the Pioneer 2/3-DX in ARIA's geometry
 (``p3dx.p`` parameter file): 8 sonars at the front, 8 at the back. Its Polaroid 600-series
 transducers have a beam of about 30° full width (our default β) and read 0.1-5 m.
-``udacity-8sonar`` is the ring of udacity/RoboND-OccupancyGridMappingAlgorithm's data
+``pioneer-p3dx-front`` is its front array alone (the 8 sonars every P3-DX carries; the
+rear 8 are an option). ``udacity-8sonar`` is the ring of udacity/RoboND-OccupancyGridMappingAlgorithm's data
 (beam axes −90…90°, usable 0.17-5 m, mounted at the robot centre).
 """
 
@@ -38,6 +39,12 @@ PRESETS: dict[str, tuple[MountConfig, ...]] = {
             name=f"sonar_{i}", x=x, y=y, yaw_deg=float(a), fov_deg=30.0, min_range=0.1, max_range=5.0
         )
         for i, (x, y, a) in enumerate(_P3DX)
+    ),
+    "pioneer-p3dx-front": tuple(
+        MountConfig(
+            name=f"sonar_{i}", x=x, y=y, yaw_deg=float(a), fov_deg=30.0, min_range=0.1, max_range=5.0
+        )
+        for i, (x, y, a) in enumerate(_P3DX[:8])
     ),
     "udacity-8sonar": tuple(
         MountConfig(name=f"sonar_{i}", x=0.0, y=0.0, yaw_deg=a, fov_deg=20.0, min_range=0.17, max_range=5.0)

@@ -72,6 +72,11 @@ def test_ring_is_the_explicit_mounts_in_file_order_else_the_preset() -> None:
     assert preset.names == tuple(m.name for m in PRESETS["pioneer-p3dx"])
     assert np.allclose(preset.y, [m.y for m in PRESETS["pioneer-p3dx"]])
     assert np.allclose(preset.min_range, 0.1) and np.allclose(preset.fov, math.radians(30.0))
+    front = sensor_setup(SensorsConfig(preset="pioneer-p3dx-front")).ring()
+    assert front is not None and front.names == preset.names[:8]  # the front array alone
+    assert np.allclose(front.x, preset.x[:8]) and np.allclose(front.y, preset.y[:8])
+    assert [m.yaw_deg for m in PRESETS["pioneer-p3dx-front"]] == [90, 50, 30, 10, -10, -30,
+                                                                 -50, -90]
 
 
 def test_ring_mounts_are_the_configured_entries_as_written() -> None:
