@@ -318,9 +318,8 @@ def summary(metrics: dict[str, Any], cfg: PoseRefinementConfig) -> str:
             parts.append(f"local corrections over {local['stretches']} stretches "
                          f"({gain:.2f} per parameter)")
         elif "consistency_gain" in local:
-            change = local["consistency_gain"]
             parts.append(f"no local corrections ({gain:.2f} per parameter, but the echoes "
-                         f"{abs(change):.1%} {'more' if change >= 0 else 'less'} consistent, "
+                         f"{_consistency_change(local['consistency_gain'])}, "
                          f"< {cfg.calibration_min_gain:.0%})")
         else:
             parts.append(f"no local corrections ({gain:.2f} < {cfg.local_min_gain:g} per "
@@ -342,9 +341,12 @@ def _why_no_bias(rejected: dict[str, float] | None, min_gain: float) -> str:
             f"{rejected['sharper']:.1%} sharper")
     if "more_consistent" not in rejected:
         return f"{head}, < {min_gain:.0%})"
-    change = rejected["more_consistent"]
-    said = f"{change:.1%} more" if change >= 0 else f"{-change:.1%} less"
-    return f"{head} but {said} consistent, < {min_gain:.0%})"
+    return f"{head} but {_consistency_change(rejected['more_consistent'])}, < {min_gain:.0%})"
+
+
+def _consistency_change(change: float) -> str:
+    """A consistency gain (fraction) in words: ``0.7% less consistent``."""
+    return f"{abs(change):.1%} {'more' if change >= 0 else 'less'} consistent"
 
 
 def _moved(x0: F64, y0: F64, a0: F64, x1: F64, y1: F64, a1: F64) -> dict[str, float]:
