@@ -56,6 +56,13 @@ class Echoes:
     def __len__(self) -> int:
         return int(self.t_ns.shape[0])
 
+    def on_track(self, t_ns: I64, x: F64, y: F64, yaw: F64) -> Echoes:
+        """These echoes with their odometry read again from the pose track ``(x, y, yaw)``
+        at ``t_ns`` (interpolated at each echo's stamp)."""
+        look = interpolate_poses(PoseTrack(t_ns, x, y, yaw, "", ""), self.t_ns,
+                                 np.iinfo(np.int64).max)
+        return dataclasses.replace(self, odo=np.column_stack([look.x, look.y, look.yaw]))
+
     def take(self, index: I64) -> Echoes:
         """The echoes at ``index`` (in that order)."""
         return Echoes(*(getattr(self, f.name)[index] for f in dataclasses.fields(self)))

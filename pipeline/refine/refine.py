@@ -31,7 +31,6 @@ Everything is numpy and scipy without randomness, so the same input gives the sa
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -149,9 +148,7 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
                 sigma=cfg.field_sigma_m)
             ox, oy, oyaw = local.x, local.y, local.yaw
             metrics["local"] = local.metrics
-        look = interpolate_poses(PoseTrack(tt, ox, oy, oyaw, "", ""), echoes.t_ns,
-                                 np.iinfo(np.int64).max)
-        echoes = dataclasses.replace(echoes, odo=np.column_stack([look.x, look.y, look.yaw]))
+        echoes = echoes.on_track(tt, ox, oy, oyaw)
         metrics["search_scale_error"] = cal0.scale_error
         metrics["search_heading_bias_deg_per_m"] = math.degrees(cal0.heading_bias)
         metrics["sharpness_before"] = cal0.sharpness_uncalibrated

@@ -51,7 +51,6 @@ Deterministic: no random draws.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -60,7 +59,6 @@ import numpy as np
 
 from formats.angles import wrap_angle
 from formats.arrays import F64, I64
-from pipeline.pose_sync import PoseTrack, interpolate_poses
 from pipeline.refine.echoes import Echoes
 from pipeline.se2 import transform_points
 
@@ -98,10 +96,7 @@ def correct_stretches(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
         count = np.bincount(stretch, minlength=n)
         centre = np.column_stack([np.bincount(stretch, x, n), np.bincount(stretch, y, n),
                                   np.bincount(stretch, travel, n)]) / np.maximum(count, 1)[:, None]
-        look = interpolate_poses(PoseTrack(t_ns, x, y, yaw, "", ""), echoes.t_ns,
-                                 np.iinfo(np.int64).max)
-        placed = dataclasses.replace(echoes, odo=np.column_stack([look.x, look.y, look.yaw]))
-        solved = _solve(t_ns, x, y, yaw, placed, stretch, centre, stretch_m, sigma_xy,
+        solved = _solve(t_ns, x, y, yaw, echoes.on_track(t_ns, x, y, yaw), stretch, centre, stretch_m, sigma_xy,
                         sigma_yaw)
         if solved is None:
             break
@@ -134,10 +129,8 @@ def _consistency(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, res: float
     their poses on the track ``(x, y, yaw)``."""
     from pipeline.refine.calibration import _Consistency
 
-    look = interpolate_poses(PoseTrack(t_ns, x, y, yaw, "", ""), echoes.t_ns,
-                             np.iinfo(np.int64).max)
-    placed = dataclasses.replace(echoes, odo=np.column_stack([look.x, look.y, look.yaw]))
-    return _Consistency(t_ns, x, y, yaw, placed, res=2 * res, sigma=sigma)(0.0, 0.0)
+    return _Consistency(t_ns, x, y, yaw, echoes.on_track(t_ns, x, y, yaw), res=2 * res,
+                        sigma=sigma)(0.0, 0.0)
 
 
 def _solve(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, stretch: I64, centre: F64,
