@@ -7,18 +7,23 @@ sonarmap and keeps its traceback.
 
 from __future__ import annotations
 
+import _thread
 import atexit
 import contextlib
 import functools
+import gc
 import signal
 import sys
 import threading
 from collections.abc import Callable, Iterator
-from typing import ParamSpec, TypeVar
+from typing import TYPE_CHECKING, ParamSpec, TypeVar
 
 import typer
 
 from formats.errors import SonarmapError
+
+if TYPE_CHECKING:
+    from sys import UnraisableHookArgs
 
 P = ParamSpec("P")
 R = TypeVar("R")
@@ -34,21 +39,62 @@ class Terminated(KeyboardInterrupt):
     """SIGTERM, raised like Ctrl-C so that the same cleanup runs (temporary outputs)."""
 
 
+_REDELIVER_S = 0.01  # a signal Python dropped is delivered again after this
+_terminated: set[int] = set()  # holds SIGTERM once one arrived during the current command
+
+
 def _raise_terminated(signum: int, frame: object) -> None:
+    _terminated.add(signum)
     raise Terminated
+
+
+def _redeliver_dropped(previous: Callable[[UnraisableHookArgs], object]
+                       ) -> Callable[[UnraisableHookArgs], None]:
+    """An ``unraisablehook`` that delivers again a signal whose exception Python dropped:
+    one raised inside a ``__del__`` or a ctypes callback (llvmlite's, while numba
+    compiles) is printed as "Exception ignored …" and the command would go on. Other
+    unraisable exceptions go to ``previous``, unless a signal arrived before them."""
+
+    def hook(unraisable: UnraisableHookArgs) -> None:
+        if not isinstance(unraisable.exc_value, KeyboardInterrupt):
+            if not _terminated:  # after a signal, a finalizer's failure is the signal's
+                previous(unraisable)
+            return
+        signum = signal.SIGTERM if isinstance(unraisable.exc_value, Terminated) else signal.SIGINT
+        # From another thread: delivered now, the signal would land in the same finalizer.
+        timer = threading.Timer(_REDELIVER_S, _thread.interrupt_main, (signum,))
+        timer.daemon = True
+        timer.start()
+
+    return hook
 
 
 @contextlib.contextmanager
 def sigterm_as_interrupt() -> Iterator[None]:
     """While inside, SIGTERM unwinds the command like SIGINT (``with`` blocks clean up:
-    no ``.OUT.tmp-*`` is left behind). Only the main thread can install handlers."""
+    no ``.OUT.tmp-*`` is left behind). A signal Python dropped in a finalizer or a
+    callback is delivered again; once one arrived, the command ends as terminated however
+    it ends (an error after it is the interruption's). Only the main thread can install
+    handlers."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
+    _terminated.clear()
     previous = signal.signal(signal.SIGTERM, _raise_terminated)
+    previous_hook, sys.unraisablehook = sys.unraisablehook, _redeliver_dropped(sys.unraisablehook)
     try:
         yield
+    except Exception as err:  # a library left broken by the signal it dropped, say
+        if _terminated:
+            raise Terminated from err
+        raise
+    else:
+        if _terminated:
+            raise Terminated
     finally:
+        if _terminated:  # the interrupted library's garbage, while the hook is this one
+            gc.collect()
+        sys.unraisablehook = previous_hook
         signal.signal(signal.SIGTERM, previous)
 
 
