@@ -26,6 +26,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from formats.angles import wrap_angle
 from formats.arrays import F64
@@ -75,6 +76,14 @@ def apply_drift(
     return Steps.of(x, y, yaw).drifted(model, rng)
 
 
+def systematic_factors(models: list[DriftModel]) -> tuple[F64, F64, npt.NDArray[np.bool_]]:
+    """Per model, the factor on each step's length (``1 + scale error``), the heading bias
+    (rad per metre of step) and whether the model is zero (its poses are the odometry's)."""
+    scale = 1.0 + np.array([v.scale_error for v in models], np.float64)
+    bias = np.array([math.radians(v.heading_bias_deg_per_m) for v in models], np.float64)
+    return scale, bias, np.array([v.is_zero for v in models], np.bool_)
+
+
 @dataclass(frozen=True)
 class Steps:
     """A trajectory's motion increments (the module docstring's ``Δs``, ``Δθ``, and the step
@@ -106,11 +115,9 @@ class Steps:
         m, n = len(models), x.shape[0]
         if n < 2 or m == 0:
             return (np.tile(x, (m, 1)), np.tile(y, (m, 1)), np.tile(yaw, (m, 1)))
-        scale = 1.0 + np.array([v.scale_error for v in models])[:, None]
-        bias = np.array([math.radians(v.heading_bias_deg_per_m) for v in models])[:, None]
-        ox, oy, oyaw = self._integrate(self.lx * scale, self.ly * scale,
-                                       self.dyaw + bias * self.ds)
-        same = np.array([v.is_zero for v in models])
+        scale, bias, same = systematic_factors(models)
+        ox, oy, oyaw = self._integrate(self.lx * scale[:, None], self.ly * scale[:, None],
+                                       self.dyaw + bias[:, None] * self.ds)
         ox[same], oy[same], oyaw[same] = x, y, yaw  # as drifted(): the poses themselves
         return ox, oy, oyaw
 

@@ -66,8 +66,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
+from formats.angles import wrap_angle
 from formats.arrays import F64, I64
-from pipeline.drift import DriftModel, Steps, apply_drift
+from pipeline.drift import DriftModel, Steps, apply_drift, systematic_factors
 from pipeline.refine.echoes import Echoes
 from pipeline.refine.threads import parallel_map
 from pipeline.se2 import transform_points
@@ -154,11 +155,21 @@ class _Placed:
         self.sx, self.sy = echoes.sx[keep], echoes.sy[keep]
 
     def poses_many(self, ks: F64, bs: F64) -> F64:
-        """(len(ks), echoes, 3): the echoes' poses under each calibration ``(ks[j], bs[j])``."""
-        x, y, yaw = self.motion.drifted_many(
-            [Calibration(float(k), float(b)).inverse for k, b in zip(ks, bs, strict=True)])
-        i = self.echo_at
-        return np.stack([x[:, i], y[:, i], yaw[:, i]], axis=-1)
+        """(len(ks), echoes, 3): the echoes' poses under each calibration ``(ks[j], bs[j])``
+        (compiled: ``self.motion.drifted_many`` at the echoes, bit for bit)."""
+        from pipeline.refine.kernels import poses_at
+
+        models = [Calibration(float(k), float(b)).inverse for k, b in zip(ks, bs, strict=True)]
+        m, i = self.motion, self.echo_at
+        if m.x.shape[0] < 2:  # no step: every calibration leaves the poses
+            return np.broadcast_to(np.stack([m.x[i], m.y[i], m.yaw[i]], axis=-1),
+                                   (len(models), i.shape[0], 3)).copy()
+        scale, bias, same = systematic_factors(models)
+        out = poses_at(float(m.x[0]), float(m.y[0]), float(m.yaw[0]), m.lx, m.ly, m.dyaw,
+                       m.ds, scale, bias, i)
+        out[..., 2] = wrap_angle(out[..., 2])
+        out[same] = np.stack([m.x[i], m.y[i], m.yaw[i]], axis=-1)  # as drifted_many
+        return np.asarray(out)
 
     def poses(self, k: float, b: float) -> F64:
         """(echoes, 3): the echoes' poses under the calibration ``(k, b)``."""

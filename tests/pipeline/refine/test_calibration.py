@@ -134,6 +134,26 @@ def test_the_compiled_binned_sharpness_is_the_reference_bit_for_bit(
     assert compiled(0.0, math.radians(b_deg)) == want
 
 
+@pytest.mark.parametrize("thinned", [None, 40])
+def test_the_compiled_poses_are_drifted_many_bit_for_bit(true_run: tuple[object, Echoes],
+                                                        thinned: int | None) -> None:
+    from pipeline.refine.calibration import Calibration, _Placed
+
+    track, echoes = true_run
+    t, x, y, yaw = (np.asarray(getattr(track, a)) for a in ("t_ns", "x", "y", "yaw"))
+    placed = _Placed(t, x, y, yaw, echoes, thinned or len(echoes))
+    ks = np.array([0.0, 0.03, -0.05, 0.0, 0.0])
+    bs = np.radians([0.0, 0.8, -1.5, 2.5, -0.0])  # the first and last: no calibration
+    got = placed.poses_many(ks, bs)
+    x_all, y_all, yaw_all = placed.motion.drifted_many(
+        [Calibration(float(k), float(b)).inverse for k, b in zip(ks, bs, strict=True)])
+    i = placed.echo_at
+    assert got.shape == (5, i.shape[0], 3) and i.shape[0] == (thinned or len(echoes))
+    assert np.array_equal(got, np.stack([x_all[:, i], y_all[:, i], yaw_all[:, i]], axis=-1))
+    assert np.array_equal(got[0], np.column_stack([placed.x[i], placed.y[i], placed.yaw[i]]))
+    assert np.abs(got[1] - got[0]).max() > 0.1  # 3 % and 0.8°/m move the poses
+
+
 def test_far_echoes_replace_the_near_ones_only_when_they_agree() -> None:
     from pipeline.refine.calibration import _far_agrees
     from pipeline.refine.surfaces import FixedPoint
