@@ -4,9 +4,12 @@ simulation and the Intel lab emulation; then the same kinds of drift on the buil
 the corridor and the orchard, and the buildings' sonars emulated as the Udacity 8-sonar
 ring — logs the refinement was not developed on — two worlds of repeating structure
 (a warehouse's shelving, a hall of pillars) and two floors (a loop corridor, rooms off a
-corridor), all four in ``sample_logs/worlds``. What refinement finds and what it gives.
+corridor), all four in ``sample_logs/worlds``, and the floors seen by the Pioneer's 8
+front sonars and by one servo-swept sonar (presets ``pioneer-p3dx-front``,
+``hc-sr04-sweep3``). What refinement finds and what it gives.
 
-    python -m benchmarks.drift_variety [--work DIR] [--cases office intel-lab ...] [--config TOML]
+    python -m benchmarks.drift_variety [--work DIR] [--cases office intel-lab ...]
+        [--presets none hc-sr04-sweep3 ...] [--config TOML]
 
 Each row: the drift model, F1 of the default method on true poses / the drifted odometry /
 refined, refined/true, F1 of the true poses refined (its cost), ATE drifted → refined
@@ -73,6 +76,9 @@ ROWS: tuple[tuple[str, str | None, tuple[str, float, float, float, float], int],
     # ... and by the Pioneer's 8 front sonars
     *((world, "pioneer-p3dx-front", ("+3 %, +0.8°/m", 0.03, 0.8, 0.0, 0.0), 0)
       for world in ("office", "corridor", "rooms", "loop", "warehouse", "pillars")),
+    # ... and by one sonar on a servo, sweeping three bearings
+    *((world, "hc-sr04-sweep3", ("+3 %, +0.8°/m", 0.03, 0.8, 0.0, 0.0), 0)
+      for world in ("office", "corridor", "rooms", "loop", "warehouse", "pillars")),
 )
 CASES = tuple(dict.fromkeys(row[0] for row in ROWS))
 
@@ -96,6 +102,8 @@ def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--work", type=Path, default=REPO / "build" / "drift_variety")
     ap.add_argument("--cases", nargs="+", default=list(CASES), choices=CASES)
+    ap.add_argument("--presets", nargs="+", metavar="PRESET",
+                    help="only the rows of these sonar presets ('none': the log's own sonars)")
     ap.add_argument("--config", type=Path, help="TOML whose [pose_refinement] the refined runs use")
     args = ap.parse_args(argv)
     args.work.mkdir(parents=True, exist_ok=True)
@@ -108,7 +116,7 @@ def main(argv: list[str] | None = None) -> None:
     print("|---|---|---:|---:|---:|---:|---:|---|---|")
     truths: dict[str, tuple[float, float]] = {}  # per log: F1 of true poses, refined
     for i, (case, preset, model, seed) in enumerate(ROWS):
-        if case not in args.cases:
+        if case not in args.cases or (args.presets and (preset or "none") not in args.presets):
             continue
         log = case if preset is None else f"{case} ({preset})"
         tag = case if preset is None else f"{case}-{preset}"

@@ -8,6 +8,7 @@ from typing import Annotated
 import typer
 
 from cli.errors import handle_errors
+from formats.presets import PRESETS
 
 _FORMATS = ("ros1", "ros2", "ros2-mcap", "mcap", "mcap-ros1", "csv", "csv-set")
 
@@ -37,7 +38,7 @@ def emulate(
         str | None,
         typer.Option(
             "--preset",
-            help="Sonar ring preset (pioneer-p3dx, udacity-8sonar); default: the config's "
+            help=f"Sonar ring preset ({', '.join(PRESETS)}); default: the config's "
             "mounts, else pioneer-p3dx.",
         ),
     ] = None,

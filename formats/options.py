@@ -87,7 +87,8 @@ class SensorsConfig:
     """Sensor mounts: explicit entries, a preset, or /tf_static from the log."""
 
     preset: str = doc_field(
-        "mount preset ('pioneer-p3dx', 'udacity-8sonar'); '' = none", default=""
+        "mount preset ('pioneer-p3dx', 'pioneer-p3dx-front', 'udacity-8sonar', "
+        "'hc-sr04-sweep3'); '' = none", default=""
     )
     fov_deg: float = doc_field("default beam width β where the log has none, degrees", default=0.0)
     min_range: float = doc_field("default r_min where the log has none, m", default=0.0)

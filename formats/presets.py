@@ -5,7 +5,9 @@
 transducers have a beam of about 30° full width (our default β) and read 0.1-5 m.
 ``pioneer-p3dx-front`` is its front array alone (the 8 sonars every P3-DX carries; the
 rear 8 are an option). ``udacity-8sonar`` is the ring of udacity/RoboND-OccupancyGridMappingAlgorithm's data
-(beam axes −90…90°, usable 0.17-5 m, mounted at the robot centre).
+(beam axes −90…90°, usable 0.17-5 m, mounted at the robot centre). ``hc-sr04-sweep3`` is a
+hobby robot's single sonar on a servo (an HC-SR04: 15° beam and 0.02-4 m by its datasheet)
+0.1 m ahead of the centre, stepping through −40°, 0° and +40°: one mount per bearing.
 """
 
 from __future__ import annotations
@@ -49,5 +51,10 @@ PRESETS: dict[str, tuple[MountConfig, ...]] = {
     "udacity-8sonar": tuple(
         MountConfig(name=f"sonar_{i}", x=0.0, y=0.0, yaw_deg=a, fov_deg=20.0, min_range=0.17, max_range=5.0)
         for i, a in enumerate(_UDACITY)
+    ),
+    "hc-sr04-sweep3": tuple(
+        MountConfig(name=f"sweep_{a:+d}", x=0.1, y=0.0, yaw_deg=float(a), fov_deg=15.0, min_range=0.02,
+                    max_range=4.0)
+        for a in (-40, 0, 40)
     ),
 }

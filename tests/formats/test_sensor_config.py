@@ -77,6 +77,10 @@ def test_ring_is_the_explicit_mounts_in_file_order_else_the_preset() -> None:
     assert np.allclose(front.x, preset.x[:8]) and np.allclose(front.y, preset.y[:8])
     assert [m.yaw_deg for m in PRESETS["pioneer-p3dx-front"]] == [90, 50, 30, 10, -10, -30,
                                                                  -50, -90]
+    sweep = sensor_setup(SensorsConfig(preset="hc-sr04-sweep3")).ring()
+    assert sweep is not None and sweep.names == ("sweep_-40", "sweep_+0", "sweep_+40")
+    assert np.allclose(sweep.x, 0.1) and np.allclose(sweep.y, 0.0)  # one sonar, three bearings
+    assert np.allclose(sweep.fov, math.radians(15.0)) and np.allclose(sweep.max_range, 4.0)
 
 
 def test_ring_mounts_are_the_configured_entries_as_written() -> None:
