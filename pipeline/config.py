@@ -192,6 +192,9 @@ class PoseRefinementConfig:
     local_min_gain: float = doc_field(
         "... applied when the first solve lowers the patches' robust loss by this much per "
         "correction parameter", default=1.0)
+    local_min_consistency_gain: float = doc_field(
+        "... and the corrected poses make the echoes more consistent by this fraction",
+        default=0.01)
     match_submaps: bool = doc_field("after the calibration, match submaps and solve the pose "
                                "graph (off: measured worse on sonar, see RESULTS.md)",
                                default=False)
@@ -467,6 +470,9 @@ def _check_ranges(cfg: Config) -> None:
          "must be >= 0 (0 = the whole run)", pr.calibration_scale_window_m)
     need(math.isfinite(pr.local_min_gain) and pr.local_min_gain >= 0,
          "pose_refinement.local_min_gain", "must be >= 0", pr.local_min_gain)
+    need(math.isfinite(pr.local_min_consistency_gain) and -1 < pr.local_min_consistency_gain < 1,
+         "pose_refinement.local_min_consistency_gain", "must be in (-1, 1)",
+         pr.local_min_consistency_gain)
     need(math.isfinite(pr.calibration_far_range_m) and pr.calibration_far_range_m >= 0,
          "pose_refinement.calibration_far_range_m", "must be >= 0 (0 = off)",
          pr.calibration_far_range_m)

@@ -144,7 +144,7 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
                 tt, ox, oy, oyaw, echoes, stretch_m=cfg.local_stretch_m,
                 sigma_xy=cfg.odometry_sigma_xy, sigma_yaw=math.radians(cfg.odometry_sigma_yaw_deg),
                 iterations=cfg.local_iterations, min_gain=cfg.local_min_gain,
-                min_consistency_gain=cfg.calibration_min_gain, res=cfg.field_resolution_m,
+                min_consistency_gain=cfg.local_min_consistency_gain, res=cfg.field_resolution_m,
                 sigma=cfg.field_sigma_m)
             ox, oy, oyaw = local.x, local.y, local.yaw
             metrics["local"] = local.metrics
@@ -317,7 +317,7 @@ def summary(metrics: dict[str, Any], cfg: PoseRefinementConfig) -> str:
         elif "consistency_gain" in local:
             parts.append(f"no local corrections ({gain:.2f} per parameter, but the echoes "
                          f"{_consistency_change(local['consistency_gain'])}, "
-                         f"< {cfg.calibration_min_gain:.0%})")
+                         f"< {cfg.local_min_consistency_gain:.1%})")
         else:
             parts.append(f"no local corrections ({gain:.2f} < {cfg.local_min_gain:g} per "
                          "parameter)")

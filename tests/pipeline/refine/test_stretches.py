@@ -109,3 +109,25 @@ def test_true_poses_the_patches_loss_would_move_are_kept_by_the_echoes_consisten
     assert out.metrics["gain_per_parameter"] > 1.0 and out.metrics["iterations"] == 4
     assert out.metrics["consistency_gain"] < 0.0 and not out.metrics["applied"]
     assert out.x is x and out.y is y and out.yaw is yaw
+
+
+@pytest.mark.parametrize("value", [1.0, -1.0, float("nan")])
+def test_a_consistency_gate_out_of_range_is_refused_by_name(value: float) -> None:
+    from pipeline.config import ConfigError, config_from_dict
+
+    with pytest.raises(ConfigError, match=r"pose_refinement\.local_min_consistency_gain"):
+        config_from_dict({"pose_refinement": {"local_min_consistency_gain": value}})
+
+
+def test_the_consistency_gate_applies_a_gain_that_reaches_it(true_run) -> None:
+    (t, x, y, yaw), echoes = true_run
+    travel = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(x), np.diff(y)))])
+    dx = 0.12 * np.clip((travel - travel[-1] / 3) / 4.0, 0.0, 1.0)
+    gain = correct_stretches(t, x + dx, y, yaw, echoes, **KW).metrics["consistency_gain"]
+    assert gain > 0
+    at = correct_stretches(t, x + dx, y, yaw, echoes, **{**KW, "min_consistency_gain": gain})
+    above = correct_stretches(t, x + dx, y, yaw, echoes,
+                              **{**KW, "min_consistency_gain": gain + 1e-9})
+    assert at.metrics["applied"] and not above.metrics["applied"]
+    assert above.metrics["note"] == (f"not applied: the echoes would be {gain:.1%} more "
+                                     f"consistent (< {gain + 1e-9:.1%})")
