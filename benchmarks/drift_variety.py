@@ -6,7 +6,7 @@ ring — logs the refinement was not developed on — two worlds of repeating st
 (a warehouse's shelving, a hall of pillars) and two floors (a loop corridor, rooms off a
 corridor), all four in ``sample_logs/worlds``, and the floors seen by the Pioneer's 8
 front sonars and by one servo-swept sonar (presets ``pioneer-p3dx-front``,
-``hc-sr04-sweep3``), and a floor whose walls run at 25° to the axes. What refinement
+``hc-sr04-sweep3``), and an L-shaped office (turned 25°). What refinement
 finds and what it gives.
 
     python -m benchmarks.drift_variety [--work DIR] [--cases office intel-lab ...]
@@ -80,7 +80,7 @@ ROWS: tuple[tuple[str, str | None, tuple[str, float, float, float, float], int],
     # ... and by one sonar on a servo, sweeping three bearings
     *((world, "hc-sr04-sweep3", ("+3 %, +0.8°/m", 0.03, 0.8, 0.0, 0.0), 0)
       for world in ("office", "corridor", "rooms", "loop", "warehouse", "pillars")),
-    # a floor turned 25° (no wall along an axis), made after the rows above
+    # an L-shaped office (turned 25°), made after the rows above
     *(("skew", preset, model, 0) for preset in (None, "pioneer-p3dx-front")
       for model in (("+3 %, +0.8°/m", 0.03, 0.8, 0.0, 0.0),
                     ("+4 %, +1.2°/m, noise 0.002 rad/√rad", 0.04, 1.2, 0.0, 0.002))),

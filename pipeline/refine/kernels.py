@@ -163,7 +163,6 @@ def binned_sharpness(x: np.ndarray, y: np.ndarray, size: float) -> float:
     return total / 2
 
 
-
 @njit(cache=True, nogil=True)
 def poses_at(x0: float, y0: float, yaw0: float, lx: np.ndarray, ly: np.ndarray,
              dyaw: np.ndarray, ds: np.ndarray, scale: np.ndarray, bias: np.ndarray,
