@@ -328,3 +328,26 @@ def test_a_lattice_that_sharpens_under_a_wrong_bias_keeps_its_true_heading(
         assert rejected is not None
         assert math.degrees(rejected.candidate) == pytest.approx(0.23, abs=0.05)
         assert rejected.sharper > 0.01 > rejected.more_consistent  # measured +3.7 %, -2.4 %
+
+
+@pytest.mark.parametrize(("patch_consistency", "taken"), [(0.995, True), (0.985, False)])
+def test_the_patches_bias_is_refused_when_clearly_less_consistent(patch_consistency: float,
+                                                                  taken: bool) -> None:
+    from pipeline.refine.calibration import _patch_bias
+    from pipeline.refine.surfaces import FixedPoint
+
+    b, patches = math.radians(0.80), math.radians(0.75)
+
+    class Surfaces:  # the patches' fixed point, determined (slope 0.53)
+        def bias_fixed_point(self, k: float, b0: float) -> FixedPoint:
+            return FixedPoint(patches, 0.53, (), math.radians(0.005))
+
+    def consistent(k: float, bias: float) -> float:  # 0.5 % / 1.5 % less at the patches'
+        return 0.88 * (patch_consistency if bias == patches else 1.0)
+
+    step = math.radians(0.053)
+    got = _patch_bias(Surfaces(), consistent, 0.03, b, 0.75, step, 0.01)  # type: ignore[arg-type]
+    assert got == (patches if taken else b)
+    # no bias stays none; an undetermined or far fixed point is never taken
+    assert _patch_bias(Surfaces(), consistent, 0.03, 0.0, 0.75, step, 0.01) == 0.0  # type: ignore[arg-type]
+    assert _patch_bias(Surfaces(), consistent, 0.03, b, 0.5, step, 0.01) == b  # type: ignore[arg-type]
