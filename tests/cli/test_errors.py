@@ -15,8 +15,8 @@ from cli.errors import EXIT_TERMINATED, handle_errors
 
 
 class _SignalsInFinalizer:
-    """Sends SIGTERM to this process from its ``__del__`` and goes on running there, as
-    llvmlite's finalizers do when numba is interrupted while compiling."""
+    """Sends SIGTERM to this process from its ``__del__``, where Python drops the handler's
+    exception, as in llvmlite's finalizers when numba is interrupted while compiling."""
 
     def __init__(self, log: list[str]):
         self.log = log
