@@ -97,12 +97,23 @@ def found(pr: dict[str, Any]) -> str:
             f"({pr.get('scale_z', math.nan):.1f})")
 
 
+def scored_run(log: Path, out: Path, cfg: Any, truth: Path, traj: Path
+               ) -> tuple[float, float, dict[str, Any]]:
+    """F1 of ``log`` run with ``cfg`` into ``out`` against the map ``truth``, the ATE of its
+    trajectory against ``traj``, and its refinement's metrics."""
+    from pipeline.evaluate import evaluate_run
+    from pipeline.run import run
+
+    result = run(log, out, cfg, force=True)
+    ev = evaluate_run(out, truth, trajectory=traj, truth_trajectory=traj)
+    ate = ev.trajectory_error["ate_rmse_m"] if ev.trajectory_error else math.nan
+    return ev.f1, float(ate), result.metrics.pose_refinement or {}
+
+
 def main(argv: list[str] | None = None) -> None:
     from benchmarks.compare_methods import drifted_case
     from pipeline.config import Config, load_config
     from pipeline.drift import DriftModel
-    from pipeline.evaluate import evaluate_run
-    from pipeline.run import run
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--work", type=Path, default=REPO / "build" / "drift_variety")
@@ -131,20 +142,12 @@ def main(argv: list[str] | None = None) -> None:
         clean, truth, traj = drifted_case(case, drifted, DriftModel(*model[1:]),
                                           drift_seed=seed, preset=preset)
         if tag not in truths:
-            f1s = []
-            for key, cfg in (("true", plain), ("true_refined", refine)):
-                out = args.work / tag / key
-                run(clean, out, cfg, force=True)
-                f1s.append(evaluate_run(out, truth, trajectory=traj, truth_trajectory=traj).f1)
-            truths[tag] = (f1s[0], f1s[1])
+            truths[tag] = (scored_run(clean, args.work / tag / "true", plain, truth, traj)[0],
+                           scored_run(clean, args.work / tag / "true_refined", refine, truth,
+                                      traj)[0])
         f1_true, f1_true_refined = truths[tag]
-        scores = {}
-        for key, cfg in (("drifted", plain), ("refined", refine)):
-            out = args.work / tag / f"{stem}_{key}"
-            result = run(drifted, out, cfg, force=True)
-            ev = evaluate_run(out, truth, trajectory=traj, truth_trajectory=traj)
-            ate = ev.trajectory_error["ate_rmse_m"] if ev.trajectory_error else math.nan
-            scores[key] = (ev.f1, float(ate), result.metrics.pose_refinement or {})
+        scores = {key: scored_run(drifted, args.work / tag / f"{stem}_{key}", cfg, truth, traj)
+                  for key, cfg in (("drifted", plain), ("refined", refine))}
         print(f"| {log} | {model[0]} | {f1_true:.3f} | {scores['drifted'][0]:.3f} | "
               f"{scores['refined'][0]:.3f} | {scores['refined'][0] / f1_true:.2f} | "
               f"{f1_true_refined:.3f} ({f1_true - f1_true_refined:.3f}) | "

@@ -25,7 +25,6 @@ import math
 import sys
 import tomllib
 from pathlib import Path
-from typing import Any
 
 REPO = Path(__file__).resolve().parents[1]
 WORLDS = REPO / "sample_logs" / "worlds"
@@ -82,20 +81,8 @@ def world_file(spec: str, work: Path) -> Path:
     return out
 
 
-def _score(log: Path, out: Path, cfg: Any, truth: Path, traj: Path
-           ) -> tuple[float, float, dict[str, Any]]:
-    """F1 and ATE of ``log`` run with ``cfg`` into ``out``, and its refinement's metrics."""
-    from pipeline.evaluate import evaluate_run
-    from pipeline.run import run
-
-    result = run(log, out, cfg, force=True)
-    ev = evaluate_run(out, truth, trajectory=traj, truth_trajectory=traj)
-    ate = ev.trajectory_error["ate_rmse_m"] if ev.trajectory_error else math.nan
-    return ev.f1, float(ate), result.metrics.pose_refinement or {}
-
-
 def main(argv: list[str] | None = None) -> None:
-    from benchmarks.drift_variety import found
+    from benchmarks.drift_variety import found, scored_run
     from formats.presets import PRESETS
     from pipeline.config import Config
     from pipeline.simulate import SimOptions, run_simulation
@@ -133,8 +120,8 @@ def main(argv: list[str] | None = None) -> None:
                 run_simulation(world, clean, "mcap", options=sim)
             truth, traj = clean.with_name(f"{stem}.truth.yaml"), clean.with_name(f"{stem}.truth.csv")
 
-            f1_true = _score(clean, work / stem / "true", plain, truth, traj)[0]
-            f1_true_refined = _score(clean, work / stem / "true_refined", refine, truth, traj)[0]
+            f1_true = scored_run(clean, work / stem / "true", plain, truth, traj)[0]
+            f1_true_refined = scored_run(clean, work / stem / "true_refined", refine, truth, traj)[0]
             for m in args.models:
                 label, *model = MODELS[m]
                 drifted = work / f"{stem}_{m}.mcap"
@@ -142,8 +129,8 @@ def main(argv: list[str] | None = None) -> None:
                     run_simulation(world, drifted, "mcap", options=dataclasses.replace(
                         sim, drift_scale=model[0], drift_heading_bias_deg_per_m=model[1],
                         drift_xy=model[2], drift_yaw=model[3]))
-                d = _score(drifted, work / stem / f"{m}_drifted", plain, truth, traj)
-                r = _score(drifted, work / stem / f"{m}_refined", refine, truth, traj)
+                d = scored_run(drifted, work / stem / f"{m}_drifted", plain, truth, traj)
+                r = scored_run(drifted, work / stem / f"{m}_refined", refine, truth, traj)
                 print(f"| {spec} | {preset} | {label} | {f1_true:.3f} | {d[0]:.3f} | {r[0]:.3f} | "
                       f"{r[0] / f1_true:.2f} | {f1_true_refined:.3f} "
                       f"({f1_true - f1_true_refined:.3f}) | {d[1]:.3f} → {r[1]:.3f} | "
