@@ -368,6 +368,11 @@ def _consistency_gain(consistent: _Consistency, k: float, b: float) -> float:
     return consistent(k, b) / none - 1.0 if none > 0 else math.inf  # nothing to lose
 
 
+def consistency_change(change: float) -> str:
+    """A consistency gain (fraction) in words: ``0.7% less consistent``."""
+    return f"{abs(change):.1%} {'more' if change >= 0 else 'less'} consistent"
+
+
 def _most_consistent(consistent: _Consistency, k: float, b0: float, db: float) -> float:
     """The heading bias of best echo consistency at the scale ``k`` within
     :data:`CONSISTENT_SPAN` steps ``db`` of ``b0`` (the sharpest), refined twice (steps / 4).

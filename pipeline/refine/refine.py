@@ -42,7 +42,7 @@ from formats.arrays import F64, I64
 from pipeline.config import PoseRefinementConfig
 from pipeline.drift import DriftModel, apply_drift
 from pipeline.pose_sync import POSE_OK, PoseTrack, interpolate_poses
-from pipeline.refine.calibration import calibrate
+from pipeline.refine.calibration import calibrate, consistency_change
 from pipeline.refine.echoes import Echoes
 from pipeline.refine.graph import (
     GraphOptions,
@@ -316,7 +316,7 @@ def summary(metrics: dict[str, Any], cfg: PoseRefinementConfig) -> str:
                          f"({gain:.2f} per parameter)")
         elif "consistency_gain" in local:
             parts.append(f"no local corrections ({gain:.2f} per parameter, but the echoes "
-                         f"{_consistency_change(local['consistency_gain'])}, "
+                         f"{consistency_change(local['consistency_gain'])}, "
                          f"< {cfg.local_min_consistency_gain:.1%})")
         else:
             parts.append(f"no local corrections ({gain:.2f} < {cfg.local_min_gain:g} per "
@@ -338,12 +338,7 @@ def _why_no_bias(rejected: dict[str, float] | None, min_gain: float) -> str:
             f"{rejected['sharper']:.1%} sharper")
     if "more_consistent" not in rejected:
         return f"{head}, < {min_gain:.0%})"
-    return f"{head} but {_consistency_change(rejected['more_consistent'])}, < {min_gain:.0%})"
-
-
-def _consistency_change(change: float) -> str:
-    """A consistency gain (fraction) in words: ``0.7% less consistent``."""
-    return f"{abs(change):.1%} {'more' if change >= 0 else 'less'} consistent"
+    return f"{head} but {consistency_change(rejected['more_consistent'])}, < {min_gain:.0%})"
 
 
 def _moved(x0: F64, y0: F64, a0: F64, x1: F64, y1: F64, a1: F64) -> dict[str, float]:

@@ -62,6 +62,7 @@ import numpy as np
 
 from formats.angles import wrap_angle
 from formats.arrays import F64, I64
+from pipeline.refine.calibration import _Consistency, consistency_change
 from pipeline.refine.echoes import Echoes
 from pipeline.se2 import transform_points
 
@@ -117,8 +118,7 @@ def correct_stretches(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
                 / _consistency(t_ns, *given, echoes, res, sigma) - 1.0)
         metrics["consistency_gain"] = gain
         if gain < min_consistency_gain:
-            metrics["note"] = (f"not applied: the echoes would be {abs(gain):.1%} "
-                               f"{'more' if gain >= 0 else 'less'} consistent "
+            metrics["note"] = (f"not applied: the echoes would be {consistency_change(gain)} "
                                f"(< {min_consistency_gain:.1%})")
             metrics["applied"] = False
             return Corrected(*given, metrics)
@@ -130,8 +130,6 @@ def _consistency(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, res: float
                  sigma: float) -> float:
     """The echoes' consistency (:class:`pipeline.refine.calibration._Consistency`) with
     their poses on the track ``(x, y, yaw)``."""
-    from pipeline.refine.calibration import _Consistency
-
     return _Consistency(t_ns, x, y, yaw, echoes.on_track(t_ns, x, y, yaw), res=2 * res,
                         sigma=sigma)(0.0, 0.0)
 
