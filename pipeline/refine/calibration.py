@@ -179,6 +179,31 @@ class _Placed:
         return transform_points(pose[:, None, :], self.bx, self.by)
 
 
+class _Compiled(_Placed):
+    """A score with a compiled kernel (``_compiled``, of the echoes' poses) and its numpy
+    reference (``reference=True``, which the kernel's tests compare it with)."""
+
+    reference: bool = False
+
+    def __call__(self, k: float, b: float) -> float:
+        raise NotImplementedError
+
+    def _compiled(self, pose: F64) -> float:
+        raise NotImplementedError
+
+    def scan(self, k: float, bs: F64, chunk: int = 64) -> list[float]:
+        """The score at ``k`` and each bias of ``bs``, as calls would give (the poses
+        integrated ``chunk`` biases at a time, the chunks on parallel threads)."""
+        if self.reference:
+            return [self(k, float(b)) for b in bs]
+
+        def score(lo: int) -> list[float]:
+            part = bs[lo:lo + chunk]
+            return [self._compiled(pose) for pose in self.poses_many(np.full(part.shape, k), part)]
+
+        return [v for part in parallel_map(score, range(0, len(bs), chunk)) for v in part]
+
+
 class _Sharpness(_Placed):
     """Sharpness of the echoes' density under a candidate calibration."""
 
@@ -192,7 +217,7 @@ class _Sharpness(_Placed):
         return density_sharpness(wx.ravel(), wy.ravel(), self.res, self.sigma)
 
 
-class _BinnedSharpness(_Placed):
+class _BinnedSharpness(_Compiled):
     """The sharpness's coarse stand-in for the wide scan: ``Σ n² / (Σ n)²`` of the points'
     counts ``n`` in square bins of ``2σ``, averaged over two grids offset by half a bin
     (no dense grid, no blur: a wrong bias spreads the points over a large area). Compiled
@@ -205,29 +230,17 @@ class _BinnedSharpness(_Placed):
         self.bin = 2 * sigma
         self.reference = reference
 
-    def scan(self, k: float, bs: F64, chunk: int = 64) -> list[float]:
-        """The score at ``k`` and each bias of ``bs`` (as calls would give, the poses
-        integrated ``chunk`` biases at a time)."""
+    def _compiled(self, pose: F64) -> float:
         from pipeline.refine.kernels import binned_sharpness
 
-        if self.reference:
-            return [self(k, float(b)) for b in bs]
-        def score(lo: int) -> list[float]:
-            part = bs[lo:lo + chunk]
-            out = []
-            for pose in self.poses_many(np.full(part.shape, k), part):
-                wx, wy = self.arcs(pose)
-                out.append(float(binned_sharpness(wx.ravel(), wy.ravel(), self.bin)))
-            return out
-
-        return [v for part in parallel_map(score, range(0, len(bs), chunk)) for v in part]
+        wx, wy = self.arcs(pose)
+        return float(binned_sharpness(wx.ravel(), wy.ravel(), self.bin))
 
     def __call__(self, k: float, b: float) -> float:
-        wx, wy = self.arcs(self.poses(k, b))
+        pose = self.poses(k, b)
         if not self.reference:
-            from pipeline.refine.kernels import binned_sharpness
-
-            return float(binned_sharpness(wx.ravel(), wy.ravel(), self.bin))
+            return self._compiled(pose)
+        wx, wy = self.arcs(pose)
         total = 0.0
         for shift in (0.0, 0.5):
             ix = np.floor(wx.ravel() / self.bin + shift).astype(np.int64)
@@ -237,7 +250,7 @@ class _BinnedSharpness(_Placed):
         return total / 2
 
 
-class _Consistency(_Placed):
+class _Consistency(_Compiled):
     """Echo consistency ``H / (H + F)`` under a candidate calibration (module docstring),
     compiled (:mod:`pipeline.refine.kernels`); ``reference=True``: the numpy
     version below, which the kernel's tests compare it with."""
@@ -256,18 +269,6 @@ class _Consistency(_Placed):
         reach = float(np.hypot(self.bx - self.sx[:, None], self.by - self.sy[:, None]).max(
             initial=0.0))
         self.steps = np.arange(1, int(reach / res) + 1) * res  # along each ray, m
-
-    def scan(self, k: float, bs: F64, chunk: int = 64) -> list[float]:
-        """The score at ``k`` and each bias of ``bs``, as calls would give (the poses
-        integrated ``chunk`` biases at a time, the chunks on parallel threads)."""
-        if self.reference:
-            return [self(k, float(b)) for b in bs]
-
-        def score(lo: int) -> list[float]:
-            part = bs[lo:lo + chunk]
-            return [self._compiled(pose) for pose in self.poses_many(np.full(part.shape, k), part)]
-
-        return [v for part in parallel_map(score, range(0, len(bs), chunk)) for v in part]
 
     def _compiled(self, pose: F64) -> float:
         from pipeline.refine.kernels import consistency_score, gaussian_weights
