@@ -465,12 +465,12 @@ def calibrate(
     b_scan = _best_of([(0.0, b) for b in bs.tolist()], scan.scan(0.0, bs),
                       (scan(0.0, 0.0), 0.0, 0.0))[2]
     consistent = _Consistency(t_ns, x, y, yaw, echoes, res=2 * res, sigma=sigma)
-    b, rejected = _heading_bias(sharp, consistent, 0.0, b_scan, float(bs[1] - bs[0]),
-                                (base, 0.0, 0.0), base, min_gain)
+    db = float(bs[1] - bs[0])  # the coarse bias step
+    b, rejected = _heading_bias(sharp, consistent, 0.0, b_scan, db, (base, 0.0, 0.0), base,
+                                min_gain)
     # Echo consistency over the whole range too: where sharpness found none (a lattice can
     # make the right bias less sharp than none), or an alias of it that a more consistent
     # bias elsewhere beats.
-    db = float(bs[1] - bs[0])
     b_c = _consistent_bias(t_ns, x, y, yaw, echoes, consistent, bs, res=res, sigma=sigma,
                            min_gain=min_gain)
     by_consistency = b_c != 0.0 and (b == 0.0 or (
@@ -483,13 +483,13 @@ def calibrate(
     if scale_score == "surfaces":
         return _surface_calibration(t_ns, x, y, yaw, echoes, sharp, consistent, base, best,
                                     rejected, by_consistency,
-                                    max_scale=max_scale, bias_step=float(bs[1] - bs[0]),
+                                    max_scale=max_scale, bias_step=db,
                                     max_slope=max_slope, min_gain=min_gain, min_z=min_z,
                                     systematic=systematic, window_m=window_m,
                                     far_echoes=far_echoes)
     n_k = max(1, math.ceil(max_scale / SCALE_STEP))
     ks = np.linspace(-max_scale, max_scale, 2 * n_k + 1)
-    dk, db = float(ks[1] - ks[0]), float(bs[1] - bs[0])
+    dk = float(ks[1] - ks[0])
     b0 = best[2]
     cbest = _grid_max(consistent, ks, b0 + db * np.arange(-2, 3), (-1.0, 0.0, b0))
     for _ in range(2):
