@@ -117,3 +117,53 @@ def test_a_signal_deferred_past_the_commands_end_still_ends_it_as_terminated() -
         command()
     assert exc.value.exit_code == EXIT_TERMINATED
     time.sleep(3 * 0.01)  # the re-delivery, after the default handler is back: ignored
+
+
+@pytest.mark.parametrize(("signum", "code"), [(signal.SIGTERM, EXIT_TERMINATED),
+                                              (signal.SIGINT, 130)])
+def test_a_signal_waits_while_numba_compiles_on_the_main_thread(
+        signum: int, code: int, capsys: pytest.CaptureFixture[str]) -> None:
+    # Inside numba's compiler lock (a kernel compiled or loaded from the cache, nested as a
+    # kernel that calls another is), the signal is held; it ends the command as soon as
+    # the outermost lock is released, before the next statement.
+    from numba.core.compiler_lock import global_compiler_lock
+
+    steps: list[str] = []
+
+    @handle_errors
+    def command() -> None:
+        with global_compiler_lock:
+            with global_compiler_lock:
+                os.kill(os.getpid(), signum)
+                _busy(0.05)
+                steps.append("inner compile finished")
+            _busy(0.05)
+            steps.append("outer compile finished")
+        steps.append("after the compiler")
+
+    with pytest.raises(typer.Exit) as exc:
+        command()
+    assert exc.value.exit_code == code
+    assert steps == ["inner compile finished", "outer compile finished"]
+    assert not global_compiler_lock.is_locked()
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # restored
+    assert "sonarmap: " in capsys.readouterr().err
+
+
+def test_a_signal_outside_numbas_compiler_is_raised_at_once() -> None:
+    from numba.core.compiler_lock import global_compiler_lock
+
+    steps: list[str] = []
+
+    @handle_errors
+    def command() -> None:
+        with global_compiler_lock:
+            steps.append("compiled")
+        os.kill(os.getpid(), signal.SIGTERM)
+        _busy(0.05)
+        steps.append("after the signal")
+
+    with pytest.raises(typer.Exit) as exc:
+        command()
+    assert exc.value.exit_code == EXIT_TERMINATED
+    assert steps == ["compiled"]
