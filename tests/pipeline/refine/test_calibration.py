@@ -393,3 +393,35 @@ def test_the_gate_judges_the_scale_under_the_bias_found_at_that_scale(
     assert len(rounds) == 2 and rounds[0] < 3.0 <= rounds[1]  # measured z 2.95, then 3.01
     assert found["search_scale_error"] == pytest.approx(0.015, abs=0.003)
     assert found["search_heading_bias_deg_per_m"] == pytest.approx(0.4, abs=0.02)
+
+
+def test_near_and_far_echoes_that_disagree_are_asked_again_under_the_far_scales_bias(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # Örebro emulated with 3 % and 0.8°/m of drift (make compare's row): under the bias
+    # found at k = 0 its near and far echoes disagree (+2.4 ± 1.8 % / +4.2 ± 1.6 %); under
+    # the bias found at the far scale they agree, and the scale stands 3 errors clear.
+    import pipeline.refine.calibration as calibration
+    from pipeline.drift import DriftModel
+    from pipeline.emulate import EmulateOptions, run_emulation
+    from pipeline.run import run
+
+    rounds: list[tuple[bool, float]] = []
+    surface_scale = calibration._surface_scale
+
+    def spy(*args: Any, **kwargs: Any) -> Any:
+        found = surface_scale(*args, **kwargs)
+        rounds.append((found[3] is not None, calibration._scale_z(found[1], kwargs["systematic"])))
+        return found
+
+    monkeypatch.setattr(calibration, "_surface_scale", spy)
+    src = Path(__file__).resolve().parents[3] / "sample_logs" / "radish" / "orebro-corrected.log.gz"
+    log = tmp_path / "orebro.mcap"
+    run_emulation(src, log, "mcap", options=EmulateOptions(drift=DriftModel(0.03, 0.8)))
+    cfg = Config()
+    refine = Config(pose_refinement=dataclasses.replace(cfg.pose_refinement, enabled=True))
+    found = run(log, tmp_path / "out", refine, force=True).metrics.pose_refinement
+    assert found is not None
+    assert [disputed for disputed, _ in rounds] == [True, False]
+    assert rounds[1][1] >= 3.0  # measured 3.29
+    assert found["search_scale_error"] == pytest.approx(0.03, abs=0.005)  # measured 0.0284
+    assert found["search_heading_bias_deg_per_m"] == pytest.approx(0.8, abs=0.02)
