@@ -546,33 +546,19 @@ def _surface_calibration(
     from pipeline.refine.surfaces import SurfaceScale
 
     k, b, found_rejected = 0.0, best[2], rejected
-    # The first round also chooses the echoes (near, or out to the far range) for both.
+    # The first scale, which also chooses the echoes (near, or out to the far range) for
+    # both; where near and far disagree, the far one (the more precise) is the first.
     surfaces, fp, far_used, disputed = _surface_scale(
         t_ns, x, y, yaw, echoes, far_echoes, b, window_m=window_m, systematic=systematic,
         min_z=min_z, max_slope=max_slope)
     at_zero, used = surfaces, (far_echoes if far_used and far_echoes is not None else echoes)
-    # Near and far echoes that disagree under the bias of k = 0 are asked again under the
-    # bias found at the far (the more precise) scale.
-    ask_again = disputed
-    for rounds in range(2):
-        if rounds == 1 and ask_again is not None:
-            surfaces, fp, far_used, disputed = _surface_scale(
-                t_ns, x, y, yaw, echoes, far_echoes, b / (1.0 + k), window_m=window_m,
-                systematic=systematic, min_z=min_z, max_slope=max_slope)
-        elif rounds == 1:  # the bias is held per reported metre while the scale varies
-            surfaces = SurfaceScale(t_ns, x, y, yaw, used, b / (1.0 + k), window_m)
-            fp = surfaces.fixed_point()
-        established = disputed is None and _established(fp, fp.value, systematic, min_z,
-                                                        max_slope)
-        provisional = ask_again if rounds == 0 and ask_again is not None else fp
-        if not math.isfinite(provisional.value) or (rounds == 1 and not established):
-            break
-        k_new = float(np.clip(provisional.value, -max_scale, max_scale))
-        b = b / (1.0 + k) * (1.0 + k_new)
-        k = k_new
-        if rounds == 1:
-            break  # the scale under the bias found at the first: the answer
-        # As at k = 0 (the same rule), then the patches' value where they determine it.
+    established = disputed is None and _established(fp, fp.value, systematic, min_z, max_slope)
+    first = fp if disputed is None else disputed
+    if math.isfinite(first.value):
+        k = float(np.clip(first.value, -max_scale, max_scale))
+        b *= 1.0 + k  # the bias is held per reported metre while the scale varies
+        # The bias at that scale as at k = 0 (the same rule), then the patches' value where
+        # they determine it.
         if by_consistency:
             b_new = (_most_consistent(consistent, k, b, bias_step)
                      if _consistency_gain(consistent, k, b) >= min_gain else 0.0)
@@ -583,8 +569,22 @@ def _surface_calibration(
         b_new = _patch_bias(surfaces, consistent, k, b_new, max_slope, bias_step, min_gain)
         moved = abs(b_new - b) > bias_step / 64  # a quarter of the finest step searched
         b = b_new
-        if not moved:
-            break  # the bias stands: the scale found under it is the answer
+        if moved:  # else the bias stands: the first scale is the answer (or none)
+            # The scale once more under the new bias (near and far asked again where they
+            # disagreed); the gates judge this one.
+            if disputed is not None:
+                surfaces, fp, far_used, disputed = _surface_scale(
+                    t_ns, x, y, yaw, echoes, far_echoes, b / (1.0 + k), window_m=window_m,
+                    systematic=systematic, min_z=min_z, max_slope=max_slope)
+            else:
+                surfaces = SurfaceScale(t_ns, x, y, yaw, used, b / (1.0 + k), window_m)
+                fp = surfaces.fixed_point()
+            established = disputed is None and _established(fp, fp.value, systematic, min_z,
+                                                            max_slope)
+            if established:
+                k_new = float(np.clip(fp.value, -max_scale, max_scale))
+                b = b / (1.0 + k) * (1.0 + k_new)
+                k = k_new
     if not established:  # the calibration at k = 0
         k, b = 0.0, _patch_bias(at_zero, consistent, 0.0, best[2], max_slope, bias_step,
                                 min_gain)
