@@ -151,7 +151,8 @@ def sigterm_as_interrupt() -> Iterator[None]:
     _terminated.clear()
     previous = signal.signal(signal.SIGTERM, _unwind)
     previous_int = signal.getsignal(signal.SIGINT)
-    if previous_int is signal.default_int_handler:  # a caller's own handler stays
+    own_sigint = previous_int is signal.default_int_handler  # a caller's own handler stays
+    if own_sigint:
         signal.signal(signal.SIGINT, _unwind)
     previous_hook, sys.unraisablehook = sys.unraisablehook, _redeliver_dropped(sys.unraisablehook)
     try:
@@ -167,7 +168,7 @@ def sigterm_as_interrupt() -> Iterator[None]:
         # A signal delivered again now (a finalizer's, by the timer) must not cut this short.
         _closing.append(True)
         signal.signal(signal.SIGTERM, previous)
-        if previous_int is signal.default_int_handler:
+        if own_sigint:
             signal.signal(signal.SIGINT, previous_int)
         _after_compiler.close()
         if _terminated:  # the interrupted library's garbage, while the hook is this one
