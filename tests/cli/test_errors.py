@@ -7,6 +7,7 @@ import ctypes.util
 import os
 import signal
 import time
+from collections.abc import Iterator
 
 import pytest
 import typer
@@ -119,8 +120,21 @@ def test_a_signal_deferred_past_the_commands_end_still_ends_it_as_terminated() -
     time.sleep(3 * 0.01)  # the re-delivery, after the default handler is back: ignored
 
 
+@pytest.fixture
+def python_sigint() -> Iterator[None]:
+    """SIGINT at Python's own handler, which the command then owns, as in a terminal (a
+    shell that starts a job in the background hands it SIGINT ignored, which the command
+    leaves alone); the inherited disposition restored after."""
+    inherited = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, inherited)
+
+
 @pytest.mark.parametrize(("signum", "code"), [(signal.SIGTERM, EXIT_TERMINATED),
                                               (signal.SIGINT, 130)])
+@pytest.mark.usefixtures("python_sigint")
 def test_a_signal_waits_while_numba_compiles_on_the_main_thread(
         signum: int, code: int, capsys: pytest.CaptureFixture[str]) -> None:
     # Inside numba's compiler lock (a kernel compiled or loaded from the cache, nested as a

@@ -268,7 +268,7 @@ def test_a_scale_is_established_only_clear_of_zero_flat_and_of_the_sign_asked() 
 def test_disagreeing_more_precise_far_echoes_give_the_scale_where_they_establish_one(
         far: tuple[float, float], applied: float | None, sample_echoes: SampleEchoes,
         monkeypatch: pytest.MonkeyPatch) -> None:
-    # The far echoes more precise than the near ones (z 3.4 here) and 2.1-3.1 errors of the
+    # The far echoes more precise than the near ones (z 3.4 here) and 2.1-3.3 errors of the
     # difference apart (the specification test fails): one of the two is misled; the far
     # scale is applied where it stands clear of 0 by itself, else none, and the far one
     # is reported as the near one's dispute.
