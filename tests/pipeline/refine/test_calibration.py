@@ -437,8 +437,7 @@ def test_front_sonars_near_scale_misled_in_shelving_gives_way_to_the_far_one(
     # front sonars, drifted by 3 % and 0.8°/m (drift_variety's row): the near echoes'
     # scale leans to the search's edge (+5.0 ± 0.6 %), the far echoes' (+3.4 ± 0.3 %)
     # disagrees and establishes one: it is applied (refined F1 0.70 → 0.98 of true poses).
-    from pipeline.refine.calibration import calibrate
-    from pipeline.run import prepare
+    from pipeline.run import run
     from pipeline.simulate import run_simulation
 
     world = Path(__file__).resolve().parents[3] / "sample_logs" / "worlds" / "warehouse.toml"
@@ -447,21 +446,9 @@ def test_front_sonars_near_scale_misled_in_shelving_gives_way_to_the_far_one(
         seed=1, speed=0.5, ring_rate_hz=5.0, mounts=PRESETS["pioneer-p3dx-front"],
         drift_scale=0.03, drift_heading_bias_deg_per_m=0.8))
     cfg = Config()
-    pr = cfg.pose_refinement
-    with open_log(log, cfg) as reader:
-        sv, sensors, _ = prepare(reader, cfg)
-        far = collect_echoes(sv.ordered_ranges(reader), sv.track, sensors,
-                             eps_max=cfg.mapper.eps_max, max_echo_range_m=pr.calibration_far_range_m,
-                             arc_fraction=pr.arc_fraction, time_offset_ns=0, max_gap_ns=10**9)
-    near = far.take(np.flatnonzero(far.range_m <= pr.max_echo_range_m))
-    track = tuple(np.asarray(getattr(sv.track, a)) for a in ("t_ns", "x", "y", "yaw"))
-    cal = calibrate(
-        *track, near, max_scale=pr.calibration_max_scale,
-        max_bias=math.radians(pr.calibration_max_bias_deg_per_m), res=pr.field_resolution_m,
-        sigma=pr.field_sigma_m, min_gain=pr.calibration_min_gain,
-        max_slope=pr.calibration_max_slope, min_z=pr.calibration_scale_min_z,
-        systematic=pr.calibration_scale_systematic, window_m=pr.calibration_scale_window_m,
-        far_echoes=far)
-    assert cal.scale_far_echoes is True and cal.scale_disputed_by is None
-    assert cal.scale_error == pytest.approx(0.03, abs=0.006)  # measured 0.034 (was 0.050)
-    assert math.degrees(cal.heading_bias) == pytest.approx(0.8, abs=0.02)  # measured 0.804
+    refine = Config(pose_refinement=dataclasses.replace(cfg.pose_refinement, enabled=True))
+    found = run(log, tmp_path / "out", refine, force=True).metrics.pose_refinement
+    assert found is not None
+    assert found["scale_far_echoes"] is True and "scale_far_estimate" not in found  # no dispute
+    assert found["search_scale_error"] == pytest.approx(0.03, abs=0.006)  # measured 0.034 (was 0.050)
+    assert found["search_heading_bias_deg_per_m"] == pytest.approx(0.8, abs=0.02)  # measured 0.804
