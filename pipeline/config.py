@@ -191,7 +191,7 @@ class PoseRefinementConfig:
     local_iterations: int = doc_field("... solves, each after associating again", default=4)
     local_min_gain: float = doc_field(
         "... applied when the first solve lowers the patches' robust loss by this much per "
-        "correction parameter", default=1.0)
+        "correction parameter", default=0.5)
     local_min_consistency_gain: float = doc_field(
         "... and the corrected poses make the echoes more consistent by this fraction",
         default=0.01)
