@@ -44,6 +44,13 @@ def true_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[tuple[np.ndarray
     return track, echoes
 
 
+def _wander(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """0 until a third of the run's travel, then up to 1 over the next 4 m: the shape of a
+    random walk's jump, scaled by each test."""
+    travel = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(x), np.diff(y)))])
+    return np.clip((travel - travel[-1] / 3) / 4.0, 0.0, 1.0)
+
+
 def test_true_poses_are_left_exactly_as_they_are(true_run) -> None:
     (t, x, y, yaw), echoes = true_run
     out = correct_stretches(t, x, y, yaw, echoes, **KW)
@@ -55,9 +62,8 @@ def test_true_poses_are_left_exactly_as_they_are(true_run) -> None:
 
 def test_a_displaced_second_lap_is_pulled_back_onto_the_first(true_run) -> None:
     (t, x, y, yaw), echoes = true_run
-    travel = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(x), np.diff(y)))])
     # from a third of the run on, the odometry wanders 0.15 m off (a random walk's jump)
-    ramp = np.clip((travel - travel[-1] / 3) / 4.0, 0.0, 1.0)
+    ramp = _wander(x, y)
     dx, dy = 0.12 * ramp, -0.09 * ramp
     out = correct_stretches(t, x + dx, y + dy, yaw, echoes, **KW)
     before = np.sqrt(np.mean(dx**2 + dy**2))
@@ -83,8 +89,7 @@ def test_a_sparse_revisit_is_corrected_where_the_echoes_become_more_consistent(
     # per parameter and are left as they are.
     (t, x, y, yaw), echoes = true_run
     sparse = echoes.take(np.arange(0, len(echoes), 16))
-    travel = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(x), np.diff(y)))])
-    ramp = np.clip((travel - travel[-1] / 3) / 4.0, 0.0, 1.0)
+    ramp = _wander(x, y)
     dx, dy = 0.06 * ramp, -0.045 * ramp
     kw = {**KW, "min_gain": Config().pose_refinement.local_min_gain}
     out = correct_stretches(t, x + dx, y + dy, yaw, sparse, **kw)
@@ -145,8 +150,7 @@ def test_a_consistency_gate_out_of_range_is_refused_by_name(value: float) -> Non
 
 def test_the_consistency_gate_applies_a_gain_that_reaches_it(true_run) -> None:
     (t, x, y, yaw), echoes = true_run
-    travel = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(x), np.diff(y)))])
-    dx = 0.12 * np.clip((travel - travel[-1] / 3) / 4.0, 0.0, 1.0)
+    dx = 0.12 * _wander(x, y)
     gain = correct_stretches(t, x + dx, y, yaw, echoes, **KW).metrics["consistency_gain"]
     assert gain > 0
     at = correct_stretches(t, x + dx, y, yaw, echoes, **{**KW, "min_consistency_gain": gain})
