@@ -94,6 +94,18 @@ def normal_angles(density: F64) -> F64:
     return np.asarray(0.5 * np.arctan2(2 * sxy, sxx - syy))
 
 
+def normal_angles_at(density: F64, rows: I64, cols: I64) -> F64:
+    """``normal_angles(density)[rows, cols]``, bit for bit, with the structure tensor
+    filtered at those cells only (compiled: :func:`pipeline.refine.kernels.structure_tensor_at`;
+    the whole grid's three filters were two thirds of an association's time)."""
+    from pipeline.refine.kernels import gaussian_weights, structure_tensor_at
+
+    cell, at = np.unique(rows * density.shape[1] + cols, return_inverse=True)  # once each
+    t = structure_tensor_at(density, cell // density.shape[1], cell % density.shape[1],
+                            gaussian_weights(TENSOR_SIGMA_CELLS, truncate=4.0))
+    return np.asarray(0.5 * np.arctan2(2 * t[:, 2], t[:, 0] - t[:, 1]))[at.ravel()]
+
+
 class SurfaceScale:
     """``f(k₀)`` of the module docstring for one log's echoes, its fixed point, and the
     same for the heading bias at a given scale."""
@@ -119,6 +131,8 @@ class SurfaceScale:
         echoes at ``pose`` (one row per echo)."""
         from scipy.ndimage import gaussian_filter
 
+        from pipeline.refine.kernels import free_box, free_counts
+
         e = self.echoes
         if len(e) == 0:
             none = np.empty(0)
@@ -126,38 +140,38 @@ class SurfaceScale:
         wx, wy = transform_points(pose[:, None, :], self.bx, self.by)
         ox, oy = transform_points(pose, e.sx, e.sy)
         steps = np.arange(1, int(e.range_m.max(initial=0.0) / CELL_M) + 1) * CELL_M
-        rays = wx[:, ::FREE_RAY_STRIDE], wy[:, ::FREE_RAY_STRIDE]
-        free = steps[None, None, :] < (e.range_m[:, None, None] - 2 * SIGMA_M)
-        free = np.broadcast_to(free, (*rays[0].shape, steps.size))
-        frac = steps[None, None, :] / e.range_m[:, None, None]
-        fx = (ox[:, None, None] + (rays[0] - ox[:, None])[..., None] * frac)[free]
-        fy = (oy[:, None, None] + (rays[1] - oy[:, None])[..., None] * frac)[free]
-        x0 = min(float(wx.min()), float(fx.min(initial=np.inf))) - 1.0
-        y0 = min(float(wy.min()), float(fy.min(initial=np.inf))) - 1.0
-        w = int((max(float(wx.max()), float(fx.max(initial=-np.inf))) + 1.0 - x0) / CELL_M) + 2
-        h = int((max(float(wy.max()), float(fy.max(initial=-np.inf))) + 1.0 - y0) / CELL_M) + 2
+        # the free cones: rays on the arc's two edges and its axis, from the sonar to 2σ
+        # short of the echo (compiled, without the samples' arrays)
+        rx = np.ascontiguousarray(wx[:, ::FREE_RAY_STRIDE])
+        ry = np.ascontiguousarray(wy[:, ::FREE_RAY_STRIDE])
+        band = 2 * SIGMA_M
+        fxmin, fymin, fxmax, fymax = free_box(ox, oy, rx, ry, e.range_m, steps, band)
+        x0 = min(float(wx.min()), fxmin) - 1.0
+        y0 = min(float(wy.min()), fymin) - 1.0
+        w = int((max(float(wx.max()), fxmax) + 1.0 - x0) / CELL_M) + 2
+        h = int((max(float(wy.max()), fymax) + 1.0 - y0) / CELL_M) + 2
 
         def cells(px: F64, py: F64) -> tuple[I64, I64]:
             return (np.clip(((py - y0) / CELL_M).astype(np.int64), 0, h - 1),
                     np.clip(((px - x0) / CELL_M).astype(np.int64), 0, w - 1))
 
-        def density(px: F64, py: F64) -> F64:
-            r, c = cells(px, py)
-            counts = np.bincount((r * w + c).ravel(), minlength=h * w).astype(np.float64)
-            return np.asarray(gaussian_filter(counts.reshape(h, w), SIGMA_M / CELL_M,
-                                              mode="constant", truncate=3.0))
+        def density(counts: F64) -> F64:
+            return np.asarray(gaussian_filter(counts, SIGMA_M / CELL_M, mode="constant",
+                                              truncate=3.0))
 
-        # each free ray stands for FREE_RAY_STRIDE-odd of the arc's rays
-        hit, fr = density(wx, wy), density(fx, fy) * (wx.shape[1] / rays[0].shape[1])
         r, c = cells(wx, wy)
+        hit = density(np.bincount((r * w + c).ravel(), minlength=h * w).reshape(h, w)
+                      .astype(np.float64))
+        # each free ray stands for FREE_RAY_STRIDE-odd of the arc's rays
+        fr = density(free_counts(ox, oy, rx, ry, e.range_m, steps, band, x0, y0, CELL_M, h, w)
+                     ) * (wx.shape[1] / rx.shape[1])
         seen = hit[r, c] + fr[r, c]
         ratio = np.where(seen >= 2.0, hit[r, c] / np.maximum(seen, 1e-12), -1.0)
         best = ratio.argmax(axis=1)
         rows = np.arange(len(e))
         px, py = wx[rows, best], wy[rows, best]
-        angle = normal_angles(hit)
-        hr, hc = cells(px, py)
-        nx, ny = np.cos(angle[hr, hc]), np.sin(angle[hr, hc])
+        angle = normal_angles_at(hit, *cells(px, py))
+        nx, ny = np.cos(angle), np.sin(angle)
         towards = np.where(nx * (ox - px) + ny * (oy - py) < 0, -1.0, 1.0)
         nx, ny = nx * towards, ny * towards
         ray = pose[:, 2] + self.phi[rows, best]

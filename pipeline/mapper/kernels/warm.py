@@ -33,14 +33,24 @@ def warm() -> float:
 
 
 def _warm_refinement() -> None:
-    """The calibration scores of ``--refine-poses`` (numba compiles per argument types)."""
-    from pipeline.refine.kernels import binned_sharpness, consistency_score
+    """The kernels of ``--refine-poses`` (numba compiles per argument types)."""
+    from pipeline.refine.kernels import (
+        binned_sharpness,
+        consistency_score,
+        free_box,
+        free_counts,
+        poses_at,
+        structure_tensor_at,
+    )
 
-    none2, none1 = np.empty((0, 3)), np.empty(0)
+    none2, none1, cells = np.empty((0, 3)), np.empty(0), np.zeros(1, np.int64)
     binned_sharpness(none1, none1, 0.1)
     consistency_score(none2, none2, none1, none1, np.linspace(0.0, 1.0, 3), 0.2, 0.1, 0.4,
                       np.ones(3), 1.0)
-
+    poses_at(0.0, 0.0, 0.0, none1, none1, none1, none1, np.ones(1), np.zeros(1), cells)
+    structure_tensor_at(np.zeros((3, 3)), cells, cells, np.ones(3) / 3)
+    free_box(none1, none1, none2, none2, none1, none1, 0.2)
+    free_counts(none1, none1, none2, none2, none1, none1, 0.2, 0.0, 0.0, 0.1, 2, 2)
 
 if __name__ == "__main__":
     print(f"mapper kernels compiled (or loaded from numba's cache) in {warm():.1f} s")

@@ -1,0 +1,90 @@
+"""The surface association's compiled kernels (pipeline/refine/kernels.py) against the
+numpy they replace: the structure tensor read at a few cells, and the free cones counted
+without their samples' arrays — the same numbers bit for bit."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.ndimage import gaussian_filter
+
+from pipeline.refine.kernels import free_box, free_counts, gaussian_weights, structure_tensor_at
+from pipeline.refine.surfaces import TENSOR_SIGMA_CELLS, normal_angles, normal_angles_at
+
+
+def _densities() -> list[np.ndarray]:
+    """Random grids from 2 × 2 (smaller than the filter: reflected again and again) to
+    40 × 40, raw and blurred like an echo density."""
+    rng = np.random.default_rng(5)
+    grids = []
+    for h, w in ((2, 2), (2, 9), (5, 3), (13, 13), (40, 27), (31, 40)):
+        raw = np.floor(rng.random((h, w)) * 4)
+        grids += [raw, gaussian_filter(raw, 1.0, mode="constant", truncate=3.0)]
+    return grids
+
+
+@pytest.mark.parametrize("density", _densities(), ids=lambda d: f"{d.shape[0]}x{d.shape[1]}")
+def test_the_structure_tensor_at_cells_is_the_whole_grid_filter_bit_for_bit(
+        density: np.ndarray) -> None:
+    gy, gx = np.gradient(density)
+    whole = [gaussian_filter(v, TENSOR_SIGMA_CELLS) for v in (gx * gx, gy * gy, gx * gy)]
+    rows, cols = (v.ravel() for v in np.indices(density.shape))  # every cell, edges too
+    at = structure_tensor_at(density, rows, cols, gaussian_weights(TENSOR_SIGMA_CELLS, 4.0))
+    for k in range(3):
+        assert np.array_equal(at[:, k], whole[k].ravel())
+
+
+def test_the_normals_at_cells_are_the_whole_grids_and_point_across_a_wall() -> None:
+    density = np.zeros((60, 40))
+    density[:, 20] = 1.0  # a wall along the rows (y): its normal is along x
+    density = gaussian_filter(density, 1.0, mode="constant", truncate=3.0)
+    rows = np.array([30, 20, 30, 40, 0])  # a cell asked twice, a corner
+    cols = np.array([20, 19, 20, 21, 0])
+    angles = normal_angles_at(density, rows, cols)
+    assert np.array_equal(angles, normal_angles(density)[rows, cols])
+    assert np.abs(angles[:4]).max() < 1e-12  # across the wall: angle 0 (x), modulo π
+
+
+def _numpy_free_samples(ox: np.ndarray, oy: np.ndarray, rx: np.ndarray, ry: np.ndarray,
+                        range_m: np.ndarray, steps: np.ndarray, band: float
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """The samples as the association built them in numpy (the reference)."""
+    free = steps[None, None, :] < (range_m[:, None, None] - band)
+    free = np.broadcast_to(free, (*rx.shape, steps.size))
+    frac = steps[None, None, :] / range_m[:, None, None]
+    fx = (ox[:, None, None] + (rx - ox[:, None])[..., None] * frac)[free]
+    fy = (oy[:, None, None] + (ry - oy[:, None])[..., None] * frac)[free]
+    return fx, fy
+
+
+def test_the_free_cones_are_counted_where_numpy_places_their_samples() -> None:
+    rng = np.random.default_rng(8)
+    n, cell = 300, 0.1
+    ox, oy = rng.uniform(-3, 3, n), rng.uniform(-3, 3, n)
+    range_m = rng.uniform(0.15, 4.0, n)  # some shorter than the band: no sample
+    heading = rng.uniform(-math.pi, math.pi, n)[:, None] + np.array([-0.26, 0.0, 0.26])
+    rx, ry = ox[:, None] + range_m[:, None] * np.cos(heading), oy[:, None] + range_m[:, None] * np.sin(heading)
+    steps = np.arange(1, int(range_m.max() / cell) + 1) * cell
+    fx, fy = _numpy_free_samples(ox, oy, rx, ry, range_m, steps, 0.2)
+    box = free_box(ox, oy, rx, ry, range_m, steps, 0.2)
+    assert box == (fx.min(), fy.min(), fx.max(), fy.max())
+    x0, y0 = box[0] - 0.5, box[1] - 0.5
+    h, w = 60, 50  # smaller than the samples' box: the far ones clipped to the edge
+    r = np.clip(((fy - y0) / cell).astype(np.int64), 0, h - 1)
+    c = np.clip(((fx - x0) / cell).astype(np.int64), 0, w - 1)
+    reference = np.bincount(r * w + c, minlength=h * w).reshape(h, w).astype(np.float64)
+    counts = free_counts(ox, oy, rx, ry, range_m, steps, 0.2, x0, y0, cell, h, w)
+    assert counts.sum() == fx.size > 0
+    assert np.array_equal(counts, reference)
+
+
+def test_no_free_sample_gives_an_empty_box_and_no_count() -> None:
+    one = np.zeros(1)
+    ray = np.array([[0.1, 0.1, 0.1]])
+    steps = np.array([0.1])
+    assert free_box(one, one, ray, ray, np.array([0.15]), steps, 0.2) == (
+        math.inf, math.inf, -math.inf, -math.inf)
+    assert free_counts(one, one, ray, ray, np.array([0.15]), steps, 0.2, -1.0, -1.0, 0.1,
+                       3, 3).sum() == 0.0
