@@ -208,7 +208,8 @@ def _reflect(i: int, n: int) -> int:
 @njit(cache=True, nogil=True)
 def _gradient(density: np.ndarray, r: int, c: int) -> tuple[float, float]:
     """``numpy.gradient(density)`` at ``(r, c)``: (d/drow, d/dcol), central differences
-    inside, one-sided at the edges, as numpy computes them."""
+    inside, one-sided at the edges, as numpy computes them (0 along an axis of one cell,
+    where numpy refuses)."""
     h, w = density.shape
     if h < 2:
         gr = 0.0
@@ -306,4 +307,3 @@ def free_counts(ox: np.ndarray, oy: np.ndarray, rx: np.ndarray, ry: np.ndarray,
                 c = min(max(int((fx - x0) / cell), 0), w - 1)
                 counts[r, c] += 1.0
     return counts
-

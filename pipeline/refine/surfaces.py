@@ -86,7 +86,8 @@ B0S = tuple(math.radians(d) for d in (-0.2, -0.1, 0.0, 0.1, 0.2))  # around the 
 def normal_angles(density: F64) -> F64:
     """Per cell, the direction (rad, modulo π) of ``density``'s structure tensor's main
     axis — across a wall, its normal: the outer products of the gradient smoothed over
-    :data:`TENSOR_SIGMA_CELLS`."""
+    :data:`TENSOR_SIGMA_CELLS`. The whole grid: the reference of :func:`normal_angles_at`,
+    which the association uses."""
     from scipy.ndimage import gaussian_filter
 
     gy, gx = np.gradient(density)

@@ -52,5 +52,6 @@ def _warm_refinement() -> None:
     free_box(none1, none1, none2, none2, none1, none1, 0.2)
     free_counts(none1, none1, none2, none2, none1, none1, 0.2, 0.0, 0.0, 0.1, 2, 2)
 
+
 if __name__ == "__main__":
     print(f"mapper kernels compiled (or loaded from numba's cache) in {warm():.1f} s")
