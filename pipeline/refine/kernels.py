@@ -20,7 +20,7 @@ versions in :mod:`pipeline.refine.calibration` stay as the reference the tests c
   arithmetic in the same order, one step at a time, without its (calibrations × poses)
   arrays — bit for bit (a wide scan integrates the Intel lab's 13,000 poses under 401
   biases; numpy's passes over those arrays were half of the scan's time).
-* :func:`structure_tensor_at`, :func:`free_box`, :func:`free_counts` — the surface
+* :func:`structure_tensor_at`, :func:`free_samples` — the surface
   association's (:meth:`pipeline.refine.surfaces.SurfaceScale._associate`): the structure
   tensor filtered at the hits' cells only instead of three whole-grid filters (numpy's
   gradient and scipy's symmetric sums in their order: bit for bit), and the free cones
@@ -267,11 +267,16 @@ def structure_tensor_at(density: np.ndarray, rows: np.ndarray, cols: np.ndarray,
 
 
 @njit(cache=True, nogil=True)
-def free_box(ox: np.ndarray, oy: np.ndarray, rx: np.ndarray, ry: np.ndarray,
-             range_m: np.ndarray, steps: np.ndarray, band: float
-             ) -> tuple[float, float, float, float]:
-    """(x min, y min, x max, y max) of the free-cone samples :func:`free_counts` counts
-    (``inf, inf, -inf, -inf`` when there is none)."""
+def free_samples(ox: np.ndarray, oy: np.ndarray, rx: np.ndarray, ry: np.ndarray,
+                 range_m: np.ndarray, steps: np.ndarray, band: float, x0: float, y0: float,
+                 cell: float, counts: np.ndarray) -> tuple[float, float, float, float]:
+    """The free-cone samples: echo ``i``'s rays from its sonar ``(ox, oy)`` to the points
+    ``(rx, ry)[i]``, sampled at ``steps`` (fractions ``steps / range_m[i]`` of the way)
+    short of ``range_m[i] − band`` and placed as ``o + (r − o)·frac`` (numpy's arithmetic),
+    without the samples' arrays. Counts them into the cells of ``counts`` (origin
+    ``(x0, y0)``, clipped into the grid; a grid of no cells counts nothing) and returns
+    their box (x min, y min, x max, y max; ``inf, inf, -inf, -inf`` when there is none)."""
+    h, w = counts.shape
     xmin, ymin, xmax, ymax = np.inf, np.inf, -np.inf, -np.inf
     for i in range(rx.shape[0]):
         for s in range(steps.shape[0]):
@@ -283,27 +288,8 @@ def free_box(ox: np.ndarray, oy: np.ndarray, rx: np.ndarray, ry: np.ndarray,
                 fy = oy[i] + (ry[i, j] - oy[i]) * frac
                 xmin, xmax = min(xmin, fx), max(xmax, fx)
                 ymin, ymax = min(ymin, fy), max(ymax, fy)
+                if h > 0 and w > 0:
+                    r = min(max(int((fy - y0) / cell), 0), h - 1)
+                    c = min(max(int((fx - x0) / cell), 0), w - 1)
+                    counts[r, c] += 1.0
     return xmin, ymin, xmax, ymax
-
-
-@njit(cache=True, nogil=True)
-def free_counts(ox: np.ndarray, oy: np.ndarray, rx: np.ndarray, ry: np.ndarray,
-                range_m: np.ndarray, steps: np.ndarray, band: float, x0: float, y0: float,
-                cell: float, h: int, w: int) -> np.ndarray:
-    """(h, w): the free-cone samples counted per cell (clipped into the grid) — echo ``i``'s
-    rays from its sonar ``(ox, oy)`` to the points ``(rx, ry)[i]`` sampled at ``steps``
-    (fractions ``steps / range_m[i]`` of the way) short of ``range_m[i] − band``, placed as
-    ``o + (r − o)·frac`` (numpy's arithmetic), without the samples' arrays."""
-    counts = np.zeros((h, w))
-    for i in range(rx.shape[0]):
-        for s in range(steps.shape[0]):
-            if not steps[s] < range_m[i] - band:
-                break
-            frac = steps[s] / range_m[i]
-            for j in range(rx.shape[1]):
-                fx = ox[i] + (rx[i, j] - ox[i]) * frac
-                fy = oy[i] + (ry[i, j] - oy[i]) * frac
-                r = min(max(int((fy - y0) / cell), 0), h - 1)
-                c = min(max(int((fx - x0) / cell), 0), w - 1)
-                counts[r, c] += 1.0
-    return counts

@@ -132,7 +132,7 @@ class SurfaceScale:
         echoes at ``pose`` (one row per echo)."""
         from scipy.ndimage import gaussian_filter
 
-        from pipeline.refine.kernels import free_box, free_counts
+        from pipeline.refine.kernels import free_samples
 
         e = self.echoes
         if len(e) == 0:
@@ -146,7 +146,8 @@ class SurfaceScale:
         rx = np.ascontiguousarray(wx[:, ::FREE_RAY_STRIDE])
         ry = np.ascontiguousarray(wy[:, ::FREE_RAY_STRIDE])
         band = 2 * SIGMA_M
-        fxmin, fymin, fxmax, fymax = free_box(ox, oy, rx, ry, e.range_m, steps, band)
+        fxmin, fymin, fxmax, fymax = free_samples(ox, oy, rx, ry, e.range_m, steps, band, 0.0,
+                                                  0.0, CELL_M, np.zeros((0, 0)))
         x0 = min(float(wx.min()), fxmin) - 1.0
         y0 = min(float(wy.min()), fymin) - 1.0
         w = int((max(float(wx.max()), fxmax) + 1.0 - x0) / CELL_M) + 2
@@ -164,8 +165,9 @@ class SurfaceScale:
         hit = density(np.bincount((r * w + c).ravel(), minlength=h * w).reshape(h, w)
                       .astype(np.float64))
         # each free ray stands for FREE_RAY_STRIDE-odd of the arc's rays
-        fr = density(free_counts(ox, oy, rx, ry, e.range_m, steps, band, x0, y0, CELL_M, h, w)
-                     ) * (wx.shape[1] / rx.shape[1])
+        free = np.zeros((h, w))
+        free_samples(ox, oy, rx, ry, e.range_m, steps, band, x0, y0, CELL_M, free)
+        fr = density(free) * (wx.shape[1] / rx.shape[1])
         seen = hit[r, c] + fr[r, c]
         ratio = np.where(seen >= 2.0, hit[r, c] / np.maximum(seen, 1e-12), -1.0)
         best = ratio.argmax(axis=1)

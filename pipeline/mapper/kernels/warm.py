@@ -37,8 +37,7 @@ def _warm_refinement() -> None:
     from pipeline.refine.kernels import (
         binned_sharpness,
         consistency_score,
-        free_box,
-        free_counts,
+        free_samples,
         poses_at,
         structure_tensor_at,
     )
@@ -49,8 +48,7 @@ def _warm_refinement() -> None:
                       np.ones(3), 1.0)
     poses_at(0.0, 0.0, 0.0, none1, none1, none1, none1, np.ones(1), np.zeros(1), cells)
     structure_tensor_at(np.zeros((3, 3)), cells, cells, np.ones(3) / 3)
-    free_box(none1, none1, none2, none2, none1, none1, 0.2)
-    free_counts(none1, none1, none2, none2, none1, none1, 0.2, 0.0, 0.0, 0.1, 2, 2)
+    free_samples(none1, none1, none2, none2, none1, none1, 0.2, 0.0, 0.0, 0.1, np.zeros((2, 2)))
 
 
 if __name__ == "__main__":

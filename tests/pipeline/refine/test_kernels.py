@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.ndimage import gaussian_filter
 
-from pipeline.refine.kernels import free_box, free_counts, gaussian_weights, structure_tensor_at
+from pipeline.refine.kernels import free_samples, gaussian_weights, structure_tensor_at
 from pipeline.refine.surfaces import TENSOR_SIGMA_CELLS, normal_angles, normal_angles_at
 
 
@@ -68,14 +68,15 @@ def test_the_free_cones_are_counted_where_numpy_places_their_samples() -> None:
     rx, ry = ox[:, None] + range_m[:, None] * np.cos(heading), oy[:, None] + range_m[:, None] * np.sin(heading)
     steps = np.arange(1, int(range_m.max() / cell) + 1) * cell
     fx, fy = _numpy_free_samples(ox, oy, rx, ry, range_m, steps, 0.2)
-    box = free_box(ox, oy, rx, ry, range_m, steps, 0.2)
+    box = free_samples(ox, oy, rx, ry, range_m, steps, 0.2, 0.0, 0.0, cell, np.zeros((0, 0)))
     assert box == (fx.min(), fy.min(), fx.max(), fy.max())
     x0, y0 = box[0] - 0.5, box[1] - 0.5
     h, w = 60, 50  # smaller than the samples' box: the far ones clipped to the edge
     r = np.clip(((fy - y0) / cell).astype(np.int64), 0, h - 1)
     c = np.clip(((fx - x0) / cell).astype(np.int64), 0, w - 1)
     reference = np.bincount(r * w + c, minlength=h * w).reshape(h, w).astype(np.float64)
-    counts = free_counts(ox, oy, rx, ry, range_m, steps, 0.2, x0, y0, cell, h, w)
+    counts = np.zeros((h, w))
+    assert free_samples(ox, oy, rx, ry, range_m, steps, 0.2, x0, y0, cell, counts) == box
     assert counts.sum() == fx.size > 0
     assert np.array_equal(counts, reference)
 
@@ -84,7 +85,7 @@ def test_no_free_sample_gives_an_empty_box_and_no_count() -> None:
     one = np.zeros(1)
     ray = np.array([[0.1, 0.1, 0.1]])
     steps = np.array([0.1])
-    assert free_box(one, one, ray, ray, np.array([0.15]), steps, 0.2) == (
-        math.inf, math.inf, -math.inf, -math.inf)
-    assert free_counts(one, one, ray, ray, np.array([0.15]), steps, 0.2, -1.0, -1.0, 0.1,
-                       3, 3).sum() == 0.0
+    counts = np.zeros((3, 3))
+    assert free_samples(one, one, ray, ray, np.array([0.15]), steps, 0.2, -1.0, -1.0, 0.1,
+                        counts) == (math.inf, math.inf, -math.inf, -math.inf)
+    assert counts.sum() == 0.0
