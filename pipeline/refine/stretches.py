@@ -109,9 +109,11 @@ def correct_stretches(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
                         sigma_yaw)
         if solved is None:
             break
-        corr, gain, dof = solved
-        if it == 0:
-            metrics.update(stretches=n, gain_per_parameter=gain / max(dof, 1))
+        corr, loss_before, loss_after, dof = solved
+        gain = loss_before - loss_after
+        if it == 0:  # the gate's solve: the optimiser's cost without and with the corrections
+            metrics.update(stretches=n, loss_before=loss_before, loss_after=loss_after,
+                           gain_per_parameter=gain / max(dof, 1))
             if gain < min_gain * dof:
                 metrics["note"] = (f"not applied: the patches' loss falls by "
                                    f"{gain / max(dof, 1):.2f} per parameter (< {min_gain:g})")
@@ -141,9 +143,9 @@ def _consistency(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, res: float
 
 def _solve(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, stretch: I64, centre: F64,
            stretch_m: float, sigma_xy: float, sigma_yaw: float
-           ) -> tuple[F64, float, int] | None:
-    """(corrections (stretches, 3), the loss's fall, the parameters) of one linearised
-    solve; ``stretch``: each pose's, ``centre``: each stretch's mean x, y and travel. The
+           ) -> tuple[F64, float, float, int] | None:
+    """(corrections (stretches, 3), the patches' robust loss without and with them, the
+    parameters) of one linearised solve; ``stretch``: each pose's, ``centre``: each stretch's mean x, y and travel. The
     patches' offsets are eliminated (each is the weighted mean of its rows), which leaves
     a dense system of 3 unknowns per stretch."""
     from pipeline.refine.surfaces import CAUCHY, MAD_SIGMA, SurfaceScale
@@ -209,7 +211,7 @@ def _solve(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, stretch: I64, ce
         none = residuals(np.zeros(n_par), none_w)
     corr = np.zeros((n, 3))
     corr[1:] = sol.reshape(n - 1, 3)
-    return corr, loss(none) - loss(res), n_par
+    return corr, loss(none), loss(res), n_par
 
 
 def _apply(x: F64, y: F64, yaw: F64, travel: F64, centre: F64, corr: F64

@@ -71,6 +71,12 @@ def test_a_displaced_second_lap_is_pulled_back_onto_the_first(true_run) -> None:
     assert out.metrics["gain_per_parameter"] > 1.0 and out.metrics["iterations"] == 4
     assert after < 0.5 * before, (before, after)
     assert out.metrics["applied"] and out.metrics["consistency_gain"] > 0.01
+    # the optimiser's cost at the gate's solve: the patches' robust loss without and with
+    # the corrections, their difference the gain reported per parameter
+    m = out.metrics
+    dof = 3 * (m["stretches"] - 1)
+    assert m["loss_before"] > m["loss_after"] > 0
+    assert m["loss_before"] - m["loss_after"] == pytest.approx(m["gain_per_parameter"] * dof)
     # the second gate: corrections that fit the patches but leave the echoes no more
     # consistent than the ask are refused, the poses returned as given
     strict = correct_stretches(t, x + dx, y + dy, yaw, echoes,
