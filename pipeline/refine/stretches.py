@@ -145,9 +145,9 @@ def _solve(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, stretch: I64, ce
            stretch_m: float, sigma_xy: float, sigma_yaw: float
            ) -> tuple[F64, float, float, int] | None:
     """(corrections (stretches, 3), the patches' robust loss without and with them, the
-    parameters) of one linearised solve; ``stretch``: each pose's, ``centre``: each stretch's mean x, y and travel. The
-    patches' offsets are eliminated (each is the weighted mean of its rows), which leaves
-    a dense system of 3 unknowns per stretch."""
+    parameters) of one linearised solve; ``stretch``: each pose's, ``centre``: each
+    stretch's mean x, y and travel. The patches' offsets are eliminated (each is the
+    weighted mean of its rows), which leaves a dense system of 3 unknowns per stretch."""
     from pipeline.refine.surfaces import CAUCHY, MAD_SIGMA, SurfaceScale
 
     surfaces = SurfaceScale(t_ns, x, y, yaw, echoes, 0.0, window_m=0.0)
