@@ -22,8 +22,8 @@ versions in :mod:`pipeline.refine.calibration` stay as the reference the tests c
   biases; numpy's passes over those arrays were half of the scan's time).
 * :func:`structure_tensor_at`, :func:`free_samples` — the surface
   association's (:meth:`pipeline.refine.surfaces.SurfaceScale._associate`): the structure
-  tensor filtered at the hits' cells only instead of three whole-grid filters (numpy's
-  gradient and scipy's symmetric sums in their order: bit for bit), and the free cones
+  tensor filtered at the hits' cells only instead of three whole-grid filters (of numpy's
+  gradient, scipy's symmetric sums in their order: bit for bit), and the free cones
   counted per cell without their samples' arrays (numpy's arithmetic per sample: the same
   counts). Measured, an association 45 → 9 ms on the drifted Örebro (1,523 echoes),
   23 → 15 ms on the drifted Intel lab (6,484; benchmarks/RESULTS.md, twelfth session).
@@ -206,53 +206,30 @@ def _reflect(i: int, n: int) -> int:
 
 
 @njit(cache=True, nogil=True)
-def _gradient(density: np.ndarray, r: int, c: int) -> tuple[float, float]:
-    """``numpy.gradient(density)`` at ``(r, c)``: (d/drow, d/dcol), central differences
-    inside, one-sided at the edges, as numpy computes them (0 along an axis of one cell,
-    where numpy refuses)."""
-    h, w = density.shape
-    if h < 2:
-        gr = 0.0
-    elif r == 0:
-        gr = (density[1, c] - density[0, c]) / 1.0
-    elif r == h - 1:
-        gr = (density[h - 1, c] - density[h - 2, c]) / 1.0
-    else:
-        gr = (density[r + 1, c] - density[r - 1, c]) / 2.0
-    if w < 2:
-        gc = 0.0
-    elif c == 0:
-        gc = (density[r, 1] - density[r, 0]) / 1.0
-    elif c == w - 1:
-        gc = (density[r, w - 1] - density[r, w - 2]) / 1.0
-    else:
-        gc = (density[r, c + 1] - density[r, c - 1]) / 2.0
-    return gr, gc
-
-
-@njit(cache=True, nogil=True)
-def structure_tensor_at(density: np.ndarray, rows: np.ndarray, cols: np.ndarray,
+def structure_tensor_at(gx: np.ndarray, gy: np.ndarray, rows: np.ndarray, cols: np.ndarray,
                         weights: np.ndarray) -> np.ndarray:
-    """(len(rows), 3): the structure tensor ``(sxx, syy, sxy)`` of ``density`` at the cells
-    ``(rows[i], cols[i])`` — the gradient's outer products (``x`` along columns) each
-    filtered by ``scipy.ndimage.gaussian_filter`` with the 1-D ``weights`` (odd, symmetric;
-    ``mode="reflect"``), read at those cells only: the rows pass, then the columns pass,
+    """(len(rows), 3): the structure tensor ``(sxx, syy, sxy)`` at the cells
+    ``(rows[i], cols[i])`` of the gradient ``(gx, gy)`` (``numpy.gradient``'s, ``x`` along
+    columns) — its outer products each filtered by ``scipy.ndimage.gaussian_filter`` with
+    the 1-D ``weights`` (odd, symmetric; ``mode="reflect"``), read at those cells only: the rows pass, then the columns pass,
     each summed as scipy's symmetric correlation sums (centre first, then the pairs from
     the outermost in), so the values are the whole-grid filter's bit for bit."""
-    h, w = density.shape
+    h, w = gx.shape
     rad = weights.shape[0] // 2
     n = rows.shape[0]
     out = np.empty((n, 3))
     t1 = np.empty((2 * rad + 1, 3))  # the rows pass at the columns the columns pass reads
     for i in range(n):
         r, c = rows[i], cols[i]
+        rr = _reflect(r, h)
         for v in range(-rad, rad + 1):
             cc = _reflect(c + v, w)
-            gr, gc = _gradient(density, _reflect(r, h), cc)
+            gr, gc = gy[rr, cc], gx[rr, cc]
             a0, a1, a2 = gc * gc * weights[rad], gr * gr * weights[rad], gc * gr * weights[rad]
             for j in range(rad, 0, -1):
-                gr1, gc1 = _gradient(density, _reflect(r - j, h), cc)
-                gr2, gc2 = _gradient(density, _reflect(r + j, h), cc)
+                r1, r2 = _reflect(r - j, h), _reflect(r + j, h)
+                gr1, gc1 = gy[r1, cc], gx[r1, cc]
+                gr2, gc2 = gy[r2, cc], gx[r2, cc]
                 wj = weights[rad - j]
                 a0 += (gc1 * gc1 + gc2 * gc2) * wj
                 a1 += (gr1 * gr1 + gr2 * gr2) * wj

@@ -101,8 +101,9 @@ def normal_angles_at(density: F64, rows: I64, cols: I64) -> F64:
     the whole grid's three filters were two thirds of an association's time)."""
     from pipeline.refine.kernels import gaussian_weights, structure_tensor_at
 
+    gy, gx = (np.asarray(g) for g in np.gradient(density))
     cell, at = np.unique(rows * density.shape[1] + cols, return_inverse=True)  # once each
-    t = structure_tensor_at(density, cell // density.shape[1], cell % density.shape[1],
+    t = structure_tensor_at(gx, gy, cell // density.shape[1], cell % density.shape[1],
                             gaussian_weights(TENSOR_SIGMA_CELLS, truncate=4.0))
     return np.asarray(0.5 * np.arctan2(2 * t[:, 2], t[:, 0] - t[:, 1]))[at.ravel()]
 

@@ -31,7 +31,7 @@ def test_the_structure_tensor_at_cells_is_the_whole_grid_filter_bit_for_bit(
     gy, gx = np.gradient(density)
     whole = [gaussian_filter(v, TENSOR_SIGMA_CELLS) for v in (gx * gx, gy * gy, gx * gy)]
     rows, cols = (v.ravel() for v in np.indices(density.shape))  # every cell, edges too
-    at = structure_tensor_at(density, rows, cols, gaussian_weights(TENSOR_SIGMA_CELLS, 4.0))
+    at = structure_tensor_at(gx, gy, rows, cols, gaussian_weights(TENSOR_SIGMA_CELLS, 4.0))
     for k in range(3):
         assert np.array_equal(at[:, k], whole[k].ravel())
 
