@@ -262,9 +262,7 @@ class _Consistency(_Compiled):
         self.reference = reference
         # The whole cone: an oblique surface's nearest point, which made the echo, lies at
         # the cone's edge (the sharpness's narrower arc would put it in front of the wall).
-        keep = _thin(len(echoes), at_most)
-        bx, by = echoes.arc(1.0)
-        self.bx, self.by = bx[keep], by[keep]
+        self.bx, self.by = echoes.take(_thin(len(echoes), at_most)).arc(1.0)
         self.res, self.sigma, self.band = res, sigma, 2 * sigma
         reach = float(np.hypot(self.bx - self.sx[:, None], self.by - self.sy[:, None]).max(
             initial=0.0))

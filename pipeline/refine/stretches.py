@@ -67,7 +67,12 @@ import numpy as np
 
 from formats.angles import wrap_angle
 from formats.arrays import F64, I64
-from pipeline.refine.calibration import _Consistency, consistency_change
+from pipeline.refine.calibration import (
+    MAX_ECHOES_CONSISTENCY,
+    _Consistency,
+    _thin,
+    consistency_change,
+)
 from pipeline.refine.echoes import Echoes
 from pipeline.se2 import transform_points
 
@@ -93,8 +98,14 @@ def correct_stretches(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
     odometry they were taken at (their poses follow the track); ``min_consistency_gain``,
     ``res``, ``sigma``: the second gate's (echo consistency at cells ``2 res``, blur
     ``sigma``, as the calibration's)."""
+    from pipeline.refine import surfaces
+
     given = (x, y, yaw)
     metrics: dict[str, Any] = {"stretches": 0, "iterations": 0}
+    # only the echoes each score reads (thinned evenly, as the scores thin them) follow the
+    # corrected track: a long log's hundreds of thousands are not interpolated each solve
+    matched = echoes.take(_thin(len(echoes), surfaces.MAX_ECHOES))
+    scored = echoes.take(_thin(len(echoes), MAX_ECHOES_CONSISTENCY))
     for it in range(iterations):
         travel = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(x), np.diff(y)))])
         # stretches numbered 0 … n − 1 over the ones poses fall in (a jump may skip one)
@@ -105,8 +116,8 @@ def correct_stretches(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
         count = np.bincount(stretch, minlength=n)
         centre = np.column_stack([np.bincount(stretch, x, n), np.bincount(stretch, y, n),
                                   np.bincount(stretch, travel, n)]) / np.maximum(count, 1)[:, None]
-        solved = _solve(t_ns, x, y, yaw, echoes.on_track(t_ns, x, y, yaw), stretch, centre, stretch_m, sigma_xy,
-                        sigma_yaw)
+        solved = _solve(t_ns, x, y, yaw, matched.on_track(t_ns, x, y, yaw), stretch, centre,
+                        stretch_m, sigma_xy, sigma_yaw)
         if solved is None:
             break
         corr, loss_before, loss_after, dof = solved
@@ -121,8 +132,8 @@ def correct_stretches(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
         x, y, yaw = _apply(x, y, yaw, travel, centre, corr)
         metrics["iterations"] = it + 1
     if metrics["iterations"]:
-        gain = (_consistency(t_ns, x, y, yaw, echoes, res, sigma)
-                / _consistency(t_ns, *given, echoes, res, sigma) - 1.0)
+        gain = (_consistency(t_ns, x, y, yaw, scored, res, sigma)
+                / _consistency(t_ns, *given, scored, res, sigma) - 1.0)
         metrics["consistency_gain"] = gain
         if gain < min_consistency_gain:
             metrics["note"] = (f"not applied: the echoes would be {consistency_change(gain)} "
