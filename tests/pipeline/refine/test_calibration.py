@@ -88,6 +88,22 @@ def test_the_compiled_consistency_gives_the_reference_score(true_run: tuple[obje
     assert got == pytest.approx(want, rel=1e-12, abs=1e-12)
 
 
+def test_a_thinned_consistency_scores_the_whole_cones_of_the_echoes_it_keeps(
+        true_run: tuple[object, Echoes]) -> None:
+    track, echoes = true_run
+    t, x, y, yaw = (np.asarray(getattr(track, a)) for a in ("t_ns", "x", "y", "yaw"))
+    at_most = len(echoes) // 3
+    thinned = _Consistency(t, x, y, yaw, echoes, res=0.1, sigma=0.1, at_most=at_most)
+    keep = np.linspace(0, len(echoes) - 1, at_most).round().astype(np.int64)
+    bx, by = echoes.arc(1.0)  # the whole cone of every echo, then the kept rows
+    assert thinned.bx.shape == (at_most, bx.shape[1])
+    np.testing.assert_array_equal(thinned.bx, bx[keep])
+    np.testing.assert_array_equal(thinned.by, by[keep])
+    np.testing.assert_array_equal(thinned.sx, echoes.sx[keep])  # the arcs' sonars, in step
+    alone = _Consistency(t, x, y, yaw, echoes.take(keep), res=0.1, sigma=0.1)
+    assert thinned(0.0, 0.0) == alone(0.0, 0.0)
+
+
 def test_the_compiled_consistency_scores_an_echo_down_where_another_saw_free_space() -> None:
     from pipeline.refine.kernels import consistency_score, gaussian_weights
 
