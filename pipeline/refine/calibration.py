@@ -138,7 +138,7 @@ class _Placed:
     """A subset of the echoes with the odometry spliced in, placed under a calibration."""
 
     def __init__(self, t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, at_most: int):
-        keep = _thin(len(echoes), at_most)
+        self.keep = keep = _thin(len(echoes), at_most)  # the echoes kept, by index
         # The echoes' odometry poses are spliced into the pose sequence (by stamp), so one
         # re-integration gives the calibrated pose of every echo too.
         t_all = np.concatenate([t_ns, echoes.t_ns[keep]])
@@ -262,7 +262,7 @@ class _Consistency(_Compiled):
         self.reference = reference
         # The whole cone: an oblique surface's nearest point, which made the echo, lies at
         # the cone's edge (the sharpness's narrower arc would put it in front of the wall).
-        self.bx, self.by = echoes.take(_thin(len(echoes), at_most)).arc(1.0)
+        self.bx, self.by = echoes.take(self.keep).arc(1.0)
         self.res, self.sigma, self.band = res, sigma, 2 * sigma
         reach = float(np.hypot(self.bx - self.sx[:, None], self.by - self.sy[:, None]).max(
             initial=0.0))
