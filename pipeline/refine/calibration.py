@@ -269,18 +269,20 @@ class _Consistency(_Compiled):
         self.steps = np.arange(1, int(reach / res) + 1) * res  # along each ray, m
 
     def _compiled(self, pose: F64) -> float:
-        from pipeline.refine.kernels import consistency_score, gaussian_weights
+        from pipeline.refine.kernels import consistency_score
 
         wx, wy = self.arcs(pose)
         ox, oy = transform_points(pose, self.sx, self.sy)  # each sonar's position
         return float(consistency_score(
             np.ascontiguousarray(wx), np.ascontiguousarray(wy), ox, oy, self.steps,
-            self.band, self.res, 4 * self.sigma, gaussian_weights(self.sigma / self.res),
+            self.band, self.res, 4 * self.sigma, self.sigma / self.res, self._radius(),
             MIN_EVIDENCE))
 
-    def __call__(self, k: float, b: float) -> float:
-        from scipy.ndimage import gaussian_filter
+    def _radius(self) -> int:
+        """The blur read over ± this many cells (4σ)."""
+        return math.ceil(4 * self.sigma / self.res)
 
+    def __call__(self, k: float, b: float) -> float:
         pose = self.poses(k, b)
         if not self.reference:
             return self._compiled(pose)
@@ -293,22 +295,37 @@ class _Consistency(_Compiled):
         frac = along / np.maximum(r[..., None], 1e-9)
         fx = (ox[:, None, None] + dx[..., None] * frac)[free]
         fy = (oy[:, None, None] + dy[..., None] * frac)[free]
-        pad = 4 * self.sigma
-        x0 = min(float(wx.min()), float(fx.min(initial=np.inf))) - pad
-        y0 = min(float(wy.min()), float(fy.min(initial=np.inf))) - pad
-        w = int((max(float(wx.max()), float(fx.max(initial=-np.inf))) + pad - x0) / self.res) + 2
-        h = int((max(float(wy.max()), float(fy.max(initial=-np.inf))) + pad - y0) / self.res) + 2
+        res, rad, sd = self.res, self._radius(), self.sigma / self.res
+        margin = 4 * self.sigma + (rad + 2) * res
+        x0 = min(float(wx.min()), float(ox.min())) - margin
+        y0 = min(float(wy.min()), float(oy.min())) - margin
+        w = int((max(float(wx.max()), float(ox.max())) + margin - x0) / res) + 2
+        h = int((max(float(wy.max()), float(oy.max())) + margin - y0) / res) + 2
 
-        def density(px: F64, py: F64) -> F64:
-            cell = ((py - y0) / self.res).astype(np.int64) * w + ((px - x0) / self.res).astype(
-                np.int64)
-            counts = np.bincount(cell.ravel(), minlength=h * w).reshape(h, w).astype(np.float64)
-            return np.asarray(gaussian_filter(counts, self.sigma / self.res, mode="constant",
-                                              truncate=3.0).ravel())
+        def shared(px: F64, py: F64) -> F64:  # cloud in cell: each point over four cells
+            u, v = (px.ravel() - x0) / res - 0.5, (py.ravel() - y0) / res - 0.5
+            c0, r0 = np.floor(u).astype(np.int64), np.floor(v).astype(np.int64)
+            fc, fr = u - c0, v - r0
+            grid = np.zeros((h, w))
+            for dr, dc, part in ((0, 0, (1 - fr) * (1 - fc)), (0, 1, (1 - fr) * fc),
+                                 (1, 0, fr * (1 - fc)), (1, 1, fr * fc)):
+                np.add.at(grid, (r0 + dr, c0 + dc), part)
+            return grid
 
-        hits, frees = density(wx, wy), density(fx, fy)
-        at = ((wy - y0) / self.res).astype(np.int64) * w + ((wx - x0) / self.res).astype(np.int64)
-        hh, ff = hits[at], frees[at]
+        def weights(at: F64) -> tuple[I64, F64]:  # each point's window and Gaussian weights
+            c0 = np.floor(at).astype(np.int64) - rad
+            cells = c0[..., None] + np.arange(2 * rad + 2)
+            g = np.exp(-0.5 * ((at[..., None] - cells) / sd) ** 2)
+            return cells, g / g.sum(axis=-1, keepdims=True)
+
+        cols, wu = weights((wx - x0) / res - 0.5)
+        rows, wv = weights((wy - y0) / res - 0.5)
+
+        def read(grid: F64) -> F64:  # the blurred density at each arc point
+            window = grid[rows[..., :, None], cols[..., None, :]]
+            return np.asarray(np.einsum("nam,naq,namq->na", wv, wu, window))
+
+        hh, ff = read(shared(wx, wy)), read(shared(fx, fy))
         seen = hh + ff
         ratio = np.where(seen >= MIN_EVIDENCE, hh / np.maximum(seen, 1e-12), -1.0)
         best = ratio.max(axis=1)
@@ -508,9 +525,8 @@ def _surface_calibration(
 ) -> Calibration:
     """The scale by :mod:`pipeline.refine.surfaces`; then the heading bias at that scale
     (a bias found with the scale wrong partly makes up for it: 0.58°/m of 0.8 on the office
-    run) by the rule of ``k = 0`` (:func:`_heading_bias`), its value then from the patches'
-    own fixed point where that is determined (:func:`_patch_bias`); when the bias moved,
-    the scale once more under it. The gates below judge that last scale, the one found
+    run) by the rule of ``k = 0`` (:func:`_heading_bias`); when the bias moved, the scale
+    once more under it. The gates below judge that last scale, the one found
     under the bias found at a scale: the first, under the bias of ``k = 0``, is only
     provisional (measured, the Intel lab with +1.5 % and +0.4°/m: z 2.95 under the first
     bias, 3.01 under the second, refined F1 0.69 → 0.99 of true poses; FHW with yaw noise
@@ -530,7 +546,7 @@ def _surface_calibration(
       from a calibrated odometry's (wrongly applied, +0.7 % costs a 40 m building 0.07 F1).
 
     With ``far_echoes``, the first scale is also found from them, and they replace the
-    near echoes for the scale (and the patches' bias) when they agree (:func:`_far_agrees`).
+    near echoes for the scale when they agree (:func:`_far_agrees`).
     When they are the more precise and disagree, the specification test says one of the
     two is misled: where the far echoes establish a scale by themselves, theirs (the more
     precise) is the answer — a wide cone's near echoes are the ones misled where the
@@ -553,14 +569,13 @@ def _surface_calibration(
     surfaces, fp, far_used, disputed = _surface_scale(
         t_ns, x, y, yaw, echoes, far_echoes, b, window_m=window_m, systematic=systematic,
         min_z=min_z, max_slope=max_slope)
-    at_zero, used = surfaces, (far_echoes if far_used and far_echoes is not None else echoes)
+    used = far_echoes if far_used and far_echoes is not None else echoes
     established = disputed is None and _established(fp, fp.value, systematic, min_z, max_slope)
     first = fp if disputed is None else disputed
     if math.isfinite(first.value):
         k = float(np.clip(first.value, -max_scale, max_scale))
         b *= 1.0 + k  # the bias is held per reported metre while the scale varies
-        # The bias at that scale as at k = 0 (the same rule), then the patches' value where
-        # they determine it.
+        # The bias at that scale as at k = 0 (the same rule).
         if by_consistency:
             b_new = (_most_consistent(consistent, k, b, bias_step)
                      if _consistency_gain(consistent, k, b) >= min_gain else 0.0)
@@ -568,7 +583,6 @@ def _surface_calibration(
             b_new, again = _heading_bias(sharp, consistent, k, b, bias_step,
                                          (sharp(k, b), k, b), sharp(k, 0.0), min_gain)
             found_rejected = _sharper(rejected, again) if b_new == 0.0 else None
-        b_new = _patch_bias(surfaces, consistent, k, b_new, max_slope, bias_step, min_gain)
         moved = abs(b_new - b) > bias_step / 64  # a quarter of the finest step searched
         b = b_new
         if moved:  # else the bias stands: the first scale is the answer (or none)
@@ -588,8 +602,7 @@ def _surface_calibration(
                 b = b / (1.0 + k) * (1.0 + k_new)
                 k = k_new
     if not established:  # the calibration at k = 0
-        k, b = 0.0, _patch_bias(at_zero, consistent, 0.0, best[2], max_slope, bias_step,
-                                min_gain)
+        k, b = 0.0, best[2]
         found_rejected = rejected
     return Calibration(k, b, sharp(k, b), base, scale_slope=fp.slope,
                        scale_z=_scale_z(fp, systematic), scale_estimate=fp.value,
@@ -659,23 +672,3 @@ def _far_agrees(near: FixedPoint, far: FixedPoint) -> bool:
         return False
     spread = math.sqrt(near.standard_error ** 2 - far.standard_error ** 2)
     return abs(far.value - near.value) <= FAR_TEST_Z * spread
-
-
-def _patch_bias(surfaces: SurfaceScale, consistent: _Consistency, k: float, b: float,
-                max_slope: float, bias_step: float, min_gain: float) -> float:
-    """The heading bias ``b`` (:func:`_heading_bias`; 0: none) replaced by the surface patches'
-    fixed point at the scale ``k`` where that is determined — its slope below
-    ``max_slope``, within two coarse bias steps of ``b`` (the office: 0.72 → 0.81°/m of
-    0.8, where sharpness is flat within 1 % over 0.66-0.84; on the buildings the slope is
-    near 1 and the sharpest stays) — unless it makes the echoes less consistent than ``b``
-    by ``min_gain`` (echo consistency, the referee of every bias, is noisy at the 0.3 %
-    level between neighbouring biases: the patches' 0.803°/m of 0.8 in the sensor-layout
-    room stands; on an L-shaped office their 0.749°/m at slope 0.53 is 1.9 % less
-    consistent than the 0.80 consistency found, and is refused)."""
-    if b == 0.0:
-        return b
-    fb = surfaces.bias_fixed_point(k, b)
-    if (math.isfinite(fb.value) and fb.slope < max_slope and abs(fb.value - b) <= 2 * bias_step
-            and consistent(k, fb.value) >= consistent(k, b) * (1.0 - min_gain)):
-        return fb.value
-    return b

@@ -4,14 +4,15 @@ versions in :mod:`pipeline.refine.calibration` stay as the reference the tests c
 
 * :func:`consistency_score` — the echo consistency (``_Consistency``). The numpy version
   builds every free-cone sample as an array (echoes × arc points × steps along each ray),
-  bins hits and free samples into two grids, blurs both whole grids with
-  ``scipy.ndimage.gaussian_filter`` and reads them back at the arc points: 15-50 ms per
-  candidate calibration on the drifted logs, ~150 candidates per scale search. The kernel
-  does the same in two passes without the sample arrays, and blurs only where the score
-  reads — at each arc point's cell, the separable Gaussian (scipy's weights: ``truncate =
-  3``, normalised) summed over the raw counts around it (the box is padded by 4σ, so the
-  reference's zero boundary is never reached). Same cells, same weights, sums in another
-  order: scores agree with the reference to ~1e-14.
+  shares each hit and free sample bilinearly among the four cells around it (cloud in
+  cell), and reads the Gaussian-blurred densities at each arc point's own position (the
+  weights at its offsets from the cells over ±4σ, normalised): 15-50 ms per candidate
+  calibration, ~150 candidates per scale search. The kernel does the same in two passes
+  without the sample arrays, sums in another order: scores agree with the reference to
+  ~1e-12. Counting into the nearest cell and reading a cell's value made the score a
+  step function of the calibration (10 cm cells, 10 cm blur): under grid orientations a
+  degree apart its peak over the heading bias moved by ±0.005°/m on Örebro, the whole
+  precision a 60 m building needs (benchmarks/RESULTS.md, fourteenth session).
 * :func:`binned_sharpness` — the wide heading-bias scan's score (``_BinnedSharpness``):
   points counted per bin in a hash table instead of sorted by ``numpy.unique``; the counts
   are integers, so the score is the reference's bit for bit.
@@ -51,52 +52,68 @@ def gaussian_weights(sd_cells: float, truncate: float = 3.0) -> F64:
 
 
 @njit(cache=True, nogil=True)
+def gaussian_at(u: float, rad: int, sd: float, out: np.ndarray) -> int:
+    """Gaussian weights (sd ``sd`` cells, normalised to sum 1) at the ``2 rad + 2`` cells
+    ``c0 … c0 + 2 rad + 1`` around the continuous cell coordinate ``u`` (cell ``c``'s
+    centre at ``c``), written to ``out``; returns ``c0``."""
+    c0 = math.floor(u) - rad
+    total = 0.0
+    for m in range(2 * rad + 2):
+        d = u - (c0 + m)
+        out[m] = math.exp(-0.5 * d * d / (sd * sd))
+        total += out[m]
+    for m in range(2 * rad + 2):
+        out[m] /= total
+    return c0
+
+
+@njit(cache=True, nogil=True)
+def splat(grid: np.ndarray, u: float, v: float) -> None:
+    """One unit at the continuous cell coordinates (column ``u``, row ``v``; cell centres
+    at integers) shared bilinearly by the four cells around it (cloud in cell)."""
+    r0, c0 = math.floor(v), math.floor(u)
+    fr, fc = v - r0, u - c0
+    grid[r0, c0] += (1.0 - fr) * (1.0 - fc)
+    grid[r0, c0 + 1] += (1.0 - fr) * fc
+    grid[r0 + 1, c0] += fr * (1.0 - fc)
+    grid[r0 + 1, c0 + 1] += fr * fc
+
+
+@njit(cache=True, nogil=True)
 def consistency_score(wx: np.ndarray, wy: np.ndarray, ox: np.ndarray, oy: np.ndarray,
                       steps: np.ndarray, band: float, res: float, pad: float,
-                      weights: np.ndarray, min_evidence: float) -> float:
+                      sd_cells: float, rad: int, min_evidence: float) -> float:
     """Mean over echoes of the best ``H / (H + F)`` on their arc (see the module docstring).
 
     ``wx, wy`` (echoes, arc points) the arc points in the world, ``ox, oy`` each echo's
     sonar, ``steps`` the distances sampled along each ray, free up to ``band`` short of the
-    arc, ``weights`` the blur's 1-D weights.
+    arc; cells of ``res``, the blur's sd ``sd_cells`` cells read over ``±rad`` cells. Hits
+    and free samples are shared bilinearly by four cells and the blurred densities read at
+    each arc point's own position, so the score moves with the echoes' poses inside a cell
+    (a ray's free samples still start and stop at whole steps along it).
     """
     n, a = wx.shape
     if n == 0 or a == 0:
         return 0.0
     ns = steps.shape[0]
-    # Pass 1: the box of the arc points and the free samples (as the reference computes it).
+    # The box of the arc points and the sonars (the free samples lie between them).
     xmin, ymin, xmax, ymax = np.inf, np.inf, -np.inf, -np.inf
-    fxmin, fymin, fxmax, fymax = np.inf, np.inf, -np.inf, -np.inf
     for i in range(n):
+        xmin, xmax = min(xmin, ox[i]), max(xmax, ox[i])
+        ymin, ymax = min(ymin, oy[i]), max(ymax, oy[i])
         for j in range(a):
-            px, py = wx[i, j], wy[i, j]
-            xmin, xmax = min(xmin, px), max(xmax, px)
-            ymin, ymax = min(ymin, py), max(ymax, py)
-            dx, dy = px - ox[i], py - oy[i]
-            r = math.hypot(dx, dy)
-            for s in range(ns):
-                along = steps[s]
-                if not along < r - band:
-                    break
-                frac = along / max(r, 1e-9)
-                fx, fy = ox[i] + dx * frac, oy[i] + dy * frac
-                fxmin, fxmax = min(fxmin, fx), max(fxmax, fx)
-                fymin, fymax = min(fymin, fy), max(fymax, fy)
-    x0 = min(xmin, fxmin) - pad
-    y0 = min(ymin, fymin) - pad
-    w = int((max(xmax, fxmax) + pad - x0) / res) + 2
-    h = int((max(ymax, fymax) + pad - y0) / res) + 2
-    # Pass 2: raw counts of hits and free samples.
+            xmin, xmax = min(xmin, wx[i, j]), max(xmax, wx[i, j])
+            ymin, ymax = min(ymin, wy[i, j]), max(ymax, wy[i, j])
+    margin = pad + (rad + 2) * res
+    x0, y0 = xmin - margin, ymin - margin
+    w = int((xmax + margin - x0) / res) + 2
+    h = int((ymax + margin - y0) / res) + 2
     hits = np.zeros((h, w))
     frees = np.zeros((h, w))
-    cy = np.empty((n, a), dtype=np.int64)
-    cx = np.empty((n, a), dtype=np.int64)
     for i in range(n):
         for j in range(a):
             px, py = wx[i, j], wy[i, j]
-            cy[i, j] = int((py - y0) / res)
-            cx[i, j] = int((px - x0) / res)
-            hits[cy[i, j], cx[i, j]] += 1.0
+            splat(hits, (px - x0) / res - 0.5, (py - y0) / res - 0.5)
             dx, dy = px - ox[i], py - oy[i]
             r = math.hypot(dx, dy)
             for s in range(ns):
@@ -104,31 +121,28 @@ def consistency_score(wx: np.ndarray, wy: np.ndarray, ox: np.ndarray, oy: np.nda
                 if not along < r - band:
                     break
                 frac = along / max(r, 1e-9)
-                frees[int((oy[i] + dy * frac - y0) / res), int((ox[i] + dx * frac - x0) / res)] += 1.0
-    # The blurred densities at each arc point's cell; an echo scores its best covered point.
-    rad = weights.shape[0] // 2
+                splat(frees, (ox[i] + dx * frac - x0) / res - 0.5,
+                      (oy[i] + dy * frac - y0) / res - 0.5)
+    # The blurred densities at each arc point; an echo scores its best covered point.
+    wu = np.empty(2 * rad + 2)
+    wv = np.empty(2 * rad + 2)
     total = 0.0
     scored = 0
     for i in range(n):
         best = -1.0
         for j in range(a):
+            c0 = gaussian_at((wx[i, j] - x0) / res - 0.5, rad, sd_cells, wu)
+            r0 = gaussian_at((wy[i, j] - y0) / res - 0.5, rad, sd_cells, wv)
             hh = 0.0
             ff = 0.0
-            for u in range(-rad, rad + 1):
-                row = cy[i, j] + u
-                if row < 0 or row >= h:
-                    continue
-                wu = weights[u + rad]
+            for m in range(2 * rad + 2):
                 sh = 0.0
                 sf = 0.0
-                for v in range(-rad, rad + 1):
-                    col = cx[i, j] + v
-                    if col < 0 or col >= w:
-                        continue
-                    sh += weights[v + rad] * hits[row, col]
-                    sf += weights[v + rad] * frees[row, col]
-                hh += wu * sh
-                ff += wu * sf
+                for q in range(2 * rad + 2):
+                    sh += wu[q] * hits[r0 + m, c0 + q]
+                    sf += wu[q] * frees[r0 + m, c0 + q]
+                hh += wv[m] * sh
+                ff += wv[m] * sf
             seen = hh + ff
             if seen >= min_evidence:
                 ratio = hh / max(seen, 1e-12)

@@ -44,9 +44,6 @@ the answer.
 Its standard error is the cluster-robust sandwich error of ``f`` (patches as clusters)
 amplified by ``1 / (1 − c)``; the calibration applies the scale only when it stands
 ``min_z`` errors clear of 0 (:func:`pipeline.refine.calibration._surface_calibration`).
-The patches' offsets disagree under a wrong heading bias too: the same scan over the bias
-at a fixed scale, and its fixed point, give the bias where its slope says they determine
-it (:meth:`SurfaceScale.bias_fixed_point`).
 Deterministic: no random draws.
 """
 
@@ -77,10 +74,8 @@ TENSOR_SIGMA_CELLS = 1.5
 K0S = (-0.04, -0.02, 0.0, 0.02, 0.04)
 STEP = 0.005
 WINDOW_M = 30.0
-BIAS_STEP = math.radians(0.03)  # rad per metre: the bias's inner scan
 CAUCHY = 2.385  # the Cauchy loss's scale in residual σ (95 % efficiency at a Gaussian)
 MAD_SIGMA = 1.4826  # σ of a Gaussian per median absolute deviation
-B0S = tuple(math.radians(d) for d in (-0.2, -0.1, 0.0, 0.1, 0.2))  # around the bias given
 
 
 def normal_angles(density: F64) -> F64:
@@ -202,13 +197,6 @@ class SurfaceScale:
         return self._fit(self._associate(self.poses(k0)), ks,
                          self.placed.poses_many(ks, self.bias * (1.0 + ks)))
 
-    def evaluate_bias(self, k: float, b0: float) -> tuple[float, float]:
-        """The heading bias (rad per metre, :class:`~pipeline.refine.calibration.Calibration`'s)
-        the patches made under ``(k, b0)`` agree on at the scale ``k``, and its error."""
-        bs = np.asarray(b0 + BIAS_STEP * np.arange(-10, 11), dtype=np.float64)
-        return self._fit(self._associate(self.placed.poses(k, b0)), bs,
-                         self.placed.poses_many(np.full(bs.shape, k), bs))
-
     def _fit(self, association: tuple[I64, I64, F64, F64, F64], candidates: F64,
              poses: F64) -> tuple[float, float]:
         """The candidate (parabola-refined) minimising the patches' Cauchy loss, and its
@@ -253,15 +241,6 @@ class SurfaceScale:
         """The scale: the fixed point of ``f`` (module docstring), its standard error that
         of ``f`` nearest it amplified by ``1 / (1 − c)``."""
         return fixed_points([self])[0]
-
-    def bias_fixed_point(self, k: float, b: float) -> FixedPoint:
-        """The heading bias at the scale ``k`` the same way, around ``b`` (±:data:`B0S`):
-        the patches' offsets disagree under a wrong bias too. Where the patches are dense
-        (the office: 0.81°/m of 0.8, slope 0.55, where sharpness peaks at 0.72) it is
-        sharper than sharpness; on the buildings its slope is near 1 (undetermined)."""
-        b0s = b + np.array(B0S)
-        return _fixed_point(b0s, parallel_map(lambda b0: self.evaluate_bias(k, b0),
-                                              b0s.tolist()))
 
 
 def fixed_points(estimators: list[SurfaceScale]) -> list[FixedPoint]:

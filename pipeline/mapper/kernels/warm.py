@@ -45,7 +45,7 @@ def _warm_refinement() -> None:
     none2, none1, cells = np.empty((0, 3)), np.empty(0), np.zeros(1, np.int64)
     binned_sharpness(none1, none1, 0.1)
     consistency_score(none2, none2, none1, none1, np.linspace(0.0, 1.0, 3), 0.2, 0.1, 0.4,
-                      np.ones(3), 1.0)
+                      1.0, 4, 1.0)
     poses_at(0.0, 0.0, 0.0, none1, none1, none1, none1, np.ones(1), np.zeros(1), cells)
     structure_tensor_at(np.zeros((3, 3)), np.zeros((3, 3)), cells, cells, np.ones(3) / 3)
     free_samples(none1, none1, none2, none2, none1, none1, 0.2, 0.0, 0.0, 0.1, np.zeros((2, 2)))
