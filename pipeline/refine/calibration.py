@@ -48,7 +48,10 @@ Two measures of agreement, for two jobs:
    attribution method counts free space, ALGORITHM.md §9); an arc point's consistency is
    ``H / (H + F)`` — the share of the observations of that place that were echoes — and an
    echo scores the best of its arc points that enough evidence covers (the echo came from
-   somewhere on its arc). The score is the mean over echoes. Packing a wall tighter scales
+   somewhere on its arc). The score is the mean over echoes; both densities are deposited
+   cloud-in-cell and read at each arc point's own position, so it moves continuously with
+   the calibration (nearest-cell counts made it a step function whose peak moved by
+   ±0.005°/m with the grid's orientation). Packing a wall tighter scales
    ``H`` and ``F`` alike and leaves the ratio unchanged; an echo placed where other
    readings saw free space scores low. The search is a grid over ``±max_scale`` in 1 %
    steps × the bias ± 2 of its coarse steps, refined twice (steps / 4).
