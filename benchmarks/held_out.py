@@ -6,7 +6,7 @@ must serve, with drifted odometry. What refinement gives, and what it costs true
 
     python -m benchmarks.held_out [--worlds skew atrium rooms@35 ...] [--presets ring16 ...]
         [--models a b c] [--seed 2] [--speed 0.4] [--ring-rate 4] [--pose-rate 20]
-        [--turn-rate 0.6] [--work DIR]
+        [--turn-rate 0.6] [--work DIR] [--config TOML]
 
 Drift models: a = +3 %, +0.8°/m (the issue's); b = −2 %, −0.5°/m with 0.01 m/√m of
 noise per step; c = +4 %, +1.2°/m with 0.002 rad/√rad. Sensors: ``ring16`` (the
@@ -14,7 +14,8 @@ simulator's default 16-sonar ring) or a preset (``formats/presets.py``). Each ro
 the default method on true poses / drifted / refined, refined/true, the true poses
 refined (their cost), ATE drifted → refined (evo's SE(2)-aligned RMSE) and the
 calibration found (as ``benchmarks.drift_variety``). Logs and runs are kept under
-``--work`` (default ``build/held_out``); logs are simulated there when missing.
+``--work`` (default ``build/held_out``); logs are simulated there when missing;
+``--config`` sets the refined runs' ``[pose_refinement]`` (as ``benchmarks.drift_variety``).
 """
 
 from __future__ import annotations
@@ -84,7 +85,7 @@ def world_file(spec: str, work: Path) -> Path:
 def main(argv: list[str] | None = None) -> None:
     from benchmarks.drift_variety import found, scored_run
     from formats.presets import PRESETS
-    from pipeline.config import Config
+    from pipeline.config import Config, load_config
     from pipeline.simulate import SimOptions, run_simulation
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -98,12 +99,14 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--pose-rate", type=float, default=20.0)
     ap.add_argument("--turn-rate", type=float, default=0.6)
     ap.add_argument("--work", type=Path, default=REPO / "build" / "held_out")
+    ap.add_argument("--config", type=Path, help="TOML whose [pose_refinement] the refined runs use")
     args = ap.parse_args(argv)
     tag = f"s{args.seed}-v{args.speed:g}-r{args.ring_rate:g}-p{args.pose_rate:g}-t{args.turn_rate:g}"
     work = args.work / tag
     work.mkdir(parents=True, exist_ok=True)
     plain = Config()
-    refine = Config(pose_refinement=dataclasses.replace(plain.pose_refinement, enabled=True))
+    chosen = load_config(args.config).pose_refinement if args.config else plain.pose_refinement
+    refine = Config(pose_refinement=dataclasses.replace(chosen, enabled=True))
     print("| world | sensors | drift | F1 true | F1 drifted | F1 refined | refined/true "
           "| F1 true poses refined (cost) | ATE drifted → refined (m) "
           "| scale [gated], bias found (z) |")

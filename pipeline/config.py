@@ -195,6 +195,9 @@ class PoseRefinementConfig:
     local_min_consistency_gain: float = doc_field(
         "... and the corrected poses make the echoes more consistent by this fraction",
         default=0.01)
+    local_strong_gain: float = doc_field(
+        "... or, where the patches' loss falls by at least this much per parameter, the "
+        "echoes become no less consistent", default=4.0)
     match_submaps: bool = doc_field("after the calibration, match submaps and solve the pose "
                                "graph (off: measured worse on sonar, see RESULTS.md)",
                                default=False)
@@ -470,6 +473,8 @@ def _check_ranges(cfg: Config) -> None:
          "must be >= 0 (0 = the whole run)", pr.calibration_scale_window_m)
     need(math.isfinite(pr.local_min_gain) and pr.local_min_gain >= 0,
          "pose_refinement.local_min_gain", "must be >= 0", pr.local_min_gain)
+    need(not math.isnan(pr.local_strong_gain) and pr.local_strong_gain >= 0,
+         "pose_refinement.local_strong_gain", "must be >= 0 (inf: never)", pr.local_strong_gain)
     need(math.isfinite(pr.local_min_consistency_gain) and -1 < pr.local_min_consistency_gain < 1,
          "pose_refinement.local_min_consistency_gain", "must be in (-1, 1)",
          pr.local_min_consistency_gain)

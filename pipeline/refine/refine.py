@@ -144,7 +144,8 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
                 tt, ox, oy, oyaw, echoes, stretch_m=cfg.local_stretch_m,
                 sigma_xy=cfg.odometry_sigma_xy, sigma_yaw=math.radians(cfg.odometry_sigma_yaw_deg),
                 iterations=cfg.local_iterations, min_gain=cfg.local_min_gain,
-                min_consistency_gain=cfg.local_min_consistency_gain, res=cfg.field_resolution_m,
+                min_consistency_gain=cfg.local_min_consistency_gain,
+                strong_gain=cfg.local_strong_gain, res=cfg.field_resolution_m,
                 sigma=cfg.field_sigma_m)
             ox, oy, oyaw = local.x, local.y, local.yaw
             metrics["local"] = local.metrics
@@ -315,9 +316,11 @@ def summary(metrics: dict[str, Any], cfg: PoseRefinementConfig) -> str:
             parts.append(f"local corrections over {local['stretches']} stretches "
                          f"({gain:.2f} per parameter)")
         elif "consistency_gain" in local:
+            needed = (0.0 if gain >= cfg.local_strong_gain
+                      else cfg.local_min_consistency_gain)
             parts.append(f"no local corrections ({gain:.2f} per parameter, but the echoes "
                          f"{consistency_change(local['consistency_gain'])}, "
-                         f"< {cfg.local_min_consistency_gain:.1%})")
+                         f"< {needed:.1%})")
         else:
             parts.append(f"no local corrections ({gain:.2f} < {cfg.local_min_gain:g} per "
                          "parameter)")

@@ -48,6 +48,18 @@ their maps lose 0.02 and 0.01 F1; at 1 (before), FHW with 0.003 rad/√rad of ya
 (0.91, +13 %) and Freiburg 101 with 0.02 m/√m and 0.002 rad/√rad (0.98, +6.9 %) were kept
 out (refined F1 0.53 → 0.65 and 0.30 → 0.38 of true with 0.5).
 
+**Strong evidence.** Where the first test's gain reaches ``strong_gain``
+(``[pose_refinement] local_strong_gain``, 4 per parameter, above every true-pose run
+measured: 0.08-2.7 on all 43 of ``benchmarks.drift_variety`` and ``benchmarks.held_out``),
+the second asks only that the echoes become no less consistent. A random walk of 0.01 m/√m
+or 0.002 rad/√rad left after the calibration lowers the loss by 4.5-20 per parameter there
+but moves the consistency, a 10 cm-scale score, by only +0.1 to +0.8 %. Measured:
+``held_out`` 29 → 30 of 36 runs ≥ 0.9× true (the skewed floor with 0.01 m/√m 0.74 → 0.98,
+the hospital with yaw noise 0.80 → 0.93; the atrium with 16 sonars loses 0.98 → 0.94 and
+0.96 → 0.89), ``drift_variety`` 44 of 55 as before (the warehouse with noise 0.75 → 0.79),
+true poses untouched in every row. Asking ≥ 0 at every gain instead costs the true poses of
+three floors 0.031-0.123 F1 (0.52-0.66 per parameter).
+
 Measured (``python -m benchmarks.drift_variety``): the Intel lab with 0.02 m/√m of noise
 per step, ATE 0.187 → 0.082 m and F1 0.56 → 0.96 of true poses; with 0.003 rad/√rad,
 0.179 → 0.054 m (aligned F1 0.83 → 0.98); every true-pose and real-odometry log left as
@@ -92,6 +104,7 @@ class Corrected:
 def correct_stretches(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
                       stretch_m: float, sigma_xy: float, sigma_yaw: float, iterations: int,
                       min_gain: float, min_consistency_gain: float = 0.01,
+                      strong_gain: float = math.inf,
                       res: float = 0.05, sigma: float = 0.1) -> Corrected:
     """The poses ``(x, y, yaw)`` at ``t_ns`` with the stretches' corrections (module
     docstring), or as given when the gates keep them out; ``echoes``: the echoes with the
@@ -135,9 +148,11 @@ def correct_stretches(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
         gain = (_consistency(t_ns, x, y, yaw, scored, res, sigma)
                 / _consistency(t_ns, *given, scored, res, sigma) - 1.0)
         metrics["consistency_gain"] = gain
-        if gain < min_consistency_gain:
+        # patches that say so strongly need only that the echoes become no less consistent
+        needed = 0.0 if metrics["gain_per_parameter"] >= strong_gain else min_consistency_gain
+        if gain < needed:
             metrics["note"] = (f"not applied: the echoes would be {consistency_change(gain)} "
-                               f"(< {min_consistency_gain:.1%})")
+                               f"(< {needed:.1%})")
             metrics["applied"] = False
             return Corrected(*given, metrics)
     metrics["applied"] = bool(metrics["iterations"])

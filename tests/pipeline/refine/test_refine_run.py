@@ -156,6 +156,9 @@ def test_summary_says_what_was_applied_and_why_a_scale_was_not() -> None:
                                          "gain_per_parameter": 1.2, "consistency_gain": -0.0068}}
     assert ("; no local corrections (1.20 per parameter, but the echoes 0.7% less consistent, "
             "< 1.0%);") in summary(inconsistent, cfg)
+    strong = {**applied, "local": {**inconsistent["local"], "gain_per_parameter": 6.4}}
+    assert ("; no local corrections (6.40 per parameter, but the echoes 0.7% less consistent, "
+            "< 0.0%);") in summary(strong, cfg)
     gated = {**applied, "local": {"stretches": 2, "iterations": 0, "gain_per_parameter": 0.35}}
     assert "; no local corrections (0.35 < 0.5 per parameter);" in summary(gated, cfg)
     unsharp = {**steep, "heading_bias_rejected": {"candidate_deg_per_m": -0.081,

@@ -151,6 +151,14 @@ def test_true_poses_the_patches_loss_would_move_are_kept_by_the_echoes_consisten
     assert out.x is x and out.y is y and out.yaw is yaw
 
 
+@pytest.mark.parametrize("value", [-1.0, float("nan")])
+def test_a_strong_gain_out_of_range_is_refused_by_name(value: float) -> None:
+    from pipeline.config import ConfigError, config_from_dict
+
+    with pytest.raises(ConfigError, match=r"pose_refinement\.local_strong_gain"):
+        config_from_dict({"pose_refinement": {"local_strong_gain": value}})
+
+
 @pytest.mark.parametrize("value", [1.0, -1.0, float("nan")])
 def test_a_consistency_gate_out_of_range_is_refused_by_name(value: float) -> None:
     from pipeline.config import ConfigError, config_from_dict
@@ -170,3 +178,22 @@ def test_the_consistency_gate_applies_a_gain_that_reaches_it(true_run) -> None:
     assert at.metrics["applied"] and not above.metrics["applied"]
     assert above.metrics["note"] == (f"not applied: the echoes would be {gain:.1%} more "
                                      f"consistent (< {gain + 1e-9:.1%})")
+
+
+def test_corrections_the_patches_strongly_support_need_only_keep_the_echoes_as_consistent(
+        true_run) -> None:
+    # The displaced lap's corrections lower the patches' loss by > 1 per parameter and make
+    # the echoes more consistent, but by less than a 100 % ask: refused, unless their gain
+    # per parameter reaches the strong gain; then they need only a consistency gain >= 0.
+    (t, x, y, yaw), echoes = true_run
+    dx = 0.12 * _wander(x, y)
+    kw = {**KW, "min_consistency_gain": 1.0}
+    gain = correct_stretches(t, x + dx, y, yaw, echoes, **kw).metrics["gain_per_parameter"]
+    assert gain > 1.0
+    strong = correct_stretches(t, x + dx, y, yaw, echoes, **{**kw, "strong_gain": gain})
+    weak = correct_stretches(t, x + dx, y, yaw, echoes, **{**kw, "strong_gain": gain + 1e-6})
+    assert strong.metrics["applied"] and 0 < strong.metrics["consistency_gain"] < 1.0
+    after = np.sqrt(np.mean((strong.x - x) ** 2 + (strong.y - y) ** 2))
+    assert after < 0.5 * np.sqrt(np.mean(dx**2))
+    assert not weak.metrics["applied"] and weak.metrics["note"].endswith("(< 100.0%)")
+    np.testing.assert_array_equal(weak.x, x + dx)
