@@ -387,9 +387,15 @@ def _consistency_gain(consistent: _Consistency, k: float, b: float) -> float:
     return consistent(k, b) / none - 1.0 if none > 0 else math.inf  # nothing to lose
 
 
-def consistency_change(change: float) -> str:
+def consistency_change(change: float, digits: int = 1) -> str:
     """A consistency gain (fraction) in words: ``0.7% less consistent``."""
-    return f"{abs(change):.1%} {'more' if change >= 0 else 'less'} consistent"
+    return f"{abs(change):.{digits}%} {'more' if change >= 0 else 'less'} consistent"
+
+
+def gate_digits(change: float, needed: float) -> int:
+    """Decimals of a percentage that tell a gain under a gate from the gate's value (``0.96%
+    < 1.00%``, not ``1.0% < 1.0%``)."""
+    return next((d for d in (1, 2) if f"{abs(change):.{d}%}" != f"{needed:.{d}%}"), 3)
 
 
 def _most_consistent(consistent: _Consistency, k: float, b0: float, db: float) -> float:

@@ -42,7 +42,7 @@ from formats.arrays import F64, I64
 from pipeline.config import PoseRefinementConfig
 from pipeline.drift import DriftModel, apply_drift
 from pipeline.pose_sync import POSE_OK, PoseTrack, interpolate_poses
-from pipeline.refine.calibration import calibrate, consistency_change
+from pipeline.refine.calibration import calibrate, consistency_change, gate_digits
 from pipeline.refine.echoes import Echoes
 from pipeline.refine.graph import (
     GraphOptions,
@@ -318,9 +318,10 @@ def summary(metrics: dict[str, Any], cfg: PoseRefinementConfig) -> str:
         elif "consistency_gain" in local:
             needed = (0.0 if gain >= cfg.local_strong_gain
                       else cfg.local_min_consistency_gain)
+            d = gate_digits(local["consistency_gain"], needed)
             parts.append(f"no local corrections ({gain:.2f} per parameter, but the echoes "
-                         f"{consistency_change(local['consistency_gain'])}, "
-                         f"< {needed:.1%})")
+                         f"{consistency_change(local['consistency_gain'], d)}, "
+                         f"< {needed:.{d}%})")
         else:
             parts.append(f"no local corrections ({gain:.2f} < {cfg.local_min_gain:g} per "
                          "parameter)")

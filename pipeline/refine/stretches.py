@@ -84,6 +84,7 @@ from pipeline.refine.calibration import (
     _Consistency,
     _thin,
     consistency_change,
+    gate_digits,
 )
 from pipeline.refine.echoes import Echoes
 from pipeline.se2 import transform_points
@@ -151,8 +152,9 @@ def correct_stretches(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
         # patches that say so strongly need only that the echoes become no less consistent
         needed = 0.0 if metrics["gain_per_parameter"] >= strong_gain else min_consistency_gain
         if gain < needed:
-            metrics["note"] = (f"not applied: the echoes would be {consistency_change(gain)} "
-                               f"(< {needed:.1%})")
+            d = gate_digits(gain, needed)
+            metrics["note"] = (f"not applied: the echoes would be {consistency_change(gain, d)} "
+                               f"(< {needed:.{d}%})")
             metrics["applied"] = False
             return Corrected(*given, metrics)
     metrics["applied"] = bool(metrics["iterations"])

@@ -156,6 +156,12 @@ def test_summary_says_what_was_applied_and_why_a_scale_was_not() -> None:
                                          "gain_per_parameter": 1.2, "consistency_gain": -0.0068}}
     assert ("; no local corrections (1.20 per parameter, but the echoes 0.7% less consistent, "
             "< 1.0%);") in summary(inconsistent, cfg)
+    # a gain just under the gate, in the decimals that tell the two apart
+    close = {**applied, "local": {**inconsistent["local"], "consistency_gain": 0.00996}}
+    assert ("; no local corrections (1.20 per parameter, but the echoes 0.996% more "
+            "consistent, < 1.000%);") in summary(close, cfg)
+    closer = {**applied, "local": {**inconsistent["local"], "consistency_gain": 0.0096}}
+    assert "the echoes 0.96% more consistent, < 1.00%);" in summary(closer, cfg)
     strong = {**applied, "local": {**inconsistent["local"], "gain_per_parameter": 6.4}}
     assert ("; no local corrections (6.40 per parameter, but the echoes 0.7% less consistent, "
             "< 0.0%);") in summary(strong, cfg)

@@ -176,8 +176,9 @@ def test_the_consistency_gate_applies_a_gain_that_reaches_it(true_run) -> None:
     above = correct_stretches(t, x + dx, y, yaw, echoes,
                               **{**KW, "min_consistency_gain": gain + 1e-9})
     assert at.metrics["applied"] and not above.metrics["applied"]
-    assert above.metrics["note"] == (f"not applied: the echoes would be {gain:.1%} more "
-                                     f"consistent (< {gain + 1e-9:.1%})")
+    # the gain and the gate in the decimals that tell them apart
+    assert above.metrics["note"] == (f"not applied: the echoes would be {gain:.3%} more "
+                                     f"consistent (< {gain + 1e-9:.3%})")
 
 
 def test_corrections_the_patches_strongly_support_need_only_keep_the_echoes_as_consistent(
