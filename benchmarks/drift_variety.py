@@ -110,9 +110,18 @@ def scored_run(log: Path, out: Path, cfg: Any, truth: Path, traj: Path
     return ev.f1, float(ate), result.metrics.pose_refinement or {}
 
 
+def refined_config(path: Path | None) -> Any:
+    """The default config with refinement on, its ``[pose_refinement]`` from the TOML at
+    ``path`` when given (``--config``)."""
+    from pipeline.config import Config, load_config
+
+    chosen = load_config(path).pose_refinement if path else Config().pose_refinement
+    return Config(pose_refinement=dataclasses.replace(chosen, enabled=True))
+
+
 def main(argv: list[str] | None = None) -> None:
     from benchmarks.compare_methods import drifted_case
-    from pipeline.config import Config, load_config
+    from pipeline.config import Config
     from pipeline.drift import DriftModel
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -124,8 +133,7 @@ def main(argv: list[str] | None = None) -> None:
     args = ap.parse_args(argv)
     args.work.mkdir(parents=True, exist_ok=True)
     plain = Config()
-    chosen = load_config(args.config).pose_refinement if args.config else plain.pose_refinement
-    refine = Config(pose_refinement=dataclasses.replace(chosen, enabled=True))
+    refine = refined_config(args.config)
     print("| log | drift (scale, heading bias, noise) | F1 true | F1 drifted | F1 refined "
           "| refined/true | F1 true poses refined (cost) | ATE drifted → refined (m) "
           "| scale [gated], bias found (z) |")

@@ -83,9 +83,9 @@ def world_file(spec: str, work: Path) -> Path:
 
 
 def main(argv: list[str] | None = None) -> None:
-    from benchmarks.drift_variety import found, scored_run
+    from benchmarks.drift_variety import found, refined_config, scored_run
     from formats.presets import PRESETS
-    from pipeline.config import Config, load_config
+    from pipeline.config import Config
     from pipeline.simulate import SimOptions, run_simulation
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -105,8 +105,7 @@ def main(argv: list[str] | None = None) -> None:
     work = args.work / tag
     work.mkdir(parents=True, exist_ok=True)
     plain = Config()
-    chosen = load_config(args.config).pose_refinement if args.config else plain.pose_refinement
-    refine = Config(pose_refinement=dataclasses.replace(chosen, enabled=True))
+    refine = refined_config(args.config)
     print("| world | sensors | drift | F1 true | F1 drifted | F1 refined | refined/true "
           "| F1 true poses refined (cost) | ATE drifted → refined (m) "
           "| scale [gated], bias found (z) |")

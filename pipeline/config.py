@@ -473,7 +473,7 @@ def _check_ranges(cfg: Config) -> None:
          "must be >= 0 (0 = the whole run)", pr.calibration_scale_window_m)
     need(math.isfinite(pr.local_min_gain) and pr.local_min_gain >= 0,
          "pose_refinement.local_min_gain", "must be >= 0", pr.local_min_gain)
-    need(not math.isnan(pr.local_strong_gain) and pr.local_strong_gain >= 0,
+    need(pr.local_strong_gain >= 0,
          "pose_refinement.local_strong_gain", "must be >= 0 (inf: never)", pr.local_strong_gain)
     need(math.isfinite(pr.local_min_consistency_gain) and -1 < pr.local_min_consistency_gain < 1,
          "pose_refinement.local_min_consistency_gain", "must be in (-1, 1)",

@@ -53,7 +53,7 @@ from pipeline.refine.graph import (
     sqrt_information,
 )
 from pipeline.refine.matcher import LikelihoodField, Match, SearchWindow, match
-from pipeline.refine.stretches import correct_stretches
+from pipeline.refine.stretches import consistency_needed, correct_stretches
 from pipeline.refine.submaps import Submap, build_submaps, path_length_at
 from pipeline.se2 import between, compose, inverse, transform_points
 
@@ -316,8 +316,8 @@ def summary(metrics: dict[str, Any], cfg: PoseRefinementConfig) -> str:
             parts.append(f"local corrections over {local['stretches']} stretches "
                          f"({gain:.2f} per parameter)")
         elif "consistency_gain" in local:
-            needed = (0.0 if gain >= cfg.local_strong_gain
-                      else cfg.local_min_consistency_gain)
+            needed = consistency_needed(gain, cfg.local_min_consistency_gain,
+                                        cfg.local_strong_gain)
             d = gate_digits(local["consistency_gain"], needed)
             parts.append(f"no local corrections ({gain:.2f} per parameter, but the echoes "
                          f"{consistency_change(local['consistency_gain'], d)}, "

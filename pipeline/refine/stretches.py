@@ -149,8 +149,8 @@ def correct_stretches(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
         gain = (_consistency(t_ns, x, y, yaw, scored, res, sigma)
                 / _consistency(t_ns, *given, scored, res, sigma) - 1.0)
         metrics["consistency_gain"] = gain
-        # patches that say so strongly need only that the echoes become no less consistent
-        needed = 0.0 if metrics["gain_per_parameter"] >= strong_gain else min_consistency_gain
+        needed = consistency_needed(metrics["gain_per_parameter"], min_consistency_gain,
+                                    strong_gain)
         if gain < needed:
             d = gate_digits(gain, needed)
             metrics["note"] = (f"not applied: the echoes would be {consistency_change(gain, d)} "
@@ -159,6 +159,14 @@ def correct_stretches(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
             return Corrected(*given, metrics)
     metrics["applied"] = bool(metrics["iterations"])
     return Corrected(x, y, yaw, metrics)
+
+
+def consistency_needed(gain_per_parameter: float, min_consistency_gain: float,
+                       strong_gain: float) -> float:
+    """The consistency gain the second gate asks of corrections whose first solve lowered
+    the patches' loss by ``gain_per_parameter``: none where that reaches ``strong_gain``
+    (module docstring, strong evidence), else ``min_consistency_gain``."""
+    return 0.0 if gain_per_parameter >= strong_gain else min_consistency_gain
 
 
 def _consistency(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, res: float,
