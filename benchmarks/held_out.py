@@ -11,9 +11,10 @@ must serve, with drifted odometry. What refinement gives, and what it costs true
 Drift models: a = +3 %, +0.8°/m (the issue's); b = −2 %, −0.5°/m with 0.01 m/√m of
 noise per step; c = +4 %, +1.2°/m with 0.002 rad/√rad. Sensors: ``ring16`` (the
 simulator's default 16-sonar ring) or a preset (``formats/presets.py``). Each row: F1 of
-the default method on true poses / drifted / refined, refined/true, the true poses
-refined (their cost), ATE drifted → refined (evo's SE(2)-aligned RMSE) and the
-calibration found (as ``benchmarks.drift_variety``). Logs and runs are kept under
+the default method on true poses / drifted / refined, refined/true and aligned
+refined/true, the true poses refined (their cost), ATE drifted → refined (evo's
+SE(2)-aligned RMSE) and the calibration found, and the summary line (all as
+``benchmarks.drift_variety``). Logs and runs are kept under
 ``--work`` (default ``build/held_out``); logs are simulated there when missing;
 ``--config`` sets the refined runs' ``[pose_refinement]`` (as ``benchmarks.drift_variety``).
 """
@@ -83,7 +84,7 @@ def world_file(spec: str, work: Path) -> Path:
 
 
 def main(argv: list[str] | None = None) -> None:
-    from benchmarks.drift_variety import found, refined_config, scored_run
+    from benchmarks.drift_variety import Tally, found, refined_config, scored_run
     from formats.presets import PRESETS
     from pipeline.config import Config
     from pipeline.simulate import SimOptions, run_simulation
@@ -107,23 +108,26 @@ def main(argv: list[str] | None = None) -> None:
     plain = Config()
     refine = refined_config(args.config)
     print("| world | sensors | drift | F1 true | F1 drifted | F1 refined | refined/true "
-          "| F1 true poses refined (cost) | ATE drifted → refined (m) "
+          "| aligned refined/true | F1 true poses refined (cost) | ATE drifted → refined (m) "
           "| scale [gated], bias found (z) |")
-    print("|---|---|---|---:|---:|---:|---:|---:|---|---|")
+    print("|---|---|---|---:|---:|---:|---:|---:|---:|---|---|")
+    tally = Tally()
     for spec in args.worlds:
         world = world_file(spec, work)
         for preset in args.presets:
             sim = SimOptions(seed=args.seed, speed=args.speed, ring_rate_hz=args.ring_rate,
-                             pose_rate_hz=args.pose_rate, turn_rate=args.turn_rate,
-                             **({} if preset == "ring16" else {"mounts": PRESETS[preset]}))
+                             pose_rate_hz=args.pose_rate, turn_rate=args.turn_rate)
+            if preset != "ring16":
+                sim = dataclasses.replace(sim, mounts=PRESETS[preset])
             stem = f"{spec.replace('@', '-')}-{preset}"
             clean = work / f"{stem}.mcap"
             if not clean.exists():
                 run_simulation(world, clean, "mcap", options=sim)
             truth, traj = clean.with_name(f"{stem}.truth.yaml"), clean.with_name(f"{stem}.truth.csv")
 
-            f1_true = scored_run(clean, work / stem / "true", plain, truth, traj)[0]
-            f1_true_refined = scored_run(clean, work / stem / "true_refined", refine, truth, traj)[0]
+            f1_true = scored_run(clean, work / stem / "true", plain, truth, traj).f1
+            f1_true_refined = scored_run(clean, work / stem / "true_refined", refine, truth,
+                                         traj).f1
             for m in args.models:
                 label, *model = MODELS[m]
                 drifted = work / f"{stem}_{m}.mcap"
@@ -133,10 +137,12 @@ def main(argv: list[str] | None = None) -> None:
                         drift_xy=model[2], drift_yaw=model[3]))
                 d = scored_run(drifted, work / stem / f"{m}_drifted", plain, truth, traj)
                 r = scored_run(drifted, work / stem / f"{m}_refined", refine, truth, traj)
-                print(f"| {spec} | {preset} | {label} | {f1_true:.3f} | {d[0]:.3f} | {r[0]:.3f} | "
-                      f"{r[0] / f1_true:.2f} | {f1_true_refined:.3f} "
-                      f"({f1_true - f1_true_refined:.3f}) | {d[1]:.3f} → {r[1]:.3f} | "
-                      f"{found(r[2])} |", flush=True)
+                tally.add(f1_true, r, f1_true_refined)
+                print(f"| {spec} | {preset} | {label} | {f1_true:.3f} | {d.f1:.3f} | {r.f1:.3f} | "
+                      f"{r.f1 / f1_true:.2f} | {r.f1_aligned / f1_true:.2f} | "
+                      f"{f1_true_refined:.3f} ({f1_true - f1_true_refined:.3f}) | "
+                      f"{d.ate:.3f} → {r.ate:.3f} | {found(r.refinement)} |", flush=True)
+    print(f"\n{tally.summary()}", flush=True)
     print("held_out: done", file=sys.stderr, flush=True)
 
 
