@@ -107,9 +107,11 @@ def peak(values: F64) -> float:
     return float(SCALES[i])
 
 
-def log_echoes(log: Path) -> tuple[tuple[np.ndarray, F64, F64, F64], Echoes]:
+def log_echoes(log: Path, max_range_m: float | None = None
+               ) -> tuple[tuple[np.ndarray, F64, F64, F64], Echoes]:
     """The odometry track ``(t_ns, x, y, yaw)`` of ``log`` and the echoes refinement
-    collects from it (the default configuration)."""
+    collects from it (the default configuration; out to ``max_range_m`` when given, else
+    to ``max_echo_range_m``)."""
     from formats import open_log
     from pipeline.config import Config
     from pipeline.pose_sync import pose_gap_limit_s
@@ -122,7 +124,8 @@ def log_echoes(log: Path) -> tuple[tuple[np.ndarray, F64, F64, F64], Echoes]:
         sv, sensors, _ = prepare(reader, cfg)
         gap = round(pose_gap_limit_s(0, sv.track.median_interval_s()) * 1e9)
         echoes = collect_echoes(sv.ordered_ranges(reader), sv.track, sensors,
-                                eps_max=cfg.mapper.eps_max, max_echo_range_m=pr.max_echo_range_m,
+                                eps_max=cfg.mapper.eps_max,
+                                max_echo_range_m=max_range_m or pr.max_echo_range_m,
                                 arc_fraction=pr.arc_fraction, time_offset_ns=0, max_gap_ns=gap)
     tr = sv.track
     return (np.asarray(tr.t_ns), np.asarray(tr.x), np.asarray(tr.y), np.asarray(tr.yaw)), echoes

@@ -42,7 +42,12 @@ from formats.arrays import F64, I64
 from pipeline.config import PoseRefinementConfig
 from pipeline.drift import DriftModel, apply_drift
 from pipeline.pose_sync import POSE_OK, PoseTrack, interpolate_poses
-from pipeline.refine.calibration import calibrate, consistency_change, gate_digits
+from pipeline.refine.calibration import (
+    Calibration,
+    calibrate,
+    consistency_change,
+    gate_digits,
+)
 from pipeline.refine.echoes import Echoes
 from pipeline.refine.graph import (
     GraphOptions,
@@ -118,26 +123,37 @@ def _rotate_cov(cov: F64, yaw: float) -> F64:
     return np.asarray(r @ cov @ r.T)
 
 
+def configured_calibration(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes,
+                           cfg: PoseRefinementConfig) -> Calibration:
+    """The odometry calibration ``cfg`` asks for (:func:`pipeline.refine.calibration.calibrate`)
+    from ``echoes`` out to ``max_echo_range_m``, and those out to ``calibration_far_range_m``
+    for the scale where it reaches further."""
+    far = (echoes.take(np.flatnonzero(echoes.range_m <= cfg.calibration_far_range_m))
+           if cfg.calibration_far_range_m > cfg.max_echo_range_m else None)
+    near = echoes.take(np.flatnonzero(echoes.range_m <= cfg.max_echo_range_m))
+    return calibrate(
+        t_ns, x, y, yaw, near,
+        max_scale=cfg.calibration_max_scale,
+        max_bias=math.radians(cfg.calibration_max_bias_deg_per_m),
+        res=cfg.field_resolution_m, sigma=cfg.field_sigma_m,
+        min_gain=cfg.calibration_min_gain, scale_score=cfg.calibration_scale_score,
+        max_slope=cfg.calibration_max_slope, min_z=cfg.calibration_scale_min_z,
+        systematic=cfg.calibration_scale_systematic,
+        window_m=cfg.calibration_scale_window_m,
+        far_echoes=far,
+    )
+
+
 def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) -> Refinement:
     """Refine the odometry ``track`` from ``echoes`` (see the module docstring; echoes
     beyond ``max_echo_range_m``, out to ``calibration_far_range_m``, serve the scale alone)."""
     tt = np.asarray(track.t_ns)
     tx, ty, tyaw = np.asarray(track.x), np.asarray(track.y), np.asarray(track.yaw)
-    far = (echoes.take(np.flatnonzero(echoes.range_m <= cfg.calibration_far_range_m))
-           if cfg.calibration_far_range_m > cfg.max_echo_range_m else None)
+    all_echoes = echoes
     echoes = echoes.take(np.flatnonzero(echoes.range_m <= cfg.max_echo_range_m))
     metrics: dict[str, Any] = {"echoes": len(echoes)}
     if cfg.calibration_search and len(echoes) >= cfg.submap_min_echoes:
-        cal0 = calibrate(
-            tt, tx, ty, tyaw, echoes,
-            max_scale=cfg.calibration_max_scale, max_bias=math.radians(cfg.calibration_max_bias_deg_per_m),
-            res=cfg.field_resolution_m, sigma=cfg.field_sigma_m,
-            min_gain=cfg.calibration_min_gain, scale_score=cfg.calibration_scale_score,
-            max_slope=cfg.calibration_max_slope, min_z=cfg.calibration_scale_min_z,
-            systematic=cfg.calibration_scale_systematic,
-            window_m=cfg.calibration_scale_window_m,
-            far_echoes=far,
-        )
+        cal0 = configured_calibration(tt, tx, ty, tyaw, all_echoes, cfg)
         ox, oy, oyaw = cal0.correct(tx, ty, tyaw)
         if cfg.local_corrections:
             local = correct_stretches(

@@ -470,3 +470,27 @@ def test_front_sonars_near_scale_misled_in_shelving_gives_way_to_the_far_one(
     assert found["scale_far_echoes"] is True and "scale_far_estimate" not in found  # no dispute
     assert found["search_scale_error"] == pytest.approx(0.03, abs=0.006)  # measured 0.034 (was 0.050)
     assert found["search_heading_bias_deg_per_m"] == pytest.approx(0.8, abs=0.02)  # measured 0.804
+
+
+def test_the_configured_calibration_takes_the_near_and_far_echoes_the_config_names(
+        sample_echoes: SampleEchoes) -> None:
+    import dataclasses
+
+    from pipeline.config import Config
+    from pipeline.refine.calibration import calibrate
+    from pipeline.refine.refine import configured_calibration
+
+    cfg = Config().pose_refinement
+    track, echoes = sample_echoes("office", 5.0)
+    near = echoes.take(np.flatnonzero(echoes.range_m <= cfg.max_echo_range_m))
+    far = echoes.take(np.flatnonzero(echoes.range_m <= cfg.calibration_far_range_m))
+    kwargs = dict(max_scale=cfg.calibration_max_scale,
+                  max_bias=math.radians(cfg.calibration_max_bias_deg_per_m),
+                  res=cfg.field_resolution_m, sigma=cfg.field_sigma_m,
+                  min_gain=cfg.calibration_min_gain, window_m=cfg.calibration_scale_window_m)
+    assert len(near) < len(far) < len(echoes) + 1
+    assert configured_calibration(*track, echoes, cfg) == calibrate(*track, near, far_echoes=far,
+                                                                    **kwargs)
+    # a far range no longer than the near one: the near echoes alone
+    short = dataclasses.replace(cfg, calibration_far_range_m=cfg.max_echo_range_m)
+    assert configured_calibration(*track, echoes, short) == calibrate(*track, near, **kwargs)
