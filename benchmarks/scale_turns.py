@@ -65,8 +65,7 @@ def main(argv: list[str] | None = None) -> int:
           "| far echoes | heading bias (°/m) |")
     print("|---|---:|---:|---:|---|---:|---:|---|---:|")
     for log in args.logs:
-        (t, x0, y0, yaw0), logged = log_echoes(
-            log, max(cfg.max_echo_range_m, cfg.calibration_far_range_m))
+        (t, x0, y0, yaw0), logged = log_echoes(log, cfg.echo_reach_m)
         for extra in args.inject:
             x, y, yaw = apply_drift(x0, y0, yaw0, DriftModel(scale_error=extra))
             echoes = logged.on_track(t, x, y, yaw) if extra else logged

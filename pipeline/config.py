@@ -260,6 +260,11 @@ class PoseRefinementConfig:
         "lattice's aliases, never more consistent; 0.8 deg/m of bias: >= 0.07)", default=0.01)
     calibrate: bool = doc_field("estimate the odometry's scale error and heading bias", default=True)
     prior_scale: float = doc_field("σ of the scale error's prior (fraction)", default=0.1)
+
+    @property
+    def echo_reach_m(self) -> float:
+        """The farthest echo refinement uses: those it matches, or the scale's far ones."""
+        return max(self.max_echo_range_m, self.calibration_far_range_m)
     prior_bias_deg_per_m: float = doc_field("σ of the heading bias's prior, deg/m", default=2.0)
     robust_scale: float = doc_field("Cauchy loss scale on whitened residuals", default=3.0)
     reject_chi2: float = doc_field("a match whose χ² after solving exceeds this is dropped",

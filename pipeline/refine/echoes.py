@@ -63,6 +63,10 @@ class Echoes:
                                  np.iinfo(np.int64).max)
         return dataclasses.replace(self, odo=np.column_stack([look.x, look.y, look.yaw]))
 
+    def within(self, range_m: float) -> Echoes:
+        """The echoes no farther than ``range_m`` (in their order)."""
+        return self.take(np.flatnonzero(self.range_m <= range_m))
+
     def take(self, index: I64) -> Echoes:
         """The echoes at ``index`` (in that order)."""
         return Echoes(*(getattr(self, f.name)[index] for f in dataclasses.fields(self)))

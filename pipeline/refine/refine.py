@@ -128,11 +128,10 @@ def configured_calibration(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes,
     """The odometry calibration ``cfg`` asks for (:func:`pipeline.refine.calibration.calibrate`)
     from ``echoes`` out to ``max_echo_range_m``, and those out to ``calibration_far_range_m``
     for the scale where it reaches further."""
-    far = (echoes.take(np.flatnonzero(echoes.range_m <= cfg.calibration_far_range_m))
+    far = (echoes.within(cfg.calibration_far_range_m)
            if cfg.calibration_far_range_m > cfg.max_echo_range_m else None)
-    near = echoes.take(np.flatnonzero(echoes.range_m <= cfg.max_echo_range_m))
     return calibrate(
-        t_ns, x, y, yaw, near,
+        t_ns, x, y, yaw, echoes.within(cfg.max_echo_range_m),
         max_scale=cfg.calibration_max_scale,
         max_bias=math.radians(cfg.calibration_max_bias_deg_per_m),
         res=cfg.field_resolution_m, sigma=cfg.field_sigma_m,
@@ -149,8 +148,7 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
     beyond ``max_echo_range_m``, out to ``calibration_far_range_m``, serve the scale alone)."""
     tt = np.asarray(track.t_ns)
     tx, ty, tyaw = np.asarray(track.x), np.asarray(track.y), np.asarray(track.yaw)
-    all_echoes = echoes
-    echoes = echoes.take(np.flatnonzero(echoes.range_m <= cfg.max_echo_range_m))
+    all_echoes, echoes = echoes, echoes.within(cfg.max_echo_range_m)
     metrics: dict[str, Any] = {"echoes": len(echoes)}
     if cfg.calibration_search and len(echoes) >= cfg.submap_min_echoes:
         cal0 = configured_calibration(tt, tx, ty, tyaw, all_echoes, cfg)

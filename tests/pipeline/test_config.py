@@ -81,3 +81,10 @@ def test_file_errors_name_the_file(tmp_path):
         load_config(p)
     with pytest.raises(ConfigError, match=r"missing\.toml: configuration file not found"):
         load_config(tmp_path / "missing.toml")
+
+
+def test_refinement_reaches_the_farther_of_its_matched_and_scale_echoes():
+    pr = Config().pose_refinement
+    assert (pr.max_echo_range_m, pr.calibration_far_range_m, pr.echo_reach_m) == (3.0, 5.0, 5.0)
+    near_only = config_from_dict({"pose_refinement": {"calibration_far_range_m": 0.0}})
+    assert near_only.pose_refinement.echo_reach_m == 3.0
