@@ -4,6 +4,9 @@ Every text format sonarmap reads or writes (CSV logs, CARMEN logs, trajectory CS
 carries time as decimal seconds. Converting through a float loses ~256 ns at epoch scale,
 so both directions are exact: digits below the unit are rounded half away from zero and
 exponent notation (``1.5e9``) is accepted, as :class:`decimal.Decimal` reads it.
+
+:func:`stamps_behind` is the one meaning of a stamp going backwards, for every stream
+read in log order (readings, poses, a CARMEN log's ODOM lines).
 """
 
 from __future__ import annotations
@@ -13,7 +16,9 @@ from decimal import ROUND_HALF_UP, Decimal, InvalidOperation
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["format_time_s", "parse_time"]
+from formats.arrays import I64, B
+
+__all__ = ["format_time_s", "parse_time", "stamps_behind"]
 
 _INT64 = 2**63
 
@@ -45,3 +50,20 @@ def format_time_s(t_ns: npt.ArrayLike) -> list[str]:
         sec, nsec = divmod(abs(v), 1_000_000_000)
         out.append(f"{sign}{sec}.{nsec:09d}")
     return out
+
+
+def stamps_behind(t: I64, newest: int | None) -> tuple[B, I64, int | None]:
+    """The one meaning of "stamps going backwards": a stamp older than the running maximum
+    of the stamps before it (``newest``: the maximum of earlier batches, None if none).
+
+    Returns the mask of such stamps, how far each is behind (ns, 0 where it is not) and the
+    running maximum after ``t``. One jump back followed by rising stamps that stay below
+    the earlier maximum flags every one of them: they are all older than a stamp already
+    seen.
+    """
+    if t.shape[0] == 0:
+        return np.zeros(0, dtype=bool), np.zeros(0, dtype=np.int64), newest
+    head = t[:1] if newest is None else np.array([newest], dtype=np.int64)
+    before = np.maximum.accumulate(np.r_[head, t[:-1]])  # max of all earlier stamps
+    behind = np.maximum(before - t, 0)
+    return behind > 0, behind, int(max(before[-1], t[-1]))

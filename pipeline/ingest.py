@@ -21,6 +21,7 @@ import numpy as np
 from formats.arrays import I64, B
 from formats.contract import LogReader, MountBatch, PoseBatch, RangeBatch, SensorMount
 from formats.errors import InputError
+from formats.stamps import stamps_behind
 from pipeline.pose_sync import PoseTrack, PoseTrackBuilder
 from pipeline.reading_spill import ReadingSpill, SpilledReadings
 from pipeline.reorder_window import REORDER_WINDOW_NS, RangeChunk, ReorderWindow
@@ -54,23 +55,6 @@ class RangeSummary:
             m = float(finite.max())
             self.max_range_m = m if np.isnan(self.max_range_m) else max(self.max_range_m, m)
         self.backwards += int(backwards.sum())
-
-
-def stamps_behind(t: I64, newest: int | None) -> tuple[B, I64, int | None]:
-    """The one meaning of "stamps going backwards": a stamp older than the running maximum
-    of the stamps before it (``newest``: the maximum of earlier batches, None if none).
-
-    Returns the mask of such stamps, how far each is behind (ns, 0 where it is not) and the
-    running maximum after ``t``. One jump back followed by rising stamps that stay below
-    the earlier maximum flags every one of them: they are all older than a stamp already
-    seen.
-    """
-    if t.shape[0] == 0:
-        return np.zeros(0, dtype=bool), np.zeros(0, dtype=np.int64), newest
-    head = t[:1] if newest is None else np.array([newest], dtype=np.int64)
-    before = np.maximum.accumulate(np.r_[head, t[:-1]])  # max of all earlier stamps
-    behind = np.maximum(before - t, 0)
-    return behind > 0, behind, int(max(before[-1], t[-1]))
 
 
 class StampOrder:

@@ -92,6 +92,7 @@ class Counts(TypedDict, total=False):
     poses: int
     poses_stamp_backwards: int
     poses_duplicate_stamp: int
+    poses_spikes: int
     poses_outliers: int
     scans: int
     features: int

@@ -4,8 +4,10 @@ Between the two poses that bracket a reading's stamp the position is interpolate
 linearly and the yaw along the shortest arc. A reading gets no pose — and is dropped and
 counted by reason — before the first pose, after the last, inside a gap between poses
 longer than the pose gap limit, or between two poses the robot cannot have moved between
-(faster than MAX_POSE_SPEED_MPS: an odometry glitch). ``time_offset_s`` is added to
-reading stamps first (for a sensor whose clock is off).
+(faster than MAX_POSE_SPEED_MPS: an odometry glitch). An isolated glitch pose, one the
+robot can neither have reached nor left (:func:`pose_spikes`), is dropped from the track
+first, so the readings around it keep their pose. ``time_offset_s`` is added to reading
+stamps first (for a sensor whose clock is off).
 
 The pose gap limit is ``[pose_sync] max_pose_gap_s`` when set, else it adapts to the log
 (:func:`pose_gap_limit_s`): AUTO_GAP_FACTOR × the median pose interval, at least
@@ -25,6 +27,7 @@ import numpy.typing as npt
 from formats.angles import wrap_angle
 from formats.arrays import F64, I64
 from formats.contract import PoseBatch
+from formats.stamps import stamps_behind
 from pipeline.spilled_columns import ColumnSpill, MappedColumns
 
 # Reasons a reading has no pose (codes in PoseLookup.reason).
@@ -75,6 +78,7 @@ class PoseTrack:
     child_frame: str
     backwards: int = 0  # stamps that went backwards in the log (dropped)
     duplicates: int = 0  # repeated stamps (the first was kept)
+    spikes: int = 0  # isolated glitch poses (pose_spikes, dropped)
     _spill: MappedColumns | None = field(default=None, repr=False, compare=False)
 
     def __len__(self) -> int:
@@ -191,10 +195,12 @@ def build_pose_track(batches: Sequence[PoseBatch]) -> PoseTrack:
 class PoseTrackBuilder:
     """Builds the pose track batch by batch, in log order (pass 1 of the ingest).
 
-    Stamps that go backwards relative to the running maximum of all earlier stamps are
-    dropped and counted; an exact duplicate of the previous kept stamp keeps its first pose;
-    poses with a non-finite coordinate are dropped. Each batch is filtered as it arrives
-    (the running maximum and the last kept stamp carry over).
+    Stamps that go backwards (:func:`formats.stamps.stamps_behind`: below the running
+    maximum of all earlier stamps) are dropped and counted; an exact duplicate of the
+    previous kept stamp keeps its first pose; poses with a non-finite coordinate are
+    dropped; an isolated glitch pose (:func:`pose_spikes`) is dropped and counted. Each
+    batch is filtered as it arrives (the running maximum, the last kept stamp and the last
+    two poses, which the next batch's first pose is judged beside, carry over).
 
     Memory: the kept poses (32 bytes each, 23 MB per ten hours of 20 Hz odometry) are
     written to four anonymous temporary files, one per column
@@ -213,6 +219,11 @@ class PoseTrackBuilder:
         self._frames = ("", "")
         self.backwards = 0
         self.duplicates = 0
+        self.spikes = 0
+        # The last two kept poses (stamps; x, y, yaw rows): the last is not written yet (its
+        # spike test needs the next pose), the one before it only stands beside it.
+        self._held = np.empty((0, 3))
+        self._held_t = np.empty(0, np.int64)
 
     def add(self, b: PoseBatch) -> None:
         """Filter one batch and keep its poses."""
@@ -222,16 +233,9 @@ class PoseTrackBuilder:
         if self._running is None:
             self._frames = (b.parent_frame, b.child_frame)
         t = np.asarray(b.t_ns, dtype=np.int64)
-        # A stamp below the running maximum of every stamp before it went backwards.
-        before = np.empty(n, np.int64)
-        before[0] = t[0] if self._running is None else self._running
-        if n > 1:
-            np.maximum.accumulate(t[:-1], out=before[1:])
-            if self._running is not None:
-                np.maximum(before[1:], self._running, out=before[1:])
-        keep = t >= before
-        self._running = int(max(before[-1], t[-1]))
-        self.backwards += n - int(np.count_nonzero(keep))
+        behind, _, self._running = stamps_behind(t, self._running)
+        keep = ~behind
+        self.backwards += int(np.count_nonzero(behind))
         # Exact duplicates of the previous stamp kept by the order filter.
         idx = np.flatnonzero(keep)
         if idx.shape[0]:
@@ -247,15 +251,32 @@ class PoseTrackBuilder:
         y = np.asarray(b.y, dtype=np.float64)
         yaw = np.asarray(b.yaw, dtype=np.float64)
         keep &= np.isfinite(x) & np.isfinite(y) & np.isfinite(yaw)
-        self._spill.append(t[keep], x[keep], y[keep], yaw[keep])
+        if np.any(keep):
+            self._keep_unless_spike(t[keep], np.column_stack([x[keep], y[keep], yaw[keep]]))
+
+    def _keep_unless_spike(self, t: I64, pose: F64) -> None:
+        """Write the poses whose spike test is settled, spikes dropped; hold the last two."""
+        written = max(len(self._held_t) - 1, 0)  # held poses already written (or dropped)
+        t = np.concatenate([self._held_t, t])
+        pose = np.concatenate([self._held, pose])
+        spike = pose_spikes(t, pose[:, 0], pose[:, 1])
+        out = np.zeros(t.shape[0], np.bool_)
+        out[written:-1] = ~spike[written:-1]
+        self.spikes += int(np.count_nonzero(spike[written:-1]))
+        self._spill.append(t[out], pose[out, 0], pose[out, 1], pose[out, 2])
+        self._held_t, self._held = t[-2:].copy(), pose[-2:].copy()
 
     def finish(self) -> PoseTrack:
         """The track (its columns mapped from the files); the files are closed."""
+        if len(self._held_t):  # the last pose has no next one to be a spike beside
+            self._spill.append(self._held_t[-1:], self._held[-1:, 0], self._held[-1:, 1],
+                               self._held[-1:, 2])
         spill = self._spill.finish()
         t, x, y, yaw = spill.columns
         return PoseTrack(
             t, x, y, yaw, *self._frames,
-            backwards=self.backwards, duplicates=self.duplicates, _spill=spill,
+            backwards=self.backwards, duplicates=self.duplicates, spikes=self.spikes,
+            _spill=spill,
         )
 
 
@@ -284,6 +305,23 @@ def is_pose_jump(step_m: F64, dt_s: F64) -> npt.NDArray[np.bool_]:
     odometry glitches: further than MAX_POSE_SPEED_MPS covers in ``dt_s + STAMP_JITTER_S``."""
     with np.errstate(invalid="ignore"):
         return np.asarray(step_m > MAX_POSE_SPEED_MPS * (np.maximum(dt_s, 0.0) + STAMP_JITTER_S))
+
+
+def pose_spikes(t_ns: I64, x: F64, y: F64) -> npt.NDArray[np.bool_]:
+    """Which poses are isolated glitches: the steps into and out of the pose are both
+    jumps (:func:`is_pose_jump`) while its two neighbours are not a jump apart. A robot
+    cannot have been there; an odometry line stamped out of its place (the Intel lab's
+    CARMEN log stamps one line 81.83 s among lines at 2604.11 s: 19.6 m away and back in
+    a millisecond) is one. The first and last poses are never spikes."""
+    n = t_ns.shape[0]
+    out = np.zeros(n, np.bool_)
+    if n < 3:
+        return out
+    t = t_ns.astype(np.float64) / 1e9
+    jump = is_pose_jump(np.hypot(np.diff(x), np.diff(y)), np.diff(t))
+    across = is_pose_jump(np.hypot(x[2:] - x[:-2], y[2:] - y[:-2]), t[2:] - t[:-2])
+    out[1:-1] = jump[:-1] & jump[1:] & ~across
+    return out
 
 
 def interpolate_poses(track: PoseTrack, t_ns: I64, max_gap_ns: int) -> PoseLookup:

@@ -198,7 +198,8 @@ def _refine_poses(
     refined = refine_track(sv.track, echoes, config.pose_refinement)
     old = sv.track
     track = PoseTrack(refined.t_ns, refined.x, refined.y, refined.yaw, old.parent_frame,
-                      old.child_frame, backwards=old.backwards, duplicates=old.duplicates)
+                      old.child_frame, backwards=old.backwards, duplicates=old.duplicates,
+                      spikes=old.spikes)
     log.info("pose refinement: %d submaps, %d matches, %d loop closures; poses moved %.3f m "
              "on average", refined.metrics["submaps"], refined.metrics.get("matches_accepted", 0),
              refined.metrics.get("loop_closures_accepted", 0), refined.metrics["moved_mean_m"])
@@ -454,6 +455,7 @@ def _metrics(
             "poses": len(track),
             "poses_stamp_backwards": track.backwards,
             "poses_duplicate_stamp": track.duplicates,
+            "poses_spikes": track.spikes,
             "poses_outliers": track.bulk_bounds()[1],
             "scans": state.scans,
             **{k: v for k, v in counters.items() if not k.startswith("skipped_") and k not in ("readings", "readings_used", "scans")},

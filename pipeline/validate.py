@@ -53,7 +53,7 @@ from formats.tables import text_table
 from pipeline.config import Config
 from pipeline.ingest import StampOrder
 from pipeline.mapped_share import MIN_MAPPED_FRACTION
-from pipeline.pose_sync import MAX_POSE_SPEED_MPS, is_pose_jump, pose_gap_limit_s
+from pipeline.pose_sync import MAX_POSE_SPEED_MPS, is_pose_jump, pose_gap_limit_s, pose_spikes
 from pipeline.reading_quality import (
     MAX_RANGE,
     NAN,
@@ -633,7 +633,8 @@ def _pose_findings(
 def _pose_jumps(
     label: str, ts: npt.NDArray[np.int64], xy: npt.NDArray[np.float64]
 ) -> list[Finding]:
-    """Consecutive poses further apart than a robot moves (:func:`is_pose_jump`)."""
+    """Consecutive poses further apart than a robot moves (:func:`is_pose_jump`), and how
+    many of them lead into and out of an isolated glitch pose (:func:`pose_spikes`)."""
     if ts.shape[0] < 2:
         return []
     dist = np.hypot(np.diff(xy[:, 0]), np.diff(xy[:, 1]))
@@ -641,6 +642,7 @@ def _pose_jumps(
     jump = np.flatnonzero(is_pose_jump(dist, dt))
     if not jump.size:
         return []
+    spikes = int(np.count_nonzero(pose_spikes(ts, xy[:, 0], xy[:, 1])))
     i = int(jump[np.argmax(dist[jump])])
     return [
         Finding(
@@ -648,9 +650,10 @@ def _pose_jumps(
             "pose_jump",
             f"{jump.size} steps in the poses ({label}) faster than {MAX_POSE_SPEED_MPS:g} m/s "
             f"(largest {dist[i]:.1f} m in {dt[i]:.3f} s at +{(ts[i] - ts[0]) / 1e9:.3f} s): "
-            "odometry glitches; sonarmap run drops the readings between them (pose_jump) and "
-            "leaves isolated outliers out of the grid (outside_grid)",
-            counts={"jumps": int(jump.size), "largest_m": float(dist[i]),
+            f"odometry glitches; sonarmap run drops the {spikes} isolated glitch poses among "
+            "them (poses_spikes), the readings between the other jumps (pose_jump), and leaves "
+            "isolated outliers out of the grid (outside_grid)",
+            counts={"jumps": int(jump.size), "spikes": spikes, "largest_m": float(dist[i]),
                     "max_speed_mps": MAX_POSE_SPEED_MPS},
         )
     ]

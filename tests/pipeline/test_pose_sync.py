@@ -20,6 +20,7 @@ from pipeline.pose_sync import (
     interpolate_poses,
     is_pose_jump,
     pose_gap_limit_s,
+    pose_spikes,
     sonar_geometry,
 )
 
@@ -92,6 +93,27 @@ def test_readings_between_poses_a_robot_cannot_reach_get_pose_jump():
     assert look.x[0] == pytest.approx(0.25)
 
 
+def test_a_pose_the_robot_can_neither_reach_nor_leave_is_a_spike():
+    t = np.arange(8, dtype=np.int64) * (S // 10)
+    x = np.array([0.0, 0.1, 19.7, 0.3, 0.4, 30.0, 30.1, 30.2])
+    y = np.zeros(8)
+    # Pose 2 is 19.6 m out and back within 0.2 s; pose 5 is a jump to a new place the
+    # track stays at (an odometry reset), not a spike; the ends are never spikes.
+    assert pose_spikes(t, x, y).tolist() == [False, False, True] + [False] * 5
+    x2 = np.array([50.0, 0.1, 0.2, 50.0])  # out at both ends: no neighbour on both sides
+    assert not pose_spikes(t[:4], x2, y[:4]).any()
+    pair = np.array([0.0, 0.1, 19.7, 19.8, 0.4])  # two glitch poses: not isolated
+    assert not pose_spikes(t[:5], pair, y[:5]).any()
+
+
+def test_a_spike_is_dropped_from_the_track_and_the_readings_beside_it_keep_their_pose():
+    t = [0, S // 10, 2 * S // 10, 3 * S // 10]
+    tr = track(t, [0.0, 0.1, 19.7, 0.3], [0.0] * 4, [0.0] * 4)
+    assert tr.t_ns.tolist() == [0, S // 10, 3 * S // 10] and tr.spikes == 1
+    look = interpolate_poses(tr, np.array([2 * S // 10], np.int64), S)
+    assert look.reason.tolist() == [POSE_OK] and look.x[0] == pytest.approx(0.2)
+
+
 def test_pose_gap_limit_adapts_to_the_pose_rate_within_bounds():
     assert pose_gap_limit_s(0.0, 0.9) == pytest.approx(2.7)  # 1 Hz odometry
     assert pose_gap_limit_s(0.0, 0.05) == 0.5  # 20 Hz: the floor
@@ -104,10 +126,10 @@ def test_bulk_bounds_leave_isolated_outliers_out():
     n = 1000
     t = [i * S // 20 for i in range(n)]
     x = [0.01 * i for i in range(n)]
-    x[500] = 2000.0  # one pose 2 km away and back
+    x[500] = x[501] = 2000.0  # two poses 2 km away and back (one alone is a spike)
     tr = track(t, x, [0.0] * n, [0.0] * n)
     box, left_out = tr.bulk_bounds()
-    assert box == (0.0, 0.0, pytest.approx(9.99), 0.0) and left_out == 1
+    assert box == (0.0, 0.0, pytest.approx(9.99), 0.0) and left_out == 2
     assert tr.bounds()[2] == 2000.0
     assert tr.median_interval_s() == pytest.approx(0.05)
 
@@ -169,6 +191,21 @@ def test_pose_track_built_batch_by_batch_filters_across_batch_boundaries(cuts):
     assert tr.x.tolist() == want_x
     assert (tr.backwards, tr.duplicates) == (want_back, want_dup)
     assert (tr.parent_frame, tr.child_frame) == ("odom", "base_link")
+
+
+@pytest.mark.parametrize("cuts", [[], [1], [2], [3], [1, 2], [2, 3], [1, 2, 3, 4, 5]])
+def test_spikes_are_found_across_batch_boundaries(cuts):
+    # Poses 2 and 5 are spikes; the cuts put one before, at or after a batch boundary.
+    t = [i * S // 10 for i in range(7)]
+    x = [0.0, 0.1, 25.0, 0.3, 0.4, -40.0, 0.6]
+    edges = [0, *cuts, len(t)]
+    batches = [
+        PoseBatch(np.array(t[a:b], np.int64), np.array(x[a:b]), np.zeros(b - a),
+                  np.zeros(b - a), "odom", "base_link")
+        for a, b in itertools.pairwise(edges)
+    ]
+    tr = build_pose_track(batches)
+    assert tr.x.tolist() == [0.0, 0.1, 0.3, 0.4, 0.6] and tr.spikes == 2
 
 
 def test_path_length_in_blocks_matches_the_whole_sum():

@@ -116,30 +116,39 @@ def _grid_size(out: Path) -> tuple[int, int]:
     return int(head[1]), int(head[2])
 
 
-@pytest.mark.parametrize("where", ["spike", "step_at_end"])
+@pytest.mark.parametrize("where", ["spike", "pair", "step_at_end"])
 def test_pose_outliers_do_not_blow_up_the_grid(tmp_path: Path, where: str) -> None:
-    # A spike to 2 km and back; a 600 m jump for the last 2 of 400 poses (0.5 %).
-    glitch = {100: 2000.0} if where == "spike" else {i: 600.0 + 0.025 * i for i in (398, 399)}
+    # A spike to 2 km and back (one pose, or two); a 600 m jump for the last 2 of 400
+    # poses (0.5 %).
+    glitch = {
+        "spike": {100: 2000.0},
+        "pair": {100: 2000.0, 101: 2000.0},
+        "step_at_end": {i: 600.0 + 0.025 * i for i in (398, 399)},
+    }[where]
     log = _log(tmp_path / "log.csv", n=400, glitch=glitch)
     code, out, dest = _run(tmp_path, log, "-q")
     assert code == 0, out
     w, h = _grid_size(dest)
     assert w * h < 400_000  # ~10 m of path plus 5 m reach, not 600 m or 2 km
     m = json.loads((dest / "metrics.json").read_text())
-    dropped = m["dropped"]
-    if where == "spike":
-        assert m["counts"]["poses_outliers"] == 1
-        assert dropped["pose_jump"] == 0  # a reading at the glitch's own stamp ...
-        assert dropped["outside_grid"] == 1  # ... is placed there, outside the grid
+    dropped, counts = m["dropped"], m["counts"]
+    if where == "spike":  # dropped from the track: the reading at its stamp keeps a pose
+        assert (counts["poses_spikes"], counts["poses_outliers"]) == (1, 0)
+        assert (dropped["pose_jump"], dropped["outside_grid"]) == (0, 0)
+    elif where == "pair":
+        assert (counts["poses_spikes"], counts["poses_outliers"]) == (0, 2)
+        assert dropped["pose_jump"] == 0  # the readings at the glitch's own stamps ...
+        assert dropped["outside_grid"] == 2  # ... are placed there, outside the grid
     else:
-        assert m["counts"]["poses_outliers"] == 2
+        assert (counts["poses_spikes"], counts["poses_outliers"]) == (0, 2)
         assert dropped["outside_grid"] == 2
-    assert m["counts"]["readings_mapped"] >= 390
+    assert counts["readings_mapped"] >= 390
     res = CliRunner().invoke(app, ["validate", str(log), "-c", str(tmp_path / "mount.toml"),
                                    "--json"])
     jump = [f for f in json.loads(res.stdout)["findings"] if f["code"] == "pose_jump"]
     assert len(jump) == 1 and jump[0]["severity"] == "WARNING"
-    assert jump[0]["counts"]["jumps"] == (2 if where == "spike" else 1)
+    assert (jump[0]["counts"]["jumps"], jump[0]["counts"]["spikes"]) == {
+        "spike": (2, 1), "pair": (2, 0), "step_at_end": (1, 0)}[where]
 
 
 def test_grid_beyond_max_cells_is_refused_with_the_size_and_the_fix(tmp_path: Path) -> None:
