@@ -68,10 +68,10 @@ samples: $(STAMP)
 	SONARMAP=$(BIN)/sonarmap sample_logs/regenerate.sh
 
 # The method comparison on every log with a ground truth, OctoMap beside (README "Results"):
-# the simulated office, corridor and orchard, and four real buildings (the Intel lab and the
-# three Radish logs, sonar emulated from their laser scans into build/compare/).
+# the simulated office, corridor and orchard, and five real buildings (the Intel lab and the
+# four Radish logs, sonar emulated from their laser scans into build/compare/).
 COMPARE_DIR := build/compare
-RADISH := freiburg-101 orebro fhw
+RADISH := freiburg-101 orebro fhw belgioioso
 RADISH_LOGS := $(RADISH:%=$(COMPARE_DIR)/%.mcap)
 
 $(COMPARE_DIR)/%.mcap: sample_logs/radish/%-corrected.log.gz | $(STAMP)

@@ -333,7 +333,7 @@ class DriftRow:
 
 
 SYNTHETIC_DRIFT_CASES = ("office", "corridor", "orchard", "intel-lab", "freiburg-101", "orebro",
-                         "fhw")
+                         "fhw", "belgioioso")
 REAL_ODOMETRY_CASES = ("intel-lab-odometry", "freiburg-101-odometry", "fhw-odometry")
 DRIFT_CASES = SYNTHETIC_DRIFT_CASES + REAL_ODOMETRY_CASES
 
@@ -341,8 +341,9 @@ DRIFT_CASES = SYNTHETIC_DRIFT_CASES + REAL_ODOMETRY_CASES
 def _drift_cases(work: Path, names: tuple[str, ...] = DRIFT_CASES
                  ) -> list[tuple[str, Path, Path, Path, Path]]:
     """(name, true-pose log, drifted log, truth map, truth trajectory) per case: the office,
-    corridor and orchard simulations and the four real buildings, emulated with drift
-    applied to their corrected poses (:func:`drifted_case`)."""
+    corridor and orchard simulations and the five real buildings (the Belgioioso castle
+    beside make compare's four), emulated with drift applied to their corrected poses
+    (:func:`drifted_case`)."""
     drift = DriftModel(DRIFT_SCALE, DRIFT_BIAS_DEG_PER_M)
     work.mkdir(parents=True, exist_ok=True)
     cases = []
@@ -395,7 +396,7 @@ def drifted_case(case: str, drifted: Path, drift: DriftModel, drift_seed: int = 
         src = REPO / "sample_logs" / "intel-lab" / "intel-corrected.log.gz"
         clean = REPO / "sample_logs" / "intel-lab" / "intel.mcap"
         truth, traj = clean.with_name("intel.laser.yaml"), clean.with_name("intel.truth.csv")
-    elif name in ("freiburg-101", "orebro", "fhw"):
+    elif name in ("freiburg-101", "orebro", "fhw", "belgioioso"):
         src = REPO / "sample_logs" / "radish" / f"{name}-corrected.log.gz"
         clean = REPO / "build" / "compare" / f"{name}.mcap"
         if not clean.exists():
@@ -422,6 +423,13 @@ def drifted_comparison(work: Path, tolerance: float, names: tuple[str, ...] = DR
                        config: Path | None = None) -> list[DriftRow]:
     """Map and score every drifted case (see the section comment); ``config`` (TOML) sets
     the refined runs' ``[pose_refinement]`` (enabled either way)."""
+    return score_drift_cases(_drift_cases(work, names), work, tolerance, config)
+
+
+def score_drift_cases(cases: list[tuple[str, Path, Path, Path, Path]], work: Path,
+                      tolerance: float, config: Path | None = None) -> list[DriftRow]:
+    """Map and score ``cases`` — (name, true-pose log, drifted log, truth map, truth
+    trajectory) — with true poses, drifted, refined and true poses refined, under ``work``."""
     from pipeline.config import Config
     from pipeline.evaluate import evaluate_run
     from pipeline.run import run
@@ -429,7 +437,7 @@ def drifted_comparison(work: Path, tolerance: float, names: tuple[str, ...] = DR
     rows = []
     chosen = load_config(config).pose_refinement if config is not None else Config().pose_refinement
     refine = Config(pose_refinement=dataclasses.replace(chosen, enabled=True))
-    for name, clean, drifted, truth, traj in _drift_cases(work, names):
+    for name, clean, drifted, truth, traj in cases:
         f1, f1_aligned, ate, secs, cpu, found = {}, {}, {}, {}, {}, {}
         for key, log, cfg in (("true", clean, Config()), ("drifted", drifted, Config()),
                               ("refined", drifted, refine), ("true_refined", clean, refine)):

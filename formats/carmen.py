@@ -10,7 +10,9 @@ The CARMEN text format has one message per line, fields separated by whitespace:
 * ``PARAM name value host timestamp``.
 
 Beam angles: the ``n`` beams spread evenly over the laser's field of view (PARAM
-``laser_front_laser_fov`` in degrees, default 180), starting at −fov/2. An even ``n``
+``laser_front_laser_fov``, default 180°; in degrees as CARMEN's ini writes it, in radians
+where it is at most 2π, 6.3 as a log rounds it — no scanning laser spans under 6.3°, and
+MIT CSAIL's log writes ``3.14159`` for its 361 beams at 0.5°), starting at −fov/2. An even ``n``
 (180, 360) spaces them by fov/n (180 beams: −90° + i·1°, the SICK LMS in 1° mode as CARMEN
 logs it); an odd ``n`` (181, 361) by fov/(n − 1), so the last beam is at +fov/2.
 ``robot_frontlaser_offset`` (m, along the robot's x axis) places the laser in the base
@@ -199,6 +201,19 @@ def _param_float(params: dict[str, str], names: tuple[str, ...], path: Path) -> 
     return None
 
 
+def laser_fov_rad(value: float | None, path: Path) -> float:
+    """The laser's field of view (rad) from PARAM ``laser_front_laser_fov`` (None: absent):
+    radians where it is at most 2π as a log rounds it (6.3), else degrees (module doc)."""
+    if value is None:
+        return math.radians(DEFAULT_FOV_DEG)
+    fov = min(value, 2 * math.pi) if value <= 6.3 else math.radians(value)
+    if not 0 < fov <= 2 * math.pi:
+        raise FormatError(
+            f"laser field of view {value:g} (PARAM {FOV_PARAMS[0]}) is not in (0, 360] "
+            "degrees or (0, 2π] radians", path)
+    return fov
+
+
 def beam_angles(n: int, fov_rad: float) -> F64:
     """Beam angles (rad) of ``n`` beams over ``fov_rad``, CARMEN's convention (module doc)."""
     step = fov_rad / n if n % 2 == 0 else fov_rad / max(n - 1, 1)
@@ -248,10 +263,7 @@ def read_carmen(
     if recognised == 0 and not skipped:
         raise FormatError("no CARMEN messages (empty log)", p)
 
-    fov_deg = _param_float(params, FOV_PARAMS, p)
-    fov = math.radians(DEFAULT_FOV_DEG if fov_deg is None else fov_deg)
-    if not 0 < fov <= 2 * math.pi:
-        raise FormatError(f"laser field of view {fov_deg} deg is not in (0, 360]", p)
+    fov = laser_fov_rad(_param_float(params, FOV_PARAMS, p), p)
     pmax = _param_float(params, MAX_RANGE_PARAMS, p)
     max_range = laser_max_range if laser_max_range is not None else (pmax or DEFAULT_LASER_MAX_M)
     offset = _param_float(params, (OFFSET_PARAM,), p) or 0.0

@@ -91,6 +91,7 @@ def write_log(
     if not p.parent.is_dir():
         raise OutputError("parent directory does not exist", p)
     _check(content)
+    _check_stamps(content, fmt, p)
     writer: Callable[[LogContent, Path, str, str], None] = {
         "ros1": _write_ros1,
         "ros2": _write_ros2,
@@ -134,6 +135,23 @@ def _check(c: LogContent) -> None:
         raise ConfigError("ranges.sensor_id must index sensor_names")
     if len(c.poses) == 0 and len(r) == 0:
         raise ConfigError("log content is empty (no ranges, no poses)")
+
+
+# The stamps a ROS or MCAP log holds: ROS 2's int32 seconds (the narrowest of its fields;
+# ROS 1 has uint32 seconds, MCAP and rosbag unsigned nanoseconds); a stamp beyond would wrap.
+MAX_ROS_STAMP_NS = 2**31 * 1_000_000_000
+
+
+def _check_stamps(c: LogContent, fmt: str, p: Path) -> None:
+    """Refuse stamps a ROS or MCAP log cannot hold (CSV holds any)."""
+    if fmt in ("csv", "csv-set"):
+        return
+    t = np.concatenate([c.poses.t_ns, c.ranges.t_ns]).astype(np.int64)
+    if len(t) and (int(t.min()) < 0 or int(t.max()) >= MAX_ROS_STAMP_NS):
+        raise OutputError(
+            f"stamps {t.min() / 1e9:.3f} … {t.max() / 1e9:.3f} s cannot be written as {fmt}: "
+            f"its stamps hold 0 … {MAX_ROS_STAMP_NS // 1_000_000_000 - 1} s (ROS 2's int32 "
+            "seconds)", p)
 
 
 # --------------------------------------------------------------------------- event order

@@ -258,6 +258,10 @@ class PoseRefinementConfig:
         "... a heading bias is applied only when it makes the echoes sharper and more "
         "consistent by at least this fraction (true poses: <= 0.002 sharper but for a "
         "lattice's aliases, never more consistent; 0.8 deg/m of bias: >= 0.07)", default=0.01)
+    calibration_strong_gain: float = doc_field(
+        "... or sharper by at least this fraction and less consistent by under "
+        "calibration_min_gain (aliases: <= 0.037 sharper; 0.8 deg/m of bias: 0.07-0.77; "
+        "Belgioioso: 0.19 and level; a large value such as 1e9: never)", default=0.10)
     calibrate: bool = doc_field("estimate the odometry's scale error and heading bias", default=True)
     prior_scale: float = doc_field("σ of the scale error's prior (fraction)", default=0.1)
 
@@ -479,7 +483,7 @@ def _check_ranges(cfg: Config) -> None:
     need(math.isfinite(pr.local_min_gain) and pr.local_min_gain >= 0,
          "pose_refinement.local_min_gain", "must be >= 0", pr.local_min_gain)
     need(pr.local_strong_gain >= 0,
-         "pose_refinement.local_strong_gain", "must be >= 0 (inf: never)", pr.local_strong_gain)
+         "pose_refinement.local_strong_gain", "must be >= 0 (1e9: never)", pr.local_strong_gain)
     need(math.isfinite(pr.local_min_consistency_gain) and -1 < pr.local_min_consistency_gain < 1,
          "pose_refinement.local_min_consistency_gain", "must be in (-1, 1)",
          pr.local_min_consistency_gain)
@@ -491,6 +495,9 @@ def _check_ranges(cfg: Config) -> None:
          pr.calibration_scale_score)
     need(math.isfinite(pr.calibration_min_gain) and 0 <= pr.calibration_min_gain < 1,
          "pose_refinement.calibration_min_gain", "must be in [0, 1)", pr.calibration_min_gain)
+    need(pr.calibration_strong_gain >= pr.calibration_min_gain,
+         "pose_refinement.calibration_strong_gain", "must be >= calibration_min_gain (1e9: never)",
+         pr.calibration_strong_gain)
     need(0 < pr.calibration_max_bias_deg_per_m <= 45,
          "pose_refinement.calibration_max_bias_deg_per_m", "must be in (0, 45]",
          pr.calibration_max_bias_deg_per_m)

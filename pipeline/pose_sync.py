@@ -200,7 +200,7 @@ class PoseTrackBuilder:
     previous kept stamp keeps its first pose; poses with a non-finite coordinate are
     dropped; an isolated glitch pose (:func:`pose_spikes`) is dropped and counted. Each
     batch is filtered as it arrives (the running maximum, the last kept stamp and the last
-    two poses, which the next batch's first pose is judged beside, carry over).
+    two poses, beside which the next batch's first pose is judged, carry over).
 
     Memory: the kept poses (32 bytes each, 23 MB per ten hours of 20 Hz odometry) are
     written to four anonymous temporary files, one per column
@@ -220,8 +220,9 @@ class PoseTrackBuilder:
         self.backwards = 0
         self.duplicates = 0
         self.spikes = 0
-        # The last two kept poses (stamps; x, y, yaw rows): the last is not written yet (its
-        # spike test needs the next pose), the one before it only stands beside it.
+        # The last two poses past the filters above (stamps; x, y, yaw rows), a dropped spike
+        # among them as pose_spikes sees it over the whole track: the last is not written
+        # yet (its spike test needs the next pose), the one before it only stands beside it.
         self._held = np.empty((0, 3))
         self._held_t = np.empty(0, np.int64)
 

@@ -111,7 +111,8 @@ def laser_occupancy_map(log: LaserLog, options: LaserMapOptions | None = None) -
     l_occ = math.log(opt.p_occ / (1 - opt.p_occ))
     l_free = math.log(opt.p_free / (1 - opt.p_free))
     logodds = hits * l_occ + passes * l_free
-    prob = 1.0 / (1.0 + np.exp(-logodds))
+    with np.errstate(over="ignore"):  # a cell passed thousands of times: exp → inf, prob 0
+        prob = 1.0 / (1.0 + np.exp(-logodds))
     prob[(hits + passes) == 0] = np.nan
     shape = grid.shape
     return LaserMap(

@@ -135,7 +135,8 @@ def configured_calibration(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes,
         max_scale=cfg.calibration_max_scale,
         max_bias=math.radians(cfg.calibration_max_bias_deg_per_m),
         res=cfg.field_resolution_m, sigma=cfg.field_sigma_m,
-        min_gain=cfg.calibration_min_gain, scale_score=cfg.calibration_scale_score,
+        min_gain=cfg.calibration_min_gain, strong_gain=cfg.calibration_strong_gain,
+        scale_score=cfg.calibration_scale_score,
         max_slope=cfg.calibration_max_slope, min_z=cfg.calibration_scale_min_z,
         systematic=cfg.calibration_scale_systematic,
         window_m=cfg.calibration_scale_window_m,
@@ -322,7 +323,8 @@ def summary(metrics: dict[str, Any], cfg: PoseRefinementConfig) -> str:
         parts.append(f"heading bias {bias:+.2f}°/m")
     elif bias is not None:
         parts.append("no heading bias" + _why_no_bias(metrics.get("heading_bias_rejected"),
-                                                      cfg.calibration_min_gain))
+                                                      cfg.calibration_min_gain,
+                                                      cfg.calibration_strong_gain))
     local = metrics.get("local")
     if local and "gain_per_parameter" in local:
         gain = local["gain_per_parameter"]
@@ -347,16 +349,21 @@ def summary(metrics: dict[str, Any], cfg: PoseRefinementConfig) -> str:
     return "pose refinement: " + "; ".join(parts)
 
 
-def _why_no_bias(rejected: dict[str, float] | None, min_gain: float) -> str:
+def _why_no_bias(rejected: dict[str, float] | None, min_gain: float,
+                 strong_gain: float) -> str:
     """Why the sharpest heading bias was not applied (``metrics`` ``heading_bias_rejected``),
-    as the summary's parenthesis; empty when the sharpest was none."""
+    as the summary's parenthesis (the gate it failed, :func:`~pipeline.refine.calibration.
+    bias_accepted`); empty when the sharpest was none."""
     if not rejected:
         return ""
     head = (f" (the sharpest, {rejected['candidate_deg_per_m']:+.2f}°/m, makes the echoes "
             f"{rejected['sharper']:.1%} sharper")
     if "more_consistent" not in rejected:
         return f"{head}, < {min_gain:.0%})"
-    return f"{head} but {consistency_change(rejected['more_consistent'])}, < {min_gain:.0%})"
+    change = consistency_change(rejected["more_consistent"])
+    if rejected["sharper"] >= strong_gain:  # strongly sharper: refused for the consistency lost
+        return f"{head} but {change}, ≥ {min_gain:.0%} less)"
+    return f"{head} but {change}, < {min_gain:.0%})"
 
 
 def _moved(x0: F64, y0: F64, a0: F64, x1: F64, y1: F64, a1: F64) -> dict[str, float]:

@@ -80,6 +80,25 @@ def test_fov_and_max_range_params(tmp_path: Path) -> None:
     assert read_carmen(tmp_path / "log.log", laser_max_range=4.0).laser.max_range == 4.0
 
 
+@pytest.mark.parametrize(("value", "fov_deg"), [("100", 100.0), ("180", 180.0),
+                                             ("3.14159", 179.9998), ("6.2832", 360.0)])
+def test_a_field_of_view_up_to_two_pi_is_radians(tmp_path: Path, value: str,
+                                                 fov_deg: float) -> None:
+    # MIT CSAIL's log: "PARAM laser_front_laser_fov 3.14159" for 361 beams at 0.5°.
+    lines = [f"PARAM laser_front_laser_fov {value} nohost 0", flaser([1.0] * 361, (0, 0, 0), "1.0")]
+    las = read_carmen(write(tmp_path, lines)).laser
+    assert math.degrees(las.fov_rad) == pytest.approx(fov_deg, abs=1e-3)
+    assert math.degrees(las.angles[0]) == pytest.approx(-fov_deg / 2, abs=1e-3)
+
+
+@pytest.mark.parametrize("value", ["0", "-90", "400"])
+def test_a_field_of_view_out_of_range_names_the_param(tmp_path: Path, value: str) -> None:
+    lines = [f"PARAM laser_front_laser_fov {value} nohost 0", flaser([1.0] * 10, (0, 0, 0), "1.0")]
+    with pytest.raises(FormatError, match=rf"log.log: laser field of view {value} "
+                                          r"\(PARAM laser_front_laser_fov\) is not in"):
+        read_carmen(write(tmp_path, lines))
+
+
 def test_gzip_and_max_scans(tmp_path: Path) -> None:
     p = tmp_path / "log.log.gz"
     p.write_bytes(gzip.compress(("\n".join(LINES) + "\n").encode()))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
 import math
 from pathlib import Path
 from typing import Any
@@ -300,6 +301,27 @@ def test_bad_format_compression_and_content(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="sensor names cannot be written to CSV"):
         write_log(bad, tmp_path / "x.csv", "csv")
     assert not (tmp_path / "x.csv").exists()
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+@pytest.mark.parametrize(("start_s", "shown"), [(-1.5, "-1.505 … -1.440"),
+                                               (2**31, "2147483647.995 … 2147483648.060")])
+def test_stamps_a_ros_log_cannot_hold_are_refused(tmp_path: Path, fmt: str, start_s: float,
+                                                  shown: str) -> None:
+    c = _content()
+    ns = int(start_s * 1e9) - T0  # the first reading at start_s, the first pose 5 ms before
+    poses = PoseBatch(c.poses.t_ns + ns, c.poses.x, c.poses.y, c.poses.yaw,
+                      c.poses.parent_frame, c.poses.child_frame)
+    ranges = dataclasses.replace(c.ranges, t_ns=c.ranges.t_ns + ns)
+    moved = LogContent(ranges, c.sensor_names, poses, c.mounts)
+    out = tmp_path / "log"
+    if fmt.startswith("csv"):  # CSV holds any stamp
+        write_log(moved, out, fmt)
+        return
+    with pytest.raises(OutputError, match=rf"log: stamps {shown} s cannot be written as {fmt}: "
+                                          r"its stamps hold 0 … 2147483647 s"):
+        write_log(moved, out, fmt)
+    assert not out.exists()
 
 
 def test_simulated_log_to_content_round_trip(tmp_path: Path) -> None:

@@ -64,6 +64,8 @@ def test_method_is_the_one_typed_choice():
         ({"sensors": {"preset": "roomba"}}, r"'sensors.preset' must be one of"),
         ({"sensors": {"mounts": [{"name": "a"}, {"name": "a"}]}}, r"duplicate names"),
         ({"scans": {"policy": "never"}}, r"'scans.policy' must be one of"),
+        ({"pose_refinement": {"calibration_strong_gain": 0.005}},
+         r"'pose_refinement.calibration_strong_gain' must be >= calibration_min_gain"),
     ],
 )
 def test_bad_values_are_refused_with_the_key(data, message):

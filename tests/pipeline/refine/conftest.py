@@ -13,25 +13,30 @@ from pipeline.config import Config
 from pipeline.refine import Echoes, collect_echoes
 
 
+def log_echoes(log: Path, max_range_m: float, max_gap_ns: int = 10**9
+               ) -> tuple[tuple[np.ndarray, ...], Echoes]:
+    """A log's pose track (t, x, y, yaw) and its echoes out to ``max_range_m``."""
+    from pipeline.run import prepare
+
+    cfg = Config()
+    with open_log(log, cfg) as reader:
+        sv, sensors, _ = prepare(reader, cfg)
+        echoes = collect_echoes(sv.ordered_ranges(reader), sv.track, sensors,
+                                eps_max=cfg.mapper.eps_max, max_echo_range_m=max_range_m,
+                                arc_fraction=0.8, time_offset_ns=0, max_gap_ns=max_gap_ns)
+    return tuple(np.asarray(getattr(sv.track, a)) for a in ("t_ns", "x", "y", "yaw")), echoes
+
+
 @pytest.fixture(scope="session")
 def sample_echoes() -> Callable[[str, float], tuple[tuple[np.ndarray, ...], Echoes]]:
     """``load(name, max_range_m)``: a sample log's pose track (t, x, y, yaw) and its echoes
     out to ``max_range_m`` (read once per session)."""
-    from pipeline.run import prepare
-
     cache: dict[tuple[str, float], tuple[tuple[np.ndarray, ...], Echoes]] = {}
 
     def load(name: str, max_range_m: float) -> tuple[tuple[np.ndarray, ...], Echoes]:
         if (name, max_range_m) not in cache:
             log = Path(__file__).resolve().parents[3] / "sample_logs" / name / f"{name}.mcap"
-            cfg = Config()
-            with open_log(log, cfg) as reader:
-                sv, sensors, _ = prepare(reader, cfg)
-                echoes = collect_echoes(sv.ordered_ranges(reader), sv.track, sensors,
-                                        eps_max=cfg.mapper.eps_max, max_echo_range_m=max_range_m,
-                                        arc_fraction=0.8, time_offset_ns=0, max_gap_ns=10**9)
-            track = tuple(np.asarray(getattr(sv.track, a)) for a in ("t_ns", "x", "y", "yaw"))
-            cache[(name, max_range_m)] = (track, echoes)
+            cache[(name, max_range_m)] = log_echoes(log, max_range_m)
         return cache[(name, max_range_m)]
 
     return load

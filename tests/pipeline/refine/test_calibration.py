@@ -236,6 +236,27 @@ def pillar_hall(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[obj
     return runs
 
 
+@pytest.mark.parametrize(("sharper", "more_consistent", "accepted"), [
+    (0.20, 0.05, True),  # a drift's bias: sharper and more consistent
+    (0.005, 0.05, False),  # not sharper by 1 %
+    (0.037, -0.02, False),  # a lattice's alias (the orchard's true poses)
+    (0.037, 0.005, False),  # sharper, but under the strong gain, and not more consistent
+    (0.194, -0.001, True),  # Belgioioso drifted: strongly sharper, the consistency level
+    (0.194, -0.02, False),  # strongly sharper, but less consistent by more than 1 %
+    (0.10, -0.0099, True),  # at the strong gain exactly
+])
+def test_a_bias_is_applied_when_both_gain_or_the_sharpness_gains_strongly_and_holds(
+        sharper: float, more_consistent: float, accepted: bool) -> None:
+    from pipeline.refine.calibration import bias_accepted
+
+    pr = Config().pose_refinement
+    assert bias_accepted(sharper, more_consistent, pr.calibration_min_gain,
+                         pr.calibration_strong_gain) is accepted
+    # with no strong gain (inf) only the first test remains
+    assert bias_accepted(sharper, more_consistent, 0.01, math.inf) is (
+        sharper >= 0.01 and more_consistent >= 0.01)
+
+
 def test_a_lattice_whose_right_bias_is_less_sharp_is_calibrated_by_consistency(
         pillar_hall: dict[str, tuple[object, Echoes]]) -> None:
     # Rows of pillars: under the drift's own bias the echoes are *less* sharp than under
@@ -250,9 +271,10 @@ def test_a_lattice_whose_right_bias_is_less_sharp_is_calibrated_by_consistency(
             consistent = _Consistency(t, x, y, yaw, echoes, res=0.1, sigma=0.1)
             assert sharp(0.0, math.radians(want)) < sharp(0.0, 0.0)
             assert consistent(0.0, math.radians(want)) > 1.1 * consistent(0.0, 0.0)
-        cal = calibrate(t, x, y, yaw, echoes, max_scale=0.0, max_bias=math.radians(3.0),
-                        res=0.05, sigma=0.1, min_gain=0.01)
-        assert math.degrees(cal.heading_bias) == pytest.approx(want, abs=0.05)
+        for strong in (math.inf, Config().pose_refinement.calibration_strong_gain):
+            cal = calibrate(t, x, y, yaw, echoes, max_scale=0.0, max_bias=math.radians(3.0),
+                            res=0.05, sigma=0.1, min_gain=0.01, strong_gain=strong)
+            assert math.degrees(cal.heading_bias) == pytest.approx(want, abs=0.05)
 
 
 def test_an_alias_sharpness_accepts_loses_to_the_more_consistent_bias_elsewhere(
@@ -266,9 +288,10 @@ def test_an_alias_sharpness_accepts_loses_to_the_more_consistent_bias_elsewhere(
     t, x, y, yaw = (np.asarray(getattr(track, a)) for a in ("t_ns", "x", "y", "yaw"))
     consistent = _Consistency(t, x, y, yaw, echoes, res=0.1, sigma=0.1)
     assert consistent(0.0, math.radians(0.8)) > consistent(0.0, math.radians(-2.06))
-    cal = calibrate(t, x, y, yaw, echoes, max_scale=0.0, max_bias=math.radians(3.0),
-                    res=0.05, sigma=0.1, min_gain=0.01)
-    assert math.degrees(cal.heading_bias) == pytest.approx(0.8, abs=0.05)
+    for strong in (math.inf, Config().pose_refinement.calibration_strong_gain):
+        cal = calibrate(t, x, y, yaw, echoes, max_scale=0.0, max_bias=math.radians(3.0),
+                        res=0.05, sigma=0.1, min_gain=0.01, strong_gain=strong)
+        assert math.degrees(cal.heading_bias) == pytest.approx(0.8, abs=0.05)
 
 
 def test_the_consistency_scan_gives_the_scores_calls_give(true_run: tuple[object, Echoes]) -> None:
@@ -361,15 +384,45 @@ def test_a_lattice_that_sharpens_under_a_wrong_bias_keeps_its_true_heading(
     consistent = _Consistency(t, x, y, yaw, echoes, res=0.1, sigma=0.1)
     assert sharp(0.0, alias) > 1.01 * sharp(0.0, 0.0)  # measured +3.5 %
     assert consistent(0.0, alias) < consistent(0.0, 0.0)  # measured 0.98 of none
+    strong = Config().pose_refinement.calibration_strong_gain
     for max_scale in (0.0, 0.05):
         cal = calibrate(t, x, y, yaw, echoes, max_scale=max_scale, max_bias=math.radians(3.0),
-                        res=0.05, sigma=0.1, min_gain=0.01)
+                        res=0.05, sigma=0.1, min_gain=0.01, strong_gain=strong)
         assert (cal.scale_error, cal.heading_bias) == (0.0, 0.0)
         # ... and the calibration says which bias it turned down, and why
         rejected = cal.bias_rejected
         assert rejected is not None
         assert math.degrees(rejected.candidate) == pytest.approx(0.23, abs=0.05)
         assert rejected.sharper > 0.01 > rejected.more_consistent  # measured +3.7 %, -2.4 %
+
+
+def test_a_strongly_sharper_bias_is_applied_where_the_consistency_stays_level(
+        tmp_path: Path) -> None:
+    # Belgioioso castle (Radish), drifted as make compare drifts its buildings: the
+    # sharpest bias, +0.78°/m, sharpens the echoes by ~19 % and leaves them ~0.1 % less
+    # consistent. The first test alone refused it (refined F1 0.09 of the true poses');
+    # the strong-sharpness route applies it, the drift's 3 % and 0.8°/m found.
+    from pipeline.drift import DriftModel
+    from pipeline.emulate import EmulateOptions, run_emulation
+    from pipeline.pose_sync import pose_gap_limit_s
+    from pipeline.refine.refine import configured_calibration
+    from tests.pipeline.refine.conftest import log_echoes
+
+    src = Path(__file__).resolve().parents[3] / "sample_logs" / "radish" / "belgioioso-corrected.log.gz"
+    log = tmp_path / "belgioioso.mcap"
+    run_emulation(src, log, "mcap", options=EmulateOptions(drift=DriftModel(0.03, 0.8)))
+    pr = Config().pose_refinement
+    gap = round(pose_gap_limit_s(0, 1.0) * 1e9)  # the scans 1 s apart (the log has no time)
+    track, echoes = log_echoes(log, pr.echo_reach_m, gap)
+    cal = configured_calibration(*track, echoes, pr)
+    assert math.degrees(cal.heading_bias) == pytest.approx(0.8, abs=0.01)
+    assert cal.scale_error == pytest.approx(0.03, abs=0.005)
+    never = configured_calibration(*track, echoes,
+                                   dataclasses.replace(pr, calibration_strong_gain=1e9))
+    assert never.heading_bias == 0.0 and never.bias_rejected is not None
+    rejected = never.bias_rejected
+    assert rejected.sharper > pr.calibration_strong_gain  # measured +19.4 %
+    assert -pr.calibration_min_gain < rejected.more_consistent < pr.calibration_min_gain
 
 
 def _scripted_refinement(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,

@@ -174,6 +174,10 @@ def test_summary_says_what_was_applied_and_why_a_scale_was_not() -> None:
     alias = {**steep, "heading_bias_rejected": {"candidate_deg_per_m": 2.012, "sharper": 0.371,
                                                 "more_consistent": -0.101}}
     assert ("; no heading bias (the sharpest, +2.01°/m, makes the echoes 37.1% sharper but "
-            "10.1% less consistent, < 1%);") in summary(alias, cfg)
+            "10.1% less consistent, ≥ 1% less);") in summary(alias, cfg)
+    weak = {**steep, "heading_bias_rejected": {"candidate_deg_per_m": 0.23, "sharper": 0.037,
+                                               "more_consistent": -0.024}}
+    assert ("; no heading bias (the sharpest, +0.23°/m, makes the echoes 3.7% sharper but "
+            "2.4% less consistent, < 1%);") in summary(weak, cfg)
     assert summary({"echoes": 12, **moved}, cfg).startswith(
         "pose refinement: no calibration (12 echoes); poses moved")
