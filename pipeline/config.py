@@ -259,9 +259,11 @@ class PoseRefinementConfig:
         "consistent by at least this fraction (true poses: <= 0.002 sharper but for a "
         "lattice's aliases, never more consistent; 0.8 deg/m of bias: >= 0.07)", default=0.01)
     calibration_strong_gain: float = doc_field(
-        "... or sharper by at least this fraction and less consistent by under "
-        "calibration_min_gain (aliases: <= 0.037 sharper; 0.8 deg/m of bias: 0.07-0.77; "
-        "Belgioioso: 0.19 and level; a large value such as 1e9: never)", default=0.10)
+        "... or, where sharpness and consistency disagree, the one in its favour gains at "
+        "least this fraction: sharper by it and less consistent by under calibration_min_gain "
+        "(aliases: <= 0.037 sharper; 0.8 deg/m of bias: 0.07-0.77; Belgioioso: 0.19 and "
+        "level), or, found by the consistency scan, more consistent by it and less sharp "
+        "(lattices: 0.17-0.23; yaw noise's aliases: 0.035-0.057); 1e9: neither", default=0.10)
     calibrate: bool = doc_field("estimate the odometry's scale error and heading bias", default=True)
     prior_scale: float = doc_field("σ of the scale error's prior (fraction)", default=0.1)
 
