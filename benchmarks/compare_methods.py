@@ -25,9 +25,9 @@ defaults. The reach is ``--reach``, else the largest sensor max range in the log
 configuration.
 
 ``--drifted [--cases NAME ...] [--config TOML] [--keep DIR]`` runs the drifted-odometry
-rows instead (issue 17): the office and corridor simulations and the four buildings
-(Intel lab, Freiburg 101, Örebro, FHW) emulated with 3 % scale error and 0.8°/m heading
-bias, each mapped by the default method on true poses, on the drifted odometry, refined
+rows instead (issue 17): the office, corridor and orchard simulations and the five
+buildings (Intel lab, Freiburg 101, Örebro, FHW, Belgioioso) emulated with 3 % scale error
+and 0.8°/m heading bias, each mapped by the default method on true poses, on the drifted odometry, refined
 (``--refine-poses``; ``--config`` sets its ``[pose_refinement]``) and refined from true
 poses; F1, ATE before/after and run seconds per case.
 """
