@@ -214,10 +214,14 @@ class _Sharpness(_Placed):
                  res: float, sigma: float):
         super().__init__(t_ns, x, y, yaw, echoes, MAX_ECHOES)
         self.res, self.sigma = res, sigma
+        self._known: dict[tuple[float, float], float] = {}  # a pure function of (k, b)
 
     def __call__(self, k: float, b: float) -> float:
-        wx, wy = self.arcs(self.poses(k, b))
-        return density_sharpness(wx.ravel(), wy.ravel(), self.res, self.sigma)
+        key = (float(k), float(b))
+        if key not in self._known:
+            wx, wy = self.arcs(self.poses(k, b))
+            self._known[key] = density_sharpness(wx.ravel(), wy.ravel(), self.res, self.sigma)
+        return self._known[key]
 
 
 class _BinnedSharpness(_Compiled):
@@ -270,6 +274,7 @@ class _Consistency(_Compiled):
         reach = float(np.hypot(self.bx - self.sx[:, None], self.by - self.sy[:, None]).max(
             initial=0.0))
         self.steps = np.arange(1, int(reach / res) + 1) * res  # along each ray, m
+        self._known: dict[tuple[float, float], float] = {}  # a pure function of (k, b)
 
     def _compiled(self, pose: F64) -> float:
         from pipeline.refine.kernels import consistency_score
@@ -286,7 +291,12 @@ class _Consistency(_Compiled):
         return math.ceil(4 * self.sigma / self.res)
 
     def __call__(self, k: float, b: float) -> float:
-        pose = self.poses(k, b)
+        key = (float(k), float(b))
+        if key not in self._known:  # the searches ask for the same calibrations again
+            self._known[key] = self._score(self.poses(k, b))
+        return self._known[key]
+
+    def _score(self, pose: F64) -> float:
         if not self.reference:
             return self._compiled(pose)
         wx, wy = self.arcs(pose)
