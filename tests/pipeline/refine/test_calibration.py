@@ -315,6 +315,27 @@ def test_an_alias_sharpness_accepts_loses_to_the_more_consistent_bias_elsewhere(
         assert math.degrees(cal.heading_bias) == pytest.approx(0.8, abs=0.05)
 
 
+def test_the_scores_answer_a_calibration_asked_again_from_memory(
+        true_run: tuple[object, Echoes], monkeypatch: pytest.MonkeyPatch) -> None:
+    track, echoes = true_run
+    t, x, y, yaw = (np.asarray(getattr(track, a)) for a in ("t_ns", "x", "y", "yaw"))
+    consistent = _Consistency(t, x, y, yaw, echoes, res=0.1, sigma=0.1)
+    sharp = _Sharpness(t, x, y, yaw, echoes, res=0.1, sigma=0.1)
+    c, h = consistent(0.01, 0.002), sharp(0.01, 0.002)
+    fresh = (_Consistency(t, x, y, yaw, echoes, res=0.1, sigma=0.1)(0.01, 0.002),
+             _Sharpness(t, x, y, yaw, echoes, res=0.1, sigma=0.1)(0.01, 0.002))
+    assert (c, h) == fresh  # the same value as a score that never saw it
+
+    def recomputed(*_: object) -> float:
+        raise AssertionError("asked again")
+
+    monkeypatch.setattr(consistent, "_compiled", recomputed)
+    monkeypatch.setattr(sharp, "arcs", recomputed)
+    assert (consistent(0.01, 0.002), sharp(0.01, 0.002)) == (c, h)  # from memory
+    with pytest.raises(AssertionError, match="asked again"):
+        consistent(0.01, 0.003)  # a new calibration is computed
+
+
 def test_the_consistency_scan_gives_the_scores_calls_give(true_run: tuple[object, Echoes]) -> None:
     track, echoes = true_run
     t, x, y, yaw = (np.asarray(getattr(track, a)) for a in ("t_ns", "x", "y", "yaw"))
