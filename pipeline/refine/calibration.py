@@ -29,7 +29,9 @@ Two measures of agreement, for two jobs:
    peak that is less consistent than it, the scan's bias is taken — in repeating
    structure (shelving, a hall of pillars) the right bias can be *less* sharp than none,
    and seen by 8 sonars an alias passes both gates, while the right one is the most
-   consistent on every log measured.
+   consistent on every log measured. Where the two scores disagree, the one in the
+   bias's favour must gain ``strong_gain`` (:func:`bias_accepted`,
+   :func:`consistent_bias_accepted`), and the value applied must pass by its own gains.
 2. **Scale** (``max_scale > 0``, the default 0.05), by ``scale_score``: ``"surfaces"`` (the
    default, :mod:`pipeline.refine.surfaces`: echoes of one plane must agree on its offset;
    applied only when its standard error establishes it, with the heading bias searched
