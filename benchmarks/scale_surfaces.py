@@ -13,6 +13,7 @@ The heading bias is the one refinement's default calibration finds (by sharpness
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 from pipeline.refine.surfaces import K0S, SurfaceScale
@@ -21,7 +22,7 @@ from pipeline.refine.surfaces import K0S, SurfaceScale
 def main(argv: list[str] | None = None) -> int:
     from benchmarks.scale_bias import drifted_cases, log_echoes
     from pipeline.config import Config
-    from pipeline.refine.calibration import calibrate
+    from pipeline.refine.refine import configured_calibration
 
     cases = drifted_cases(__doc__ or "", argv)
     pr = Config().pose_refinement
@@ -31,10 +32,8 @@ def main(argv: list[str] | None = None) -> int:
     for name, clean, drifted, _, _ in cases:
         for which, log in (("true", clean), ("drifted", drifted)):
             track, echoes = log_echoes(log)
-            bias = calibrate(*track, echoes, max_scale=0.0,
-                             max_bias=math.radians(pr.calibration_max_bias_deg_per_m),
-                             res=pr.field_resolution_m, sigma=pr.field_sigma_m,
-                             min_gain=pr.calibration_min_gain).heading_bias
+            bias = configured_calibration(  # the heading bias as refinement finds it
+                *track, echoes, dataclasses.replace(pr, calibration_max_scale=0.0)).heading_bias
             fp = SurfaceScale(*track, echoes, bias, pr.calibration_scale_window_m).fixed_point()
             z = abs(fp.value) / math.hypot(fp.standard_error, pr.calibration_scale_systematic)
             print(f"| {name} | {which} | {len(echoes)} | {math.degrees(bias):.2f} | "

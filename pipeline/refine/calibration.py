@@ -428,8 +428,7 @@ def _most_consistent(consistent: _Consistency, k: float, b0: float, db: float) -
 
 def _consistent_bias(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes,
                      consistent: _Consistency, bs: F64, *, res: float, sigma: float,
-                     min_gain: float, sharp: _Sharpness | None = None,
-                     strong_gain: float = math.inf) -> float:
+                     min_gain: float, sharp: _Sharpness, strong_gain: float) -> float:
     """The heading bias by echo consistency alone: the most consistent over the whole
     range, coarsely (every other step of ``bs``, :data:`MAX_ECHOES_CONSISTENCY_SCAN`
     echoes, cells and blur twice the score's, on parallel threads: the peak spans ±1.5
@@ -460,7 +459,7 @@ def _consistent_bias(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes,
     if found[2] == 0.0 or _consistency_gain(consistent, 0.0, found[2]) < min_gain:
         return 0.0
     b = _most_consistent(consistent, 0.0, found[2], float(bs[1] - bs[0]))
-    sharper = sharp(0.0, b) / sharp(0.0, 0.0) - 1.0 if sharp is not None else 0.0
+    sharper = sharp(0.0, b) / sharp(0.0, 0.0) - 1.0
     if not consistent_bias_accepted(sharper, _consistency_gain(consistent, 0.0, b), min_gain,
                                     strong_gain):
         return 0.0
@@ -544,7 +543,10 @@ def calibrate(
     searches the heading bias alone, else the scale too by ``scale_score`` (``max_slope``,
     ``min_z``, ``systematic``: the surfaces' gates, see :func:`_surface_calibration`;
     ``window_m``: their travel window). A heading bias that sharpens the echoes, or makes
-    them more consistent, by less than the fraction ``min_gain`` is not applied (bias 0).
+    them more consistent, by less than the fraction ``min_gain`` is not applied (bias 0);
+    where the two scores disagree, the one in its favour must gain ``strong_gain``
+    (:func:`bias_accepted`, :func:`consistent_bias_accepted`; the default, inf, accepts
+    no disagreement either way).
     ``far_echoes``: the echoes out to a longer range (a superset of ``echoes``), which the
     surfaces' scale uses where they pass :func:`_far_agrees`."""
     sharp = _Sharpness(t_ns, x, y, yaw, echoes, res=max(res, sigma), sigma=sigma)
