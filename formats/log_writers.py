@@ -35,7 +35,7 @@ from formats.angles import wrap_angle
 from formats.arrays import F64, I64
 from formats.contract import PoseBatch, RangeBatch, SensorMount
 from formats.errors import ConfigError, OutputError
-from formats.stamps import format_time_s
+from formats.stamps import ROS_TIME_END_NS, format_time_s, ros_stamps_fit
 
 FORMATS: tuple[str, ...] = ("ros1", "ros2", "ros2-mcap", "mcap", "mcap-ros1", "csv", "csv-set")
 _COMPRESSION: dict[str, tuple[str, ...]] = {
@@ -137,20 +137,16 @@ def _check(c: LogContent) -> None:
         raise ConfigError("log content is empty (no ranges, no poses)")
 
 
-# The stamps a ROS or MCAP log holds: ROS 2's int32 seconds (the narrowest of its fields;
-# ROS 1 has uint32 seconds, MCAP and rosbag unsigned nanoseconds); a stamp beyond would wrap.
-MAX_ROS_STAMP_NS = 2**31 * 1_000_000_000
-
-
 def _check_stamps(c: LogContent, fmt: str, p: Path) -> None:
-    """Refuse stamps a ROS or MCAP log cannot hold (CSV holds any)."""
+    """Refuse stamps a ROS or MCAP log cannot hold (:func:`formats.stamps.ros_stamps_fit`:
+    every stamp here is also a log time); CSV holds any."""
     if fmt in ("csv", "csv-set"):
         return
     t = np.concatenate([c.poses.t_ns, c.ranges.t_ns]).astype(np.int64)
-    if len(t) and (int(t.min()) < 0 or int(t.max()) >= MAX_ROS_STAMP_NS):
+    if len(t) and not ros_stamps_fit(int(t.min()), int(t.max()), log_time=True):
         raise OutputError(
             f"stamps {t.min() / 1e9:.3f} … {t.max() / 1e9:.3f} s cannot be written as {fmt}: "
-            f"its stamps hold 0 … {MAX_ROS_STAMP_NS // 1_000_000_000 - 1} s (ROS 2's int32 "
+            f"its stamps hold 0 … {ROS_TIME_END_NS // 1_000_000_000 - 1} s (ROS 2's int32 "
             "seconds)", p)
 
 

@@ -6,7 +6,8 @@ so both directions are exact: digits below the unit are rounded half away from z
 exponent notation (``1.5e9``) is accepted, as :class:`decimal.Decimal` reads it.
 
 :func:`stamps_behind` is the one meaning of a stamp going backwards, for every stream
-read in log order (readings, poses, a CARMEN log's ODOM lines).
+read in log order (readings, poses, a CARMEN log's ODOM lines); :func:`ros_stamps_fit` the
+one meaning of the stamps a ROS or MCAP message can carry, for every writer of them.
 """
 
 from __future__ import annotations
@@ -18,7 +19,8 @@ import numpy.typing as npt
 
 from formats.arrays import I64, B
 
-__all__ = ["format_time_s", "parse_time", "stamps_behind"]
+__all__ = ["ROS_TIME_END_NS", "ROS_TIME_MIN_NS", "format_time_s", "parse_time", "ros_stamps_fit",
+           "stamps_behind"]
 
 _INT64 = 2**63
 
@@ -67,3 +69,17 @@ def stamps_behind(t: I64, newest: int | None) -> tuple[B, I64, int | None]:
     before = np.maximum.accumulate(np.r_[head, t[:-1]])  # max of all earlier stamps
     behind = np.maximum(before - t, 0)
     return behind > 0, behind, int(max(before[-1], t[-1]))
+
+
+# builtin_interfaces/Time holds int32 seconds (ROS 1's uint32 seconds hold its non-negative
+# part); MCAP and rosbag log times are unsigned nanoseconds. Beyond, a stamp would wrap or
+# the serializer fail.
+ROS_TIME_MIN_NS = -(2**31) * 1_000_000_000
+ROS_TIME_END_NS = 2**31 * 1_000_000_000  # exclusive
+
+
+def ros_stamps_fit(t_min_ns: int, t_max_ns: int, *, log_time: bool) -> bool:
+    """Whether stamps ``t_min_ns … t_max_ns`` fit a ROS 2 ``Time`` and, with ``log_time``
+    (stamps that are also a message's MCAP or bag log time), are not negative either."""
+    low = 0 if log_time else ROS_TIME_MIN_NS
+    return low <= t_min_ns and t_max_ns < ROS_TIME_END_NS

@@ -38,7 +38,9 @@ import numpy as np
 import numpy.typing as npt
 
 from formats.arrays import F64
+from formats.errors import OutputError
 from formats.map_types import FeatureTable, GridSpec
+from formats.stamps import ROS_TIME_END_NS, ROS_TIME_MIN_NS, ros_stamps_fit
 from formats.writers.atomic import atomic_open
 from formats.writers.cdr_sequence import sequence_cdr
 from formats.writers.ellipse import covariance_axes
@@ -254,6 +256,21 @@ def _path_cdr(m: _Msgs, trajectory: Trajectory, frame: str, t_ns: int) -> bytes:
     )
 
 
+def _check_stamps(path: Path, stamp_ns: int, paths: list[Trajectory]) -> None:
+    """Refuse stamps the messages cannot carry (:func:`formats.stamps.ros_stamps_fit`):
+    ``stamp_ns`` is every header's stamp and every message's log time, the poses' stamps
+    are header stamps."""
+    stamps = [int(t) for tr in paths if len(tr.t_ns) for t in (np.min(tr.t_ns), np.max(tr.t_ns))]
+    low, high = min([stamp_ns, *stamps]), max([stamp_ns, *stamps])
+    if not (ros_stamps_fit(stamp_ns, stamp_ns, log_time=True)
+            and ros_stamps_fit(low, high, log_time=False)):
+        raise OutputError(
+            f"stamps {low / 1e9:.3f} … {high / 1e9:.3f} s (the map's {stamp_ns / 1e9:.3f} s) "
+            f"cannot be written to MCAP: a header stamp holds {ROS_TIME_MIN_NS // 1_000_000_000} "
+            f"… {ROS_TIME_END_NS // 1_000_000_000 - 1} s (ROS 2's int32 seconds), a log time "
+            "no negative one", path)
+
+
 def write_map_mcap(
     path: Path,
     *,
@@ -279,6 +296,7 @@ def write_map_mcap(
     prob = np.asarray(probability)
     if prob.shape != grid.shape:
         raise ValueError(f"probability has shape {prob.shape}, grid is {grid.shape}")
+    _check_stamps(Path(path), stamp_ns, [trajectory] + ([odometry] if odometry else []))
     frame = frame_id or "map"
     ts = _typestore()
     m = _Msgs(ts)

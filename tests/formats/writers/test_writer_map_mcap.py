@@ -4,6 +4,7 @@ own readers): schemas, encodings, the grid cell for cell against map.pgm, marker
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 from typing import Any
 
@@ -131,6 +132,41 @@ def test_bytes_depend_only_on_the_inputs(tmp_path: Path, features) -> None:
     assert paths[0].read_bytes() == paths[1].read_bytes()
     _h, topics = _read(paths[0])
     assert topics["/map"][3].header.frame_id == "map"  # a log without a frame name
+
+
+@pytest.mark.parametrize(("trajectory_s", "stamp_s", "shown"), [
+    ((2**31 - 1, 2**31), 2**31, "2147483647.000 … 2147483648.000 s (the map's 2147483648.000 s)"),
+    ((-3.0, -1.0), -0.5, "-3.000 … -0.500 s (the map's -0.500 s)"),
+])
+def test_stamps_the_messages_cannot_carry_are_refused(tmp_path: Path, features,
+                                                     trajectory_s: tuple[float, float],
+                                                     stamp_s: float, shown: str) -> None:
+    from formats.errors import OutputError
+
+    t = np.array([round(v * 1e9) for v in trajectory_s], dtype=np.int64)
+    path = tmp_path / "map.mcap"
+    with pytest.raises(OutputError, match=rf"map\.mcap: stamps {re.escape(shown)} cannot be "
+                                          r"written to MCAP: a header stamp holds -2147483648 "
+                                          r"… 2147483647 s \(ROS 2's int32 seconds\), a log "
+                                          r"time no negative one$"):
+        write_map_mcap(path, probability=PROB, grid=GRID, features=features,
+                       trajectory=Trajectory(t, TRAJ.x, TRAJ.y, TRAJ.yaw), frame_id="odom",
+                       stamp_ns=round(stamp_s * 1e9))
+    assert not path.exists()  # nothing half-written
+
+
+def test_poses_before_zero_are_written_with_a_log_time_after_it(tmp_path: Path,
+                                                               features) -> None:
+    # A CSV log stamped from -100 s: its header stamps are negative, its map's (its end) not.
+    t = np.array([-100_000_000_000, -99_500_000_000], dtype=np.int64)
+    path = tmp_path / "map.mcap"
+    write_map_mcap(path, probability=PROB, grid=GRID, features=features,
+                   trajectory=Trajectory(t, TRAJ.x, TRAJ.y, TRAJ.yaw), frame_id="odom",
+                   stamp_ns=5_000_000_000)
+    _h, topics = _read(path)
+    poses = topics["/trajectory"][3].poses
+    assert [(p.header.stamp.sec, p.header.stamp.nanosec) for p in poses] == [
+        (-100, 0), (-100, 500_000_000)]
 
 
 def test_no_features_gives_an_empty_marker_array(tmp_path: Path) -> None:
