@@ -123,6 +123,7 @@ def run(
                 found = None if progress is None else (lambda n: progress("reading", n, None))
                 sv, sensors, grid = prepare(reader, config, found)
                 info = reader.info()
+                _check_mcap_stamps(out.path("map.mcap"), sv.track)
             odometry: PoseTrack | None = None
             refinement: dict[str, Any] | None = None
             if config.pose_refinement.enabled:
@@ -177,6 +178,17 @@ def run(
         if on_complete is not None:
             on_complete(out.tmp_dir, metrics)
     return RunResult(Path(out_dir), metrics, snapshots["main"])
+
+
+def _check_mcap_stamps(path: Path, track: PoseTrack) -> None:
+    """Refuse, before mapping, a log whose stamps ``map.mcap`` cannot carry: its messages
+    are stamped at the last pose, its paths with every pose's stamp (refinement keeps
+    them)."""
+    from formats.writers.map_mcap import check_stamps
+
+    if len(track):
+        t = np.asarray(track.t_ns)
+        check_stamps(path, int(t[-1]), int(t.min()), int(t.max()))
 
 
 def _refine_poses(

@@ -256,12 +256,12 @@ def _path_cdr(m: _Msgs, trajectory: Trajectory, frame: str, t_ns: int) -> bytes:
     )
 
 
-def _check_stamps(path: Path, stamp_ns: int, paths: list[Trajectory]) -> None:
+def check_stamps(path: Path, stamp_ns: int, first_ns: int, last_ns: int) -> None:
     """Refuse stamps the messages cannot carry (:func:`formats.stamps.ros_stamps_fit`):
     ``stamp_ns`` is every header's stamp and every message's log time, the poses' stamps
-    are header stamps."""
-    stamps = [int(t) for tr in paths if len(tr.t_ns) for t in (np.min(tr.t_ns), np.max(tr.t_ns))]
-    low, high = min([stamp_ns, *stamps]), max([stamp_ns, *stamps])
+    (``first_ns … last_ns``) are header stamps. A run asks at ingest, from its pose track,
+    so a log it cannot write fails before it is mapped."""
+    low, high = min(stamp_ns, first_ns), max(stamp_ns, last_ns)
     if not (ros_stamps_fit(stamp_ns, stamp_ns, log_time=True)
             and ros_stamps_fit(low, high, log_time=False)):
         raise OutputError(
@@ -296,7 +296,9 @@ def write_map_mcap(
     prob = np.asarray(probability)
     if prob.shape != grid.shape:
         raise ValueError(f"probability has shape {prob.shape}, grid is {grid.shape}")
-    _check_stamps(Path(path), stamp_ns, [trajectory] + ([odometry] if odometry else []))
+    stamps = [int(t) for tr in (trajectory, odometry) if tr is not None and len(tr.t_ns)
+              for t in (np.min(tr.t_ns), np.max(tr.t_ns))]
+    check_stamps(Path(path), stamp_ns, min(stamps, default=stamp_ns), max(stamps, default=stamp_ns))
     frame = frame_id or "map"
     ts = _typestore()
     m = _Msgs(ts)

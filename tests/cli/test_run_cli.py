@@ -202,6 +202,35 @@ def test_bad_input_exits_1_with_one_line_and_no_output(runner, tmp_path, content
     assert not out.exists() and list(tmp_path.iterdir()) == [bad]
 
 
+def test_a_log_map_mcap_cannot_stamp_fails_before_it_is_mapped(runner, tmp_path, monkeypatch):
+    # The office's CSV set moved past 2^31 s (ROS 2's int32 seconds): refused at ingest,
+    # from its poses, in one line naming map.mcap; the mapping pass never starts.
+    import pipeline.run
+
+    log = tmp_path / "late"
+    log.mkdir()
+    for f in (SAMPLES / "office" / "office_csv").iterdir():
+        text = f.read_text()
+        if f.name != "sensors.csv":
+            text = "\n".join(line.replace("1700000", "2200000", 1) if line[:1].isdigit()
+                             else line for line in text.splitlines()) + "\n"
+        (log / f.name).write_text(text)
+
+    def mapped(*args, **kwargs):
+        raise AssertionError("mapped a log whose outputs cannot be written")
+
+    monkeypatch.setattr(pipeline.run, "_map_stream", mapped)
+    out = tmp_path / "o"
+    result = _run(runner, ["run", str(log), "-o", str(out), "-q"])
+    assert result.exit_code == 1, result.output
+    lines = [line for line in result.output.splitlines() if line.strip()]
+    assert len(lines) == 1
+    assert re.search(r"map\.mcap: stamps 2200000000\.000 … 2200000\d{3}\.\d{3} s \(the map's "
+                     r"2200000\d{3}\.\d{3} s\) cannot be written to MCAP: a header stamp holds "
+                     r"-2147483648 … 2147483647 s", lines[0]), lines[0]
+    assert not out.exists()
+
+
 def test_a_text_file_is_not_a_recognised_log_format(runner, tmp_path):
     out = tmp_path / "o"
     result = _run(runner, ["run", str(ROOT / "README.md"), "-o", str(out), "-q"])
