@@ -121,7 +121,7 @@ def run(
         with reader:
             with timer.stage("ingest"):
                 found = None if progress is None else (lambda n: progress("reading", n, None))
-                sv, sensors, grid = prepare(reader, config, found)
+                sv, sensors = surveyed(reader, config, found)
                 info = reader.info()
                 _check_mcap_stamps(out.path("map.mcap"), sv.track)
             odometry: PoseTrack | None = None
@@ -130,7 +130,9 @@ def run(
                 with timer.stage("pose_refinement"):
                     odometry = sv.track
                     sv, refinement = _refine_poses(reader, sv, sensors, config)
-                    grid = grid_for(sv, sensors, config)  # the refined poses' box
+            # The poses' box: with refinement the refined poses' (a drifted odometry's box
+            # may be far larger than the building, beyond grid.max_cells).
+            grid = grid_for(sv, sensors, config)
             # Thinned now, while little else is in memory (it reads the whole track).
             drawn = _drawn_trajectory(sv.track)
             log.info(
@@ -221,9 +223,16 @@ def _refine_poses(
 def prepare(
     reader: LogReader, config: Config, found: Callable[[int], None] | None = None
 ) -> tuple[Survey, SensorTable, GridSpec]:
+    """Pass 1 over an open log (:func:`surveyed`) and the map grid of its poses."""
+    sv, sensors = surveyed(reader, config, found)
+    return sv, sensors, grid_for(sv, sensors, config)
+
+
+def surveyed(
+    reader: LogReader, config: Config, found: Callable[[int], None] | None = None
+) -> tuple[Survey, SensorTable]:
     """Pass 1 over an open log: its survey (the readings kept, spilled, for the mapping
-    passes), the sensor table and the map grid (``found`` hears the readings counted so
-    far)."""
+    passes) and the sensor table (``found`` hears the readings counted so far)."""
     sv = survey(reader, found, keep_readings=True)
     sensors = resolve_sensors(
         sv.sensor_names,
@@ -231,7 +240,7 @@ def prepare(
         config,
         used=[sv.ranges.per_sensor.get(i, 0) > 0 for i in range(len(sv.sensor_names))],
     )
-    return sv, sensors, grid_for(sv, sensors, config)
+    return sv, sensors
 
 
 def grid_for(sv: Survey, sensors: SensorTable, config: Config) -> GridSpec:

@@ -181,3 +181,22 @@ def test_summary_says_what_was_applied_and_why_a_scale_was_not() -> None:
             "2.4% less consistent, < 1%);") in summary(weak, cfg)
     assert summary({"echoes": 12, **moved}, cfg).startswith(
         "pose refinement: no calibration (12 echoes); poses moved")
+
+
+def test_the_grid_is_sized_from_the_refined_poses(drifted_log: Path, tmp_path: Path) -> None:
+    # The drifted odometry's box (377 x 322 cells) is larger than the room's (the refined
+    # poses': 371 x 298); a grid.max_cells between the two refuses the unrefined run only.
+    import dataclasses
+
+    from formats.errors import ConfigError
+    from pipeline.run import run
+
+    base = Config()
+    grid = dataclasses.replace(base.grid, max_cells=115_000)
+    refined = run(drifted_log, tmp_path / "refined", dataclasses.replace(
+        base, grid=grid, pose_refinement=PoseRefinementConfig(enabled=True)))
+    assert (refined.metrics.map["width"], refined.metrics.map["height"]) == (371, 298)
+    with pytest.raises(ConfigError, match=r"grid of 377x322 = 121394 cells .* exceeds "
+                                          r"grid.max_cells = 115000"):
+        run(drifted_log, tmp_path / "unrefined", dataclasses.replace(base, grid=grid))
+    assert not (tmp_path / "unrefined").exists()
