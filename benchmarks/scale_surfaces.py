@@ -34,7 +34,8 @@ def main(argv: list[str] | None = None) -> int:
             track, echoes = log_echoes(log)
             bias = configured_calibration(  # the heading bias as refinement finds it
                 *track, echoes, dataclasses.replace(pr, calibration_max_scale=0.0)).heading_bias
-            fp = SurfaceScale(*track, echoes, bias, pr.calibration_scale_window_m).fixed_point()
+            fp = SurfaceScale(*track, echoes, bias, pr.calibration_scale_window_m,
+                              pr.calibration_scale_tilt).fixed_point()
             z = abs(fp.value) / math.hypot(fp.standard_error, pr.calibration_scale_systematic)
             print(f"| {name} | {which} | {len(echoes)} | {math.degrees(bias):.2f} | "
                   + " ".join(f"{v:+.4f}" for v in fp.f)

@@ -537,14 +537,16 @@ def calibrate(
     max_bias: float, res: float, sigma: float, min_gain: float = 0.0,
     strong_gain: float = math.inf,
     scale_score: str = "surfaces", max_slope: float = 0.75, min_z: float = 3.0,
-    systematic: float = 0.005, window_m: float = 30.0, far_echoes: Echoes | None = None,
+    systematic: float = 0.005, window_m: float = 30.0, tilt: bool = False,
+    far_echoes: Echoes | None = None,
 ) -> Calibration:
     """The calibration the echoes agree on (see the module docstring); ``max_scale = 0``
     searches the heading bias alone, else the scale too by ``scale_score`` (``max_slope``,
     ``min_z``, ``systematic``: the surfaces' gates, see :func:`_surface_calibration`;
-    ``window_m``: their travel window). A heading bias that sharpens the echoes, or makes
-    them more consistent, by less than the fraction ``min_gain`` is not applied (bias 0);
-    where the two scores disagree, the one in its favour must gain ``strong_gain``
+    ``window_m``: their travel window, ``tilt``: their patches' orientation fitted). A
+    heading bias that sharpens the echoes, or makes them more consistent, by less than the
+    fraction ``min_gain`` is not applied (bias 0); where the two scores disagree, the one
+    in its favour must gain ``strong_gain``
     (:func:`bias_accepted`, :func:`consistent_bias_accepted`; the default, inf, accepts
     no disagreement either way).
     ``far_echoes``: the echoes out to a longer range (a superset of ``echoes``), which the
@@ -578,7 +580,7 @@ def calibrate(
                                     max_scale=max_scale, bias_step=db,
                                     max_slope=max_slope, min_gain=min_gain,
                                     strong_gain=strong_gain, min_z=min_z,
-                                    systematic=systematic, window_m=window_m,
+                                    systematic=systematic, window_m=window_m, tilt=tilt,
                                     far_echoes=far_echoes)
     n_k = max(1, math.ceil(max_scale / SCALE_STEP))
     ks = np.linspace(-max_scale, max_scale, 2 * n_k + 1)
@@ -598,7 +600,7 @@ def _surface_calibration(
     t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, sharp: _Sharpness,
     consistent: _Consistency, base: float, best: tuple[float, float, float],
     rejected: BiasRejected | None, by_consistency: bool, *, max_scale: float, bias_step: float, max_slope: float,
-    min_gain: float, min_z: float, systematic: float, window_m: float,
+    min_gain: float, min_z: float, systematic: float, window_m: float, tilt: bool = False,
     strong_gain: float = math.inf,
     far_echoes: Echoes | None = None,
 ) -> Calibration:
@@ -646,8 +648,8 @@ def _surface_calibration(
     # The first scale, which also chooses the echoes (near, or out to the far range) for
     # both; where near and far disagree, the far one (the more precise) is the first.
     surfaces, fp, far_used, disputed = _surface_scale(
-        t_ns, x, y, yaw, echoes, far_echoes, b, window_m=window_m, systematic=systematic,
-        min_z=min_z, max_slope=max_slope)
+        t_ns, x, y, yaw, echoes, far_echoes, b, window_m=window_m, tilt=tilt,
+        systematic=systematic, min_z=min_z, max_slope=max_slope)
     used = far_echoes if far_used and far_echoes is not None else echoes
     established = disputed is None and _established(fp, fp.value, systematic, min_z, max_slope)
     first = fp if disputed is None else disputed
@@ -671,9 +673,9 @@ def _surface_calibration(
             if disputed is not None:
                 surfaces, fp, far_used, disputed = _surface_scale(
                     t_ns, x, y, yaw, echoes, far_echoes, b / (1.0 + k), window_m=window_m,
-                    systematic=systematic, min_z=min_z, max_slope=max_slope)
+                    tilt=tilt, systematic=systematic, min_z=min_z, max_slope=max_slope)
             else:
-                surfaces = SurfaceScale(t_ns, x, y, yaw, used, b / (1.0 + k), window_m)
+                surfaces = SurfaceScale(t_ns, x, y, yaw, used, b / (1.0 + k), window_m, tilt)
                 fp = surfaces.fixed_point()
             established = disputed is None and _established(fp, fp.value, systematic, min_z,
                                                             max_slope)
@@ -691,7 +693,7 @@ def _surface_calibration(
 
 
 def _surface_scale(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes,
-                   far_echoes: Echoes | None, bias: float, *, window_m: float,
+                   far_echoes: Echoes | None, bias: float, *, window_m: float, tilt: bool,
                    systematic: float, min_z: float, max_slope: float
                    ) -> tuple[SurfaceScale, FixedPoint, bool, FixedPoint | None]:
     """The surfaces' scale under the heading ``bias`` (per reported metre): (the patches
@@ -699,10 +701,10 @@ def _surface_scale(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes,
     it disputes the near one's; see :func:`_surface_calibration`)."""
     from pipeline.refine.surfaces import SurfaceScale, fixed_points
 
-    surfaces = SurfaceScale(t_ns, x, y, yaw, echoes, bias, window_m)
+    surfaces = SurfaceScale(t_ns, x, y, yaw, echoes, bias, window_m, tilt)
     if far_echoes is None or len(far_echoes) <= len(echoes):
         return surfaces, surfaces.fixed_point(), False, None
-    wide = SurfaceScale(t_ns, x, y, yaw, far_echoes, bias, window_m)
+    wide = SurfaceScale(t_ns, x, y, yaw, far_echoes, bias, window_m, tilt)
     fp, fw = fixed_points([surfaces, wide])
     if _far_agrees(fp, fw):
         return wide, fw, True, None

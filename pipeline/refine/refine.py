@@ -140,6 +140,7 @@ def configured_calibration(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes,
         max_slope=cfg.calibration_max_slope, min_z=cfg.calibration_scale_min_z,
         systematic=cfg.calibration_scale_systematic,
         window_m=cfg.calibration_scale_window_m,
+        tilt=cfg.calibration_scale_tilt,
         far_echoes=far,
     )
 
