@@ -116,12 +116,12 @@ def log_echoes(log: Path, max_range_m: float | None = None
     from pipeline.config import Config
     from pipeline.pose_sync import pose_gap_limit_s
     from pipeline.refine import collect_echoes
-    from pipeline.run import prepare
+    from pipeline.run import surveyed
 
     cfg = Config()
     pr = cfg.pose_refinement
     with open_log(log, cfg) as reader:
-        sv, sensors, _ = prepare(reader, cfg)
+        sv, sensors = surveyed(reader, cfg)
         gap = round(pose_gap_limit_s(0, sv.track.median_interval_s()) * 1e9)
         echoes = collect_echoes(sv.ordered_ranges(reader), sv.track, sensors,
                                 eps_max=cfg.mapper.eps_max,
