@@ -158,6 +158,7 @@ class _Placed:
         self.echo_at = where[t_ns.shape[0]:]
         self.bx, self.by = echoes.bx[keep], echoes.by[keep]
         self.sx, self.sy = echoes.sx[keep], echoes.sy[keep]
+        self._known: dict[tuple[float, float], float] = {}  # remembered scores, by (k, b)
 
     def poses_many(self, ks: F64, bs: F64) -> F64:
         """(len(ks), echoes, 3): the echoes' poses under each calibration ``(ks[j], bs[j])``
@@ -179,6 +180,14 @@ class _Placed:
     def poses(self, k: float, b: float) -> F64:
         """(echoes, 3): the echoes' poses under the calibration ``(k, b)``."""
         return np.asarray(self.poses_many(np.array([k]), np.array([b]))[0])
+
+    def remembered(self, k: float, b: float, score: Callable[[F64], float]) -> float:
+        """``score`` of the echoes' poses under ``(k, b)``, computed once per calibration:
+        a score is a pure function of it, and the searches ask for the same ones again."""
+        key = (float(k), float(b))
+        if key not in self._known:
+            self._known[key] = score(self.poses(k, b))
+        return self._known[key]
 
     def arcs(self, pose: F64) -> tuple[F64, F64]:
         return transform_points(pose[:, None, :], self.bx, self.by)
@@ -216,14 +225,13 @@ class _Sharpness(_Placed):
                  res: float, sigma: float):
         super().__init__(t_ns, x, y, yaw, echoes, MAX_ECHOES)
         self.res, self.sigma = res, sigma
-        self._known: dict[tuple[float, float], float] = {}  # a pure function of (k, b)
 
     def __call__(self, k: float, b: float) -> float:
-        key = (float(k), float(b))
-        if key not in self._known:
-            wx, wy = self.arcs(self.poses(k, b))
-            self._known[key] = density_sharpness(wx.ravel(), wy.ravel(), self.res, self.sigma)
-        return self._known[key]
+        return self.remembered(k, b, self._score)
+
+    def _score(self, pose: F64) -> float:
+        wx, wy = self.arcs(pose)
+        return density_sharpness(wx.ravel(), wy.ravel(), self.res, self.sigma)
 
 
 class _BinnedSharpness(_Compiled):
@@ -276,7 +284,6 @@ class _Consistency(_Compiled):
         reach = float(np.hypot(self.bx - self.sx[:, None], self.by - self.sy[:, None]).max(
             initial=0.0))
         self.steps = np.arange(1, int(reach / res) + 1) * res  # along each ray, m
-        self._known: dict[tuple[float, float], float] = {}  # a pure function of (k, b)
 
     def _compiled(self, pose: F64) -> float:
         from pipeline.refine.kernels import consistency_score
@@ -293,10 +300,7 @@ class _Consistency(_Compiled):
         return math.ceil(4 * self.sigma / self.res)
 
     def __call__(self, k: float, b: float) -> float:
-        key = (float(k), float(b))
-        if key not in self._known:  # the searches ask for the same calibrations again
-            self._known[key] = self._score(self.poses(k, b))
-        return self._known[key]
+        return self.remembered(k, b, self._score)
 
     def _score(self, pose: F64) -> float:
         if not self.reference:
@@ -468,8 +472,7 @@ def _consistent_bias(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes,
 
 def _heading_bias(sharp: _Sharpness, consistent: _Consistency, k: float, b0: float,
                   db: float, start: tuple[float, float, float], none: float,
-                  min_gain: float, strong_gain: float = math.inf
-                  ) -> tuple[float, BiasRejected | None]:
+                  min_gain: float, strong_gain: float) -> tuple[float, BiasRejected | None]:
     """The heading bias at the scale ``k``: the sharpest within ±2 steps ``db`` of ``b0``
     (``start``: the best known before), refined twice (steps / 4); applied when
     :func:`bias_accepted` says so (``none``: the echoes' sharpness without a bias at ``k``;
@@ -600,9 +603,8 @@ def _surface_calibration(
     t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, sharp: _Sharpness,
     consistent: _Consistency, base: float, best: tuple[float, float, float],
     rejected: BiasRejected | None, by_consistency: bool, *, max_scale: float, bias_step: float, max_slope: float,
-    min_gain: float, min_z: float, systematic: float, window_m: float, tilt: bool = False,
-    strong_gain: float = math.inf,
-    far_echoes: Echoes | None = None,
+    min_gain: float, min_z: float, systematic: float, window_m: float, tilt: bool,
+    strong_gain: float, far_echoes: Echoes | None,
 ) -> Calibration:
     """The scale by :mod:`pipeline.refine.surfaces`; then the heading bias at that scale
     (a bias found with the scale wrong partly makes up for it: 0.58°/m of 0.8 on the office

@@ -16,11 +16,11 @@ from pipeline.refine import Echoes, collect_echoes
 def log_echoes(log: Path, max_range_m: float, max_gap_ns: int = 10**9
                ) -> tuple[tuple[np.ndarray, ...], Echoes]:
     """A log's pose track (t, x, y, yaw) and its echoes out to ``max_range_m``."""
-    from pipeline.run import prepare
+    from pipeline.run import surveyed
 
     cfg = Config()
     with open_log(log, cfg) as reader:
-        sv, sensors, _ = prepare(reader, cfg)
+        sv, sensors = surveyed(reader, cfg)
         echoes = collect_echoes(sv.ordered_ranges(reader), sv.track, sensors,
                                 eps_max=cfg.mapper.eps_max, max_echo_range_m=max_range_m,
                                 arc_fraction=0.8, time_offset_ns=0, max_gap_ns=max_gap_ns)
