@@ -8,7 +8,8 @@ Usage::
     python -m benchmarks.scale_surfaces [--cases NAME ...] [--work DIR]
 
 The heading bias is the one refinement's default calibration finds (by sharpness, at
-``k = 0``), held per reported metre.
+``k = 0``), held per reported metre. The patches are the offset-only ones (the model asked
+first), or with ``calibration_scale_tilt = "always"`` those with their orientation fitted.
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ def main(argv: list[str] | None = None) -> int:
             bias = configured_calibration(  # the heading bias as refinement finds it
                 *track, echoes, dataclasses.replace(pr, calibration_max_scale=0.0)).heading_bias
             fp = SurfaceScale(*track, echoes, bias, pr.calibration_scale_window_m,
-                              pr.calibration_scale_tilt).fixed_point()
+                              pr.calibration_scale_tilt == "always").fixed_point()
             z = abs(fp.value) / math.hypot(fp.standard_error, pr.calibration_scale_systematic)
             print(f"| {name} | {which} | {len(echoes)} | {math.degrees(bias):.2f} | "
                   + " ".join(f"{v:+.4f}" for v in fp.f)

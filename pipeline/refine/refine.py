@@ -178,6 +178,11 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
             metrics["scale_estimate"] = cal0.scale_estimate
             metrics["scale_standard_error"] = cal0.scale_standard_error
             metrics["scale_far_echoes"] = cal0.scale_far_echoes
+        if cal0.scale_other_model is not None:  # both patch models asked ("fallback")
+            metrics["scale_patch_orientation_fitted"] = cal0.scale_oriented
+            other = "offset_only" if cal0.scale_oriented else "orientation_fitted"
+            metrics[f"scale_{other}_estimate"] = cal0.scale_other_model[0]
+            metrics[f"scale_{other}_standard_error"] = cal0.scale_other_model[1]
         if cal0.scale_disputed_by is not None:  # the far echoes' scale that kept it out
             metrics["scale_far_estimate"] = cal0.scale_disputed_by.value
             metrics["scale_far_standard_error"] = cal0.scale_disputed_by.standard_error
@@ -302,6 +307,10 @@ def summary(metrics: dict[str, Any], cfg: PoseRefinementConfig) -> str:
     parts = []
     reach = (f", echoes to {cfg.calibration_far_range_m:g} m"
              if metrics.get("scale_far_echoes") else "")
+    if metrics.get("scale_patch_orientation_fitted"):
+        reach += (", patch orientations fitted; offset-only "
+                  f"{metrics['scale_offset_only_estimate']:+.1%} ± "
+                  f"{metrics['scale_offset_only_standard_error']:.1%}")
     if "search_heading_bias_deg_per_m" not in metrics:
         parts.append(f"no calibration ({metrics.get('echoes', 0)} echoes)")
     elif metrics.get("search_scale_error"):

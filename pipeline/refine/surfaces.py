@@ -29,9 +29,10 @@ One evaluation ``f(k₀)``, from the echoes alone:
    the association's pull (Intel's true poses +0.68 % without the window, +0.26 % with
    it; Intel with 0.02 m/√m of noise per step +4.6 % → +3.75 % of 3 %; the slope on the
    drifted Intel 0.60 → 0.51);
-4. ``c`` per patch eliminated (its mean) and, with ``tilt`` (``calibration_scale_tilt``,
-   opt-in: ``benchmarks/RESULTS.md``, twentieth session, has what it gains and costs), the
-   patch's orientation too: the residuals' linear trend along the patch
+4. ``c`` per patch eliminated (its mean) and, with ``tilt`` (``calibration_scale_tilt``:
+   by default the fallback where the offset alone establishes no scale,
+   :func:`pipeline.refine.calibration._patch_models`; ``benchmarks/RESULTS.md``, twentieth
+   and twenty-first sessions, has what it gains and costs), the patch's orientation too: the residuals' linear trend along the patch
    (the hits' position across its normal) removed, in patches of 4 echoes or more. A
    normal from the density off by ``δ`` leaves ``δ ×`` that position in every residual,
    which the scale absorbs where the robot drives along a wall (the side sonars' hits
@@ -61,6 +62,7 @@ Deterministic: no random draws.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -116,12 +118,34 @@ def normal_angles_at(density: F64, rows: I64, cols: I64) -> F64:
     return np.asarray(0.5 * np.arctan2(2 * t[:, 2], t[:, 0] - t[:, 1]))[at.ravel()]
 
 
+Association = tuple[I64, I64, F64, F64, F64]  # SurfaceScale._associate's patches
+
+
+class Associations:
+    """Surface associations remembered, by (echoes, heading bias, ``k₀``): both patch models
+    (``calibration_scale_tilt = "fallback"``) fit the patches of one association, and the
+    second model's first fixed point asks for the first's again."""
+
+    def __init__(self) -> None:
+        self._known: dict[tuple[int, float, float], Association] = {}
+
+    def remembered(self, key: tuple[int, float, float],
+                   associate: Callable[[], Association]) -> Association:
+        if key not in self._known:
+            self._known[key] = associate()
+        return self._known[key]
+
+
 class SurfaceScale:
     """``f(k₀)`` of the module docstring for one log's echoes, its fixed point, and the
-    same for the heading bias at a given scale."""
+    same for the heading bias at a given scale. ``associations``: where the patches
+    associated under a ``k₀`` are remembered (``echoes`` kept alive meanwhile: its ``id``
+    is in the key)."""
 
     def __init__(self, t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, bias: float,
-                 window_m: float = WINDOW_M, tilt: bool = False):
+                 window_m: float = WINDOW_M, tilt: bool = False,
+                 associations: Associations | None = None):
+        self.source, self.associations = echoes, associations
         echoes = echoes.take(_thin(len(echoes), MAX_ECHOES))  # memory and time bounded
         self.placed = _Placed(t_ns, x, y, yaw, echoes, len(echoes))
         self.echoes, self.bias, self.tilt = echoes, bias, tilt
@@ -136,7 +160,7 @@ class SurfaceScale:
     def poses(self, k: float) -> F64:
         return self.placed.poses(k, self.bias * (1.0 + k))
 
-    def _associate(self, pose: F64) -> tuple[I64, I64, F64, F64, F64]:
+    def _associate(self, pose: F64) -> Association:
         """(echo index, patch, patch normal x, y, hit ray angle in the base frame) with the
         echoes at ``pose`` (one row per echo)."""
         from scipy.ndimage import gaussian_filter
@@ -207,10 +231,15 @@ class SurfaceScale:
     def evaluate(self, k0: float) -> tuple[float, float]:
         """``f(k₀)`` and its standard error (NaN, NaN: no patch)."""
         ks = np.asarray(k0 + STEP * np.arange(-10, 11), dtype=np.float64)
-        return self._fit(self._associate(self.poses(k0)), ks,
-                         self.placed.poses_many(ks, self.bias * (1.0 + ks)))
 
-    def _fit(self, association: tuple[I64, I64, F64, F64, F64], candidates: F64,
+        def associate() -> Association:
+            return self._associate(self.poses(k0))
+
+        association = (associate() if self.associations is None else
+                       self.associations.remembered((id(self.source), self.bias, k0), associate))
+        return self._fit(association, ks, self.placed.poses_many(ks, self.bias * (1.0 + ks)))
+
+    def _fit(self, association: Association, candidates: F64,
              poses: F64) -> tuple[float, float]:
         """The candidate (parabola-refined) minimising the patches' Cauchy loss, and its
         standard error: the cluster-robust sandwich variance of the M-estimate,

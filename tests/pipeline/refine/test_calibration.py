@@ -209,6 +209,68 @@ def test_far_echoes_replace_the_near_ones_only_when_they_agree() -> None:
     assert not _far_agrees(fp(math.nan, math.nan), fp(0.03, 0.002))
 
 
+def _gated(estimate: float, error: float, applied: bool) -> Any:
+    from pipeline.refine.calibration import Calibration
+
+    return Calibration(estimate if applied else 0.0, 0.014, scale_estimate=estimate,
+                       scale_standard_error=error)
+
+
+@pytest.mark.parametrize(("offset", "oriented", "oriented_applied"), [
+    # Örebro with 3 % and 0.8°/m: the offset-only model short of its gate, the oriented
+    # one established and 0.2 errors away: its scale is applied
+    ((0.0272, 0.0144), (0.0306, 0.0066), True),
+    # the corridor seen by the 8 front sonars, true poses: the oriented model establishes
+    # a lean of the other sign, 3.8 errors away: nothing applied
+    ((0.0213, 0.0132), (-0.0312, 0.0044), False),
+    # of ±0.85 % (√(0.6² + 0.6²)) apart: 1.6 % (1.9 errors) lets it in, 1.8 % (2.1) does not
+    ((0.0100, 0.0060), (0.0260, 0.0060), True),
+    ((0.0100, 0.0060), (0.0280, 0.0060), False),
+    # undetermined by the offset-only model: nothing to agree with
+    ((math.nan, math.nan), (0.0306, 0.0066), False),
+])
+def test_the_oriented_patches_scale_is_the_fallback_where_the_models_agree(
+        offset: tuple[float, float], oriented: tuple[float, float],
+        oriented_applied: bool) -> None:
+    from pipeline.refine.calibration import _patch_models
+
+    asked: list[bool] = []
+
+    def surfaces(tilt: bool) -> Any:
+        asked.append(tilt)
+        return _gated(*(oriented if tilt else offset), applied=tilt)
+
+    got = _patch_models(surfaces, "fallback")
+    assert asked == [False, True]
+    assert got.scale_oriented is oriented_applied
+    if oriented_applied:
+        assert got.scale_error == oriented[0]
+        assert got.scale_other_model == offset
+    else:
+        assert got.scale_error == 0.0
+        assert got.scale_estimate == offset[0] or math.isnan(offset[0])
+        assert got.scale_other_model == oriented
+
+
+def test_an_established_offset_only_scale_is_not_asked_again() -> None:
+    from pipeline.refine.calibration import _patch_models
+
+    asked: list[bool] = []
+
+    def surfaces(tilt: bool) -> Any:
+        asked.append(tilt)
+        return _gated(0.028, 0.008, applied=True)
+
+    assert _patch_models(surfaces, "fallback").scale_error == 0.028
+    assert asked == [False]
+    asked.clear()
+    assert _patch_models(surfaces, "always").scale_other_model is None
+    assert asked == [True]
+    asked.clear()
+    assert not _patch_models(surfaces, "off").scale_oriented
+    assert asked == [False]
+
+
 @pytest.fixture(scope="module")
 def pillar_hall(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[object, Echoes]]:
     """The hall of pillars (sample_logs/worlds/pillars.toml), true and with 3 % / 0.8°/m."""
@@ -496,7 +558,8 @@ def _scripted_refinement(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
     surfaces' scale estimates replaced by ``answers`` in turn (each call of ``fixed_points`` takes the
     next: near, or near and far), and the heading bias found at a scale other than 0 moved by
     0.01°/m (the bias found at k = 0 absorbs part of the scale); the refinement's metrics
-    and the heading bias (°/m per reported metre) each estimate was asked under."""
+    and the heading bias (°/m per reported metre) each estimate was asked under. The
+    offset-only patch model alone (``calibration_scale_tilt = "off"``): these are its rules."""
     import pipeline.refine.calibration as calibration
     import pipeline.refine.surfaces as surfaces
     from pipeline.drift import DriftModel
@@ -526,7 +589,8 @@ def _scripted_refinement(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
     log = tmp_path / "orebro.mcap"
     run_emulation(src, log, "mcap", options=EmulateOptions(drift=DriftModel(0.03, 0.8)))
     cfg = Config()
-    refine = Config(pose_refinement=dataclasses.replace(cfg.pose_refinement, enabled=True))
+    refine = Config(pose_refinement=dataclasses.replace(cfg.pose_refinement, enabled=True,
+                                                        calibration_scale_tilt="off"))
     found = run(log, tmp_path / "out", refine, force=True).metrics.pose_refinement
     assert found is not None
     return found, asked
@@ -605,7 +669,8 @@ def test_the_configured_calibration_takes_the_near_and_far_echoes_the_config_nam
     kwargs = dict(max_scale=cfg.calibration_max_scale,
                   max_bias=math.radians(cfg.calibration_max_bias_deg_per_m),
                   res=cfg.field_resolution_m, sigma=cfg.field_sigma_m,
-                  min_gain=cfg.calibration_min_gain, window_m=cfg.calibration_scale_window_m)
+                  min_gain=cfg.calibration_min_gain, window_m=cfg.calibration_scale_window_m,
+                  tilt=cfg.calibration_scale_tilt)
     assert len(near) < len(far) < len(echoes) + 1
     assert configured_calibration(*track, echoes, cfg) == calibrate(*track, near, far_echoes=far,
                                                                     **kwargs)

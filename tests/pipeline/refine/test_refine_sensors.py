@@ -91,18 +91,20 @@ def test_refinement_finds_the_drift_with_each_sensor_layout(layout: str, tmp_pat
     # The default searches the scale too, by the surface patches, and applies it only when
     # it stands 3 errors clear of 0: the ring and the front sonars establish it on one lap
     # (measured 0.031 / 0.037 at z 5.5 / 5.6; ATE 30x / 16x down). The sweeping sonar's 1/8
-    # of their echoes find it (0.025) but not clear of 0 on one lap (z 2.8), so only the
-    # heading bias is applied (ATE 3.4x down); three laps establish it (the test below).
+    # of their echoes find it (0.025) but not clear of 0 on one lap (z 2.8, the test
+    # below); the patches with their orientation fitted establish it (0.029 at z 3.2) and
+    # agree with that: their scale is applied (ATE 0.29 m -> 7 mm, 45x).
     _, scaled, metrics = refined_errors(run)
     assert 0 < metrics["scale_fixed_point_slope"] < 0.75
-    assert metrics["scale_estimate"] == pytest.approx(0.03, abs=0.01)
+    assert metrics["scale_z"] >= 3
+    assert metrics["search_scale_error"] == pytest.approx(0.03, abs=0.01)
+    assert metrics["scale_estimate"] == metrics["search_scale_error"]
     if layout == "sweep3":
-        assert 2 < metrics["scale_z"] < 3
-        assert metrics["search_scale_error"] == 0.0
-        assert scaled < before / 3, (before, scaled)
+        assert metrics["scale_patch_orientation_fitted"] is True
+        assert metrics["scale_offset_only_estimate"] == pytest.approx(0.025, abs=0.005)
+        assert scaled < before / 20, (before, scaled)
     else:
-        assert metrics["scale_z"] >= 3
-        assert metrics["search_scale_error"] == pytest.approx(0.03, abs=0.01)
+        assert "scale_patch_orientation_fitted" not in metrics  # one model asked
         assert scaled < before / 10, (before, scaled)
     # By echo consistency (the older score): the sweeping sonar recovers part of the scale
     # (0.018; ATE 8.5x down), the ring most of it (0.027; 20x), the 8 front sonars 0.022
@@ -116,18 +118,19 @@ def test_refinement_finds_the_drift_with_each_sensor_layout(layout: str, tmp_pat
         assert metrics["search_scale_error"] == pytest.approx(0.03, abs=0.015)
 
 
-def test_patches_fitted_with_their_orientation_establish_the_sweeping_sonars_scale(
-        tmp_path: Path) -> None:
-    # calibration_scale_tilt: the one-lap sweep whose scale the default leaves out (z 2.8)
-    # stands clear of 0 (measured 0.029 at z 3.2; ATE 0.29 m -> 7 mm, 45x).
+def test_the_offset_only_patches_leave_the_one_lap_sweeps_scale_out(tmp_path: Path) -> None:
+    # calibration_scale_tilt = "off": the offset-only model's estimate on the one-lap sweep
+    # (0.025) stands under 3 errors from 0 (z 2.8), so only the heading bias is applied
+    # (ATE 3.4x down).
     track, echoes, truth = drifted_run("sweep3", tmp_path)
     ref = refine_track(track, echoes, PoseRefinementConfig(
-        enabled=True, calibration_max_scale=0.05, calibration_scale_tilt=True))
-    assert ref.metrics["scale_z"] >= 3
-    assert ref.metrics["search_scale_error"] == pytest.approx(0.03, abs=0.005)
+        enabled=True, calibration_max_scale=0.05, calibration_scale_tilt="off"))
+    assert 2 < ref.metrics["scale_z"] < 3
+    assert ref.metrics["scale_estimate"] == pytest.approx(0.025, abs=0.005)
+    assert ref.metrics["search_scale_error"] == 0.0
     before = trajectory_error(Trajectory(track.t_ns, track.x, track.y, track.yaw), truth)
     after = trajectory_error(Trajectory(np.asarray(track.t_ns), ref.x, ref.y, ref.yaw), truth)
-    assert after.ate_rmse_m < before.ate_rmse_m / 20, (before.ate_rmse_m, after.ate_rmse_m)
+    assert before.ate_rmse_m / 20 < after.ate_rmse_m < before.ate_rmse_m / 3
 
 
 def test_a_longer_run_establishes_the_sweeping_sonars_scale(tmp_path: Path) -> None:

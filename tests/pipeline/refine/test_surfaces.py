@@ -118,6 +118,37 @@ def test_a_patch_fitted_with_its_orientation_does_not_lean_with_its_normals_erro
         assert found[1] - found[0] > 2e-4, found
 
 
+def test_both_patch_models_fit_one_association_remembered(
+        runs: dict[str, tuple[Any, Any, Any]], monkeypatch: pytest.MonkeyPatch) -> None:
+    # calibration_scale_tilt = "fallback" asks the oriented model after the offset-only
+    # one, under the same heading bias: it fits the patches the first associated.
+    from pipeline.refine.surfaces import Associations
+
+    track, echoes, _ = runs["drifted"]
+    t, x, y, yaw = (np.asarray(v) for v in (track.t_ns, track.x, track.y, track.yaw))
+    fresh = [SurfaceScale(t, x, y, yaw, echoes, BIAS, tilt=tilt).fixed_point()
+             for tilt in (False, True)]
+    calls: list[float] = []
+    associate = SurfaceScale._associate
+
+    def counted(self: SurfaceScale, pose: np.ndarray) -> Any:
+        calls.append(float(pose[0, 0]))
+        return associate(self, pose)
+
+    monkeypatch.setattr(SurfaceScale, "_associate", counted)
+    shared = Associations()
+    offset = SurfaceScale(t, x, y, yaw, echoes, BIAS, tilt=False, associations=shared)
+    assert offset.fixed_point() == fresh[0]
+    assert len(calls) == len(K0S)
+    oriented = SurfaceScale(t, x, y, yaw, echoes, BIAS, tilt=True, associations=shared)
+    assert oriented.fixed_point() == fresh[1]
+    assert len(calls) == len(K0S)  # none associated again
+    assert fresh[0].value != fresh[1].value  # two models, two answers
+    # another heading bias places the echoes elsewhere: associated anew
+    SurfaceScale(t, x, y, yaw, echoes, BIAS * 1.01, associations=shared).fixed_point()
+    assert len(calls) == 2 * len(K0S)
+
+
 @pytest.mark.parametrize("window_m", [0.0, 5.0])
 def test_patches_link_echoes_within_one_stretch_of_travel(
         runs: dict[str, tuple[Any, Any, Any]], window_m: float) -> None:
