@@ -78,6 +78,7 @@ from formats.angles import wrap_angle
 from formats.arrays import F64, I64
 from pipeline.drift import DriftModel, Steps, apply_drift, systematic_factors
 from pipeline.refine.echoes import Echoes
+from pipeline.refine.memo import Memo
 from pipeline.refine.threads import parallel_map
 from pipeline.se2 import transform_points
 
@@ -113,7 +114,7 @@ class Calibration:
     scale_far_echoes: bool = False  # ... from the echoes out to the far range (_far_agrees)
     bias_rejected: BiasRejected | None = None  # the sharpest bias, when it was not applied
     scale_disputed_by: FixedPoint | None = None  # the far echoes' scale, where it kept the near out
-    scale_oriented: bool = False  # the scale from patches with their orientation fitted (tilt)
+    scale_oriented: bool = False  # the answer of the patches with their orientation fitted (tilt)
     scale_other_model: tuple[float, float] | None = None  # the other patch model's (estimate,
     # standard error), where ``tilt = "fallback"`` asked both (_patch_models_agree)
 
@@ -166,7 +167,7 @@ class _Placed:
         self.echo_at = where[t_ns.shape[0]:]
         self.bx, self.by = echoes.bx[keep], echoes.by[keep]
         self.sx, self.sy = echoes.sx[keep], echoes.sy[keep]
-        self._known: dict[tuple[float, float], float] = {}  # remembered scores, by (k, b)
+        self._known: Memo[tuple[float, float], float] = Memo()  # scores, by (k, b)
 
     def poses_many(self, ks: F64, bs: F64) -> F64:
         """(len(ks), echoes, 3): the echoes' poses under each calibration ``(ks[j], bs[j])``
@@ -192,10 +193,7 @@ class _Placed:
     def remembered(self, k: float, b: float, score: Callable[[F64], float]) -> float:
         """``score`` of the echoes' poses under ``(k, b)``, computed once per calibration:
         a score is a pure function of it, and the searches ask for the same ones again."""
-        key = (float(k), float(b))
-        if key not in self._known:
-            self._known[key] = score(self.poses(k, b))
-        return self._known[key]
+        return self._known.get((float(k), float(b)), lambda: score(self.poses(k, b)))
 
     def arcs(self, pose: F64) -> tuple[F64, F64]:
         return transform_points(pose[:, None, :], self.bx, self.by)
@@ -719,14 +717,15 @@ def _patch_models(surfaces: Callable[[bool], Calibration], tilt: TiltMode) -> Ca
     ``"fallback"``: the offset-only model's, unless it does not establish a scale and the
     orientation-fitted one does, with an estimate that agrees with it
     (:func:`_patch_models_agree`). The two models see the same echoes; the oriented one
-    is immune to the normals' error and more precise, but it can also establish a lean
-    that the offset-only one hid in its noise (a corridor seen by 8 front sonars: its
-    true poses at −3.1 ± 0.4 % oriented, +2.1 ± 1.3 % offset-only). Where the models
+    is immune to the normals' error and often the more precise, but it can also
+    establish a lean that the offset-only one hid in its noise (a corridor seen by 8
+    front sonars: its true poses at −3.1 ± 0.4 % oriented, +2.1 ± 1.3 % offset-only).
+    Where the models
     disagree, one is misled and nothing is applied; where they agree, the oriented
     model's precision is the answer (Örebro with 3 % and 0.8°/m: +2.7 ± 1.4 % offset-only,
     not established, +3.1 ± 0.7 % oriented; refined F1 0.42 → 0.97 of true poses)."""
     if tilt != "fallback":
-        return surfaces(tilt == "always")
+        return dataclasses.replace(surfaces(tilt == "always"), scale_oriented=tilt == "always")
     offset = surfaces(False)
     if offset.scale_error != 0.0:
         return offset

@@ -32,9 +32,10 @@ One evaluation ``f(k₀)``, from the echoes alone:
 4. ``c`` per patch eliminated (its mean) and, with ``tilt`` (``calibration_scale_tilt``:
    by default the fallback where the offset alone establishes no scale,
    :func:`pipeline.refine.calibration._patch_models`; ``benchmarks/RESULTS.md``, twentieth
-   and twenty-first sessions, has what it gains and costs), the patch's orientation too: the residuals' linear trend along the patch
-   (the hits' position across its normal) removed, in patches of 4 echoes or more. A
-   normal from the density off by ``δ`` leaves ``δ ×`` that position in every residual,
+   and twenty-first sessions, has what it gains and costs), the patch's orientation too:
+   the residuals' linear trend along the patch (the hits' position across its normal)
+   removed, in patches of 4 echoes or more. A normal from the density off by ``δ``
+   leaves ``δ ×`` that position in every residual,
    which the scale absorbs where the robot drives along a wall (the side sonars' hits
    move with it); fitted, the estimate no longer depends on the normal's error. Measured
    (one fixed point, the bias of ``k = 0``) on the true poses of seven real buildings
@@ -62,7 +63,6 @@ Deterministic: no random draws.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -70,6 +70,7 @@ import numpy as np
 from formats.arrays import F64, I64
 from pipeline.refine.calibration import _Placed, _thin
 from pipeline.refine.echoes import Echoes
+from pipeline.refine.memo import Memo
 from pipeline.refine.threads import parallel_map
 from pipeline.se2 import transform_points
 
@@ -121,19 +122,10 @@ def normal_angles_at(density: F64, rows: I64, cols: I64) -> F64:
 Association = tuple[I64, I64, F64, F64, F64]  # SurfaceScale._associate's patches
 
 
-class Associations:
-    """Surface associations remembered, by (echoes, heading bias, ``k₀``): both patch models
-    (``calibration_scale_tilt = "fallback"``) fit the patches of one association, and the
-    second model's first fixed point asks for the first's again."""
-
-    def __init__(self) -> None:
-        self._known: dict[tuple[int, float, float], Association] = {}
-
-    def remembered(self, key: tuple[int, float, float],
-                   associate: Callable[[], Association]) -> Association:
-        if key not in self._known:
-            self._known[key] = associate()
-        return self._known[key]
+# Surface associations remembered, by (echoes, heading bias, k₀): both patch models
+# (calibration_scale_tilt = "fallback") fit the patches of one association, and the
+# second model's first fixed point asks for the first's again.
+Associations = Memo[tuple[int, float, float], Association]
 
 
 class SurfaceScale:
@@ -236,7 +228,7 @@ class SurfaceScale:
             return self._associate(self.poses(k0))
 
         association = (associate() if self.associations is None else
-                       self.associations.remembered((id(self.source), self.bias, k0), associate))
+                       self.associations.get((id(self.source), self.bias, k0), associate))
         return self._fit(association, ks, self.placed.poses_many(ks, self.bias * (1.0 + ks)))
 
     def _fit(self, association: Association, candidates: F64,

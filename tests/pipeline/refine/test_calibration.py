@@ -264,7 +264,8 @@ def test_an_established_offset_only_scale_is_not_asked_again() -> None:
     assert _patch_models(surfaces, "fallback").scale_error == 0.028
     assert asked == [False]
     asked.clear()
-    assert _patch_models(surfaces, "always").scale_other_model is None
+    always = _patch_models(surfaces, "always")
+    assert always.scale_oriented and always.scale_other_model is None
     assert asked == [True]
     asked.clear()
     assert not _patch_models(surfaces, "off").scale_oriented
