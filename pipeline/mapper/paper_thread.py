@@ -20,6 +20,7 @@ reads): the paper's thread, the critical path, only merges and corrects.
 
 from __future__ import annotations
 
+import contextlib
 import queue
 import sys
 import threading
@@ -43,11 +44,12 @@ _STOP = None
 
 
 def _work(paper: AndersoneMapper, todo: queue.Queue[PreparedGroup | None],
-          failed: list[BaseException]) -> None:
-    """The thread: integrate groups in order until the stop mark (or the first error)."""
+          failed: list[BaseException], cancelled: threading.Event) -> None:
+    """The thread: integrate groups in order until the stop mark (or the first error);
+    once ``cancelled``, the groups still queued are dropped."""
     while True:
         work = todo.get()
-        if work is _STOP:
+        if work is _STOP or cancelled.is_set():
             return
         if failed:
             continue  # drain: the error is reported to the feeding thread
@@ -55,6 +57,15 @@ def _work(paper: AndersoneMapper, todo: queue.Queue[PreparedGroup | None],
             paper.integrate_prepared(work)
         except BaseException as err:  # handed to the feeding thread
             failed.append(err)
+
+
+def _cancel(todo: queue.Queue[PreparedGroup | None], cancelled: threading.Event,
+            thread: threading.Thread) -> None:
+    """Stop the thread after the group it holds (the queued ones dropped) and join it."""
+    cancelled.set()
+    with contextlib.suppress(queue.Full):  # full: it is working, and sees the flag next
+        todo.put_nowait(_STOP)  # wakes a thread waiting for work
+    thread.join()
 
 
 class PaperThread:
@@ -66,16 +77,19 @@ class PaperThread:
         self._offering = True  # pass 0 still offers (until the queue is first full)
         self._queue: queue.Queue[PreparedGroup | None] = queue.Queue(QUEUE_GROUPS)
         self._failed: list[BaseException] = []
+        cancelled = threading.Event()
         self._thread: threading.Thread | None = threading.Thread(
-            target=_work, args=(paper, self._queue, self._failed),
+            target=_work, args=(paper, self._queue, self._failed, cancelled),
             name="sonarmap-paper-mapper", daemon=True,
         )
         self._switch_interval = sys.getswitchinterval()
         sys.setswitchinterval(min(self._switch_interval, SWITCH_INTERVAL_S))
         self._thread.start()
-        # A mapper dropped half-way (a failed run) stops its thread; at interpreter exit
-        # the daemon thread just ends (no waiting for room in the queue then).
-        weakref.finalize(self, self._queue.put, _STOP).atexit = False
+        # A mapper dropped half-way (a failed or interrupted run), or still running when
+        # the interpreter exits, stops its thread after the group in hand and waits for
+        # it: a daemon thread left inside the compiled kernels while the interpreter
+        # finalises can crash the process (seen once: SIGSEGV after SIGTERM mid-run).
+        weakref.finalize(self, _cancel, self._queue, cancelled, self._thread)
 
     def offer(self, index: int, group: ScanGroup) -> None:
         """Pass 0: hand over group ``index`` if it is the next one needed and the queue has

@@ -120,3 +120,35 @@ def test_threads_is_a_checked_speed_key_outside_the_config_hash() -> None:
     assert Config(mapper=dataclasses.replace(INLINE, seed=1)).hash() != one.hash()
     with pytest.raises(ConfigError, match=r"mapper\.threads"):
         Config(mapper=MapperConfig(threads=0)).validate()
+
+
+def test_a_mapper_dropped_half_way_stops_its_thread_after_the_group_in_hand(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # An interrupted run drops its mapper with groups still queued: the thread ends after
+    # the one it holds and is joined there, not left inside the kernels until the
+    # interpreter exits (as a daemon thread finalised mid-kernel, it can crash the process).
+    import gc
+
+    integrated: list[int] = []
+    slow = AndersoneMapper.integrate_prepared
+
+    def integrate_slowly(self: AndersoneMapper, work: PreparedGroup) -> None:
+        time.sleep(0.05)
+        slow(self, work)
+        integrated.append(1)
+
+    monkeypatch.setattr(pt, "QUEUE_GROUPS", 8)
+    monkeypatch.setattr(AndersoneMapper, "integrate_prepared", integrate_slowly)
+    m = AttributionMapper(THREADED, room_grid())
+    m.begin_pass(0)
+    scans = ring_scans(400, seed=3)
+    for k in range(0, 400, 50):
+        m.integrate_many(scans[k : k + 50])
+    assert m._paper_thread is not None
+    thread, handed = m._paper_thread._thread, m._paper_thread.handed
+    assert thread is not None and thread.is_alive() and handed >= 4
+    del m
+    gc.collect()
+    assert not thread.is_alive()  # joined when the mapper went
+    assert len(integrated) < handed  # the queued groups were dropped
