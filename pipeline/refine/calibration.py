@@ -720,9 +720,8 @@ def _patch_models(surfaces: Callable[[bool], Calibration], tilt: TiltMode) -> Ca
     is immune to the normals' error and often the more precise, but it can also
     establish a lean that the offset-only one hid in its noise (a corridor seen by 8
     front sonars: its true poses at −3.1 ± 0.4 % oriented, +2.1 ± 1.3 % offset-only).
-    Where the models
-    disagree, one is misled and nothing is applied; where they agree, the oriented
-    model's precision is the answer (Örebro with 3 % and 0.8°/m: +2.7 ± 1.4 % offset-only,
+    Where the models disagree, one is misled and nothing is applied; where they agree,
+    the oriented model's precision is the answer (Örebro with 3 % and 0.8°/m: +2.7 ± 1.4 % offset-only,
     not established, +3.1 ± 0.7 % oriented; refined F1 0.42 → 0.97 of true poses)."""
     if tilt != "fallback":
         return dataclasses.replace(surfaces(tilt == "always"), scale_oriented=tilt == "always")
