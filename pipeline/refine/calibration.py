@@ -69,7 +69,7 @@ import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -95,6 +95,8 @@ SCALE_STEP = 0.01  # coarse step of the scale search (fraction)
 CONSISTENT_SPAN = 8  # the bias's value by consistency within ± this many coarse steps
 MIN_EVIDENCE = 2.0
 TiltMode = Literal["off", "fallback", "always"]  # the surfaces' patch models (_patch_models)
+_A = npt.NDArray[Any]
+Segments = tuple[_A, _A, _A, _A, _A, _A, _A, _A, _A]  # kernels.step_segments' arrays
 
 
 @dataclass(frozen=True)
@@ -168,20 +170,23 @@ class _Placed:
         self.bx, self.by = echoes.bx[keep], echoes.by[keep]
         self.sx, self.sy = echoes.sx[keep], echoes.sy[keep]
         self._known: Memo[tuple[float, float], float] = Memo()  # scores, by (k, b)
+        self._segments: Segments | None = None  # poses_many's steps, once
 
     def poses_many(self, ks: F64, bs: F64) -> F64:
         """(len(ks), echoes, 3): the echoes' poses under each calibration ``(ks[j], bs[j])``
-        (compiled: ``self.motion.drifted_many`` at the echoes, bit for bit)."""
-        from pipeline.refine.kernels import poses_at
+        (compiled: ``self.motion.drifted_many`` at the echoes to ~1e-12 m, the steps
+        summed per segment once per distinct bias, :func:`pipeline.refine.kernels.poses_at`)."""
+        from pipeline.refine.kernels import poses_at, step_segments
 
         models = [Calibration(float(k), float(b)).inverse for k, b in zip(ks, bs, strict=True)]
         m, i = self.motion, self.echo_at
         if m.x.shape[0] < 2:  # no step: every calibration leaves the poses
             return np.broadcast_to(np.stack([m.x[i], m.y[i], m.yaw[i]], axis=-1),
                                    (len(models), i.shape[0], 3)).copy()
+        if self._segments is None:  # the steps' segments: the same for every calibration
+            self._segments = step_segments(float(m.yaw[0]), m.lx, m.ly, m.dyaw, m.ds, i)
         scale, bias, same = systematic_factors(models)
-        out = poses_at(float(m.x[0]), float(m.y[0]), float(m.yaw[0]), m.lx, m.ly, m.dyaw,
-                       m.ds, scale, bias, i)
+        out = poses_at(float(m.x[0]), float(m.y[0]), *self._segments, scale, bias)
         out[..., 2] = wrap_angle(out[..., 2])
         out[same] = np.stack([m.x[i], m.y[i], m.yaw[i]], axis=-1)  # as drifted_many
         return np.asarray(out)

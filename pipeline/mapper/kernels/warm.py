@@ -39,6 +39,7 @@ def _warm_refinement() -> None:
         consistency_score,
         free_samples,
         poses_at,
+        step_segments,
         structure_tensor_at,
     )
 
@@ -46,7 +47,8 @@ def _warm_refinement() -> None:
     binned_sharpness(none1, none1, 0.1)
     consistency_score(none2, none2, none1, none1, np.linspace(0.0, 1.0, 3), 0.2, 0.1, 0.4,
                       1.0, 4, 1.0)
-    poses_at(0.0, 0.0, 0.0, none1, none1, none1, none1, np.ones(1), np.zeros(1), cells)
+    poses_at(0.0, 0.0, *step_segments(0.0, none1, none1, none1, none1, cells), np.ones(1),
+             np.zeros(1))
     structure_tensor_at(np.zeros((3, 3)), np.zeros((3, 3)), cells, cells, np.ones(3) / 3)
     free_samples(none1, none1, none2, none2, none1, none1, 0.2, 0.0, 0.0, 0.1, np.zeros((2, 2)))
 

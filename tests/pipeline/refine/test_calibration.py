@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from formats import open_log
+from formats.angles import wrap_angle
 from formats.presets import PRESETS
 from pipeline.config import Config
 from pipeline.refine import Echoes, collect_echoes
@@ -173,23 +174,58 @@ def test_the_compiled_binned_sharpness_is_the_reference_bit_for_bit(
 
 
 @pytest.mark.parametrize("thinned", [None, 40])
-def test_the_compiled_poses_are_drifted_many_bit_for_bit(true_run: tuple[object, Echoes],
-                                                        thinned: int | None) -> None:
+def test_the_compiled_poses_are_drifted_many_to_a_nanometre(true_run: tuple[object, Echoes],
+                                                            thinned: int | None) -> None:
     from pipeline.refine.calibration import Calibration, _Placed
 
     track, echoes = true_run
     t, x, y, yaw = (np.asarray(getattr(track, a)) for a in ("t_ns", "x", "y", "yaw"))
     placed = _Placed(t, x, y, yaw, echoes, thinned or len(echoes))
-    ks = np.array([0.0, 0.03, -0.05, 0.0, 0.0])
-    bs = np.radians([0.0, 0.8, -1.5, 2.5, -0.0])  # the first and last: no calibration
+    # no calibration first and last; two scales under one bias (summed once, scaled
+    # apart); 30°/m turns a metre's segment by more than the Taylor sums are kept for
+    ks = np.array([0.0, 0.03, -0.05, 0.0, 0.02, 0.0, -0.0])
+    bs = np.radians([0.0, 0.8, -1.5, 2.5, 0.0, 30.0, -0.0])
+    bs[4] = bs[3] * (1 + ks[4])  # the same bias per reported metre as the row before
     got = placed.poses_many(ks, bs)
     x_all, y_all, yaw_all = placed.motion.drifted_many(
         [Calibration(float(k), float(b)).inverse for k, b in zip(ks, bs, strict=True)])
     i = placed.echo_at
-    assert got.shape == (5, i.shape[0], 3) and i.shape[0] == (thinned or len(echoes))
-    assert np.array_equal(got, np.stack([x_all[:, i], y_all[:, i], yaw_all[:, i]], axis=-1))
-    assert np.array_equal(got[0], np.column_stack([placed.x[i], placed.y[i], placed.yaw[i]]))
+    want = np.stack([x_all[:, i], y_all[:, i], yaw_all[:, i]], axis=-1)
+    assert got.shape == (7, i.shape[0], 3) and i.shape[0] == (thinned or len(echoes))
+    turn = np.abs(wrap_angle(got[..., 2] - want[..., 2]))
+    assert np.abs(got[..., :2] - want[..., :2]).max() < 1e-9 and turn.max() < 1e-12
+    for row in (0, 6):  # no calibration: the odometry's poses themselves
+        assert np.array_equal(got[row], np.column_stack([placed.x[i], placed.y[i],
+                                                         placed.yaw[i]]))
     assert np.abs(got[1] - got[0]).max() > 0.1  # 3 % and 0.8°/m move the poses
+    assert np.abs(got[4, :, :2] - got[3, :, :2]).max() > 0.01  # the scale moves them apart
+    assert np.abs(got[5] - got[0]).max() > 1.0  # 30°/m: the steps one by one
+
+
+def test_a_segment_sum_stops_where_its_taylor_series_would_not_hold() -> None:
+    from pipeline.refine.kernels import MAX_TURN, SEGMENT_M, poses_at, step_segments
+
+    # a straight metre in 100 steps, then a quarter turn on the spot, then another metre
+    lx = np.concatenate([np.full(100, 0.01), [0.0], np.full(100, 0.01)])
+    dyaw = np.concatenate([np.zeros(100), [math.pi / 2], np.zeros(100)])
+    ly, ds = np.zeros_like(lx), lx.copy()
+    at = np.array([0, 50, 100, 101, 201])
+    seg = step_segments(0.0, lx, ly, dyaw, ds, at)
+    bounds = seg[2]
+    assert bounds[0] == 0 and bounds[-1] == 201 and 100 in bounds and 101 not in bounds
+    assert np.diff(seg[0][bounds]).max() <= SEGMENT_M + 0.01
+    big = 4 * MAX_TURN / SEGMENT_M  # turns a half-metre segment's steps by 2 × MAX_TURN
+    out = poses_at(0.0, 0.0, *seg, np.ones(3), np.array([0.0, 0.01, big]))
+    assert out.shape == (3, 5, 3)
+    assert np.allclose(out[0, :, :2], [[0, 0], [0.5, 0], [1, 0], [1, 0], [1, 1]])
+    assert np.allclose(out[0, :, 2], [0, 0, 0, math.pi / 2, math.pi / 2])
+    for j, b in ((1, 0.01), (2, big)):  # each step turned by b per metre before it
+        heading = np.concatenate([[0.0], np.cumsum(dyaw + b * ds)])
+        px = np.concatenate([[0.0], np.cumsum(np.cos(heading[:-1]) * lx)])
+        py = np.concatenate([[0.0], np.cumsum(np.sin(heading[:-1]) * lx)])
+        assert np.abs(out[j, :, 0] - px[at]).max() < 1e-12
+        assert np.abs(out[j, :, 1] - py[at]).max() < 1e-12
+        assert np.abs(out[j, :, 2] - heading[at]).max() < 1e-12
 
 
 def test_far_echoes_replace_the_near_ones_only_when_they_agree() -> None:

@@ -89,3 +89,18 @@ def test_no_free_sample_gives_an_empty_box_and_no_count() -> None:
     assert free_samples(one, one, ray, ray, np.array([0.15]), steps, 0.2, -1.0, -1.0, 0.1,
                         counts) == (math.inf, math.inf, -math.inf, -math.inf)
     assert counts.sum() == 0.0
+
+
+@pytest.mark.parametrize("sd", [1.0, 0.4, 2.5, 0.05])  # 0.05: the first weight underflows
+@pytest.mark.parametrize("u", [0.0, 3.25, -7.999, 12.5])
+def test_the_gaussian_weights_at_a_point_are_each_cells_exponential(u: float, sd: float) -> None:
+    from pipeline.refine.kernels import gaussian_at
+
+    rad = 4
+    out = np.empty(2 * rad + 2)
+    c0 = gaussian_at(u, rad, sd, out)
+    assert c0 == math.floor(u) - rad
+    d = u - (c0 + np.arange(2 * rad + 2))
+    want = np.exp(-0.5 * d * d / (sd * sd))
+    assert np.allclose(out, want / want.sum(), rtol=1e-12, atol=1e-300)
+    assert out.sum() == pytest.approx(1.0, abs=1e-14)
