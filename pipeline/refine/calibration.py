@@ -174,7 +174,7 @@ class _Placed:
 
     def poses_many(self, ks: F64, bs: F64) -> F64:
         """(len(ks), echoes, 3): the echoes' poses under each calibration ``(ks[j], bs[j])``
-        (compiled: ``self.motion.drifted_many`` at the echoes to ~1e-12 m, the steps
+        (compiled: ``self.motion.drifted_many`` at the echoes to ~1e-11 m, the steps
         summed per segment once per distinct bias, :func:`pipeline.refine.kernels.poses_at`)."""
         from pipeline.refine.kernels import poses_at, step_segments
 

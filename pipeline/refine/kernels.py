@@ -69,23 +69,20 @@ def gaussian_at(u: float, rad: int, sd: float, out: np.ndarray) -> int:
     # exponentials per call instead of one per cell (they were most of the score's time)
     d, inv = u - c0, 1.0 / (sd * sd)
     if 0.5 * d * d * inv > 700.0:  # the first weight would underflow: one per cell
-        total = 0.0
         for m in range(2 * rad + 2):
             e = u - (c0 + m)
             out[m] = math.exp(-0.5 * e * e * inv)
-            total += out[m]
+    else:
+        g = math.exp(-0.5 * d * d * inv)
+        ratio = math.exp((d - 0.5) * inv)
+        fall = math.exp(-inv)
         for m in range(2 * rad + 2):
-            out[m] /= total
-        return c0
-    g = math.exp(-0.5 * d * d * inv)
-    ratio = math.exp((d - 0.5) * inv)
-    fall = math.exp(-inv)
+            out[m] = g
+            g *= ratio
+            ratio *= fall
     total = 0.0
     for m in range(2 * rad + 2):
-        out[m] = g
-        total += g
-        g *= ratio
-        ratio *= fall
+        total += out[m]
     for m in range(2 * rad + 2):
         out[m] /= total
     return c0

@@ -1,6 +1,7 @@
-"""The surface association's compiled kernels (pipeline/refine/kernels.py) against the
-numpy they replace: the structure tensor read at a few cells, and the free cones counted
-without their samples' arrays — the same numbers bit for bit."""
+"""Pose refinement's compiled kernels (pipeline/refine/kernels.py) against the numpy they
+replace: the structure tensor read at a few cells, and the free cones counted without their
+samples' arrays — the same numbers bit for bit; the consistency's Gaussian weights and the
+odometry summed per segment of travel — the same to rounding."""
 
 from __future__ import annotations
 
@@ -104,3 +105,29 @@ def test_the_gaussian_weights_at_a_point_are_each_cells_exponential(u: float, sd
     want = np.exp(-0.5 * d * d / (sd * sd))
     assert np.allclose(out, want / want.sum(), rtol=1e-12, atol=1e-300)
     assert out.sum() == pytest.approx(1.0, abs=1e-14)
+
+
+def test_a_segment_sum_stops_where_its_taylor_series_would_not_hold() -> None:
+    from pipeline.refine.kernels import MAX_TURN, SEGMENT_M, poses_at, step_segments
+
+    # a straight metre in 100 steps, then a quarter turn on the spot, then another metre
+    lx = np.concatenate([np.full(100, 0.01), [0.0], np.full(100, 0.01)])
+    dyaw = np.concatenate([np.zeros(100), [math.pi / 2], np.zeros(100)])
+    ly, ds = np.zeros_like(lx), lx.copy()
+    at = np.array([0, 50, 100, 101, 201])
+    seg = step_segments(0.0, lx, ly, dyaw, ds, at)
+    bounds = seg[2]
+    assert bounds[0] == 0 and bounds[-1] == 201 and 100 in bounds and 101 not in bounds
+    assert np.diff(seg[0][bounds]).max() <= SEGMENT_M + 0.01
+    big = 4 * MAX_TURN / SEGMENT_M  # turns a half-metre segment's steps by 2 × MAX_TURN
+    out = poses_at(0.0, 0.0, *seg, np.ones(3), np.array([0.0, 0.01, big]))
+    assert out.shape == (3, 5, 3)
+    assert np.allclose(out[0, :, :2], [[0, 0], [0.5, 0], [1, 0], [1, 0], [1, 1]])
+    assert np.allclose(out[0, :, 2], [0, 0, 0, math.pi / 2, math.pi / 2])
+    for j, b in ((1, 0.01), (2, big)):  # each step turned by b per metre before it
+        heading = np.concatenate([[0.0], np.cumsum(dyaw + b * ds)])
+        px = np.concatenate([[0.0], np.cumsum(np.cos(heading[:-1]) * lx)])
+        py = np.concatenate([[0.0], np.cumsum(np.sin(heading[:-1]) * lx)])
+        assert np.abs(out[j, :, 0] - px[at]).max() < 1e-12
+        assert np.abs(out[j, :, 1] - py[at]).max() < 1e-12
+        assert np.abs(out[j, :, 2] - heading[at]).max() < 1e-12
