@@ -180,15 +180,15 @@ class _Placed:
 
         models = [Calibration(float(k), float(b)).inverse for k, b in zip(ks, bs, strict=True)]
         m, i = self.motion, self.echo_at
-        if m.x.shape[0] < 2:  # no step: every calibration leaves the poses
-            return np.broadcast_to(np.stack([m.x[i], m.y[i], m.yaw[i]], axis=-1),
-                                   (len(models), i.shape[0], 3)).copy()
+        scale, bias, same = systematic_factors(models)
+        given = np.stack([m.x[i], m.y[i], m.yaw[i]], axis=-1)  # the odometry's own poses
+        if m.x.shape[0] < 2 or same.all():  # no step, or no calibration: the poses as given
+            return np.broadcast_to(given, (len(models), i.shape[0], 3)).copy()
         if self._segments is None:  # the steps' segments: the same for every calibration
             self._segments = step_segments(float(m.yaw[0]), m.lx, m.ly, m.dyaw, m.ds, i)
-        scale, bias, same = systematic_factors(models)
         out = poses_at(float(m.x[0]), float(m.y[0]), *self._segments, scale, bias)
         out[..., 2] = wrap_angle(out[..., 2])
-        out[same] = np.stack([m.x[i], m.y[i], m.yaw[i]], axis=-1)  # as drifted_many
+        out[same] = given  # as drifted_many
         return np.asarray(out)
 
     def poses(self, k: float, b: float) -> F64:

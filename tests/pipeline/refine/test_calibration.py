@@ -181,6 +181,10 @@ def test_the_compiled_poses_are_drifted_many_to_a_nanometre(true_run: tuple[obje
     track, echoes = true_run
     t, x, y, yaw = (np.asarray(getattr(track, a)) for a in ("t_ns", "x", "y", "yaw"))
     placed = _Placed(t, x, y, yaw, echoes, thinned or len(echoes))
+    at_odometry = np.column_stack([placed.x[placed.echo_at], placed.y[placed.echo_at],
+                                   placed.yaw[placed.echo_at]])
+    none = placed.poses_many(np.zeros(2), np.zeros(2))  # no calibration: nothing summed
+    assert placed._segments is None and np.array_equal(none, np.stack([at_odometry] * 2))
     # no calibration first and last; two scales under one bias (summed once, scaled
     # apart); 30°/m turns a metre's segment by more than the Taylor sums are kept for
     ks = np.array([0.0, 0.03, -0.05, 0.0, 0.02, 0.0, -0.0])
