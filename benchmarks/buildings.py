@@ -1,6 +1,7 @@
 """Pose refinement on real buildings it was not tuned on.
 
     python -m benchmarks.buildings LOG.log.gz [LOG.log.gz ...] [--work DIR] [--no-odometry]
+        [--config TOML]
 
 Each LOG is a CARMEN log with corrected poses (FLASER) and wheel odometry (ODOM), such as
 the Radish buildings of ``acschaefer/ple`` (``data/carmen/``: ACES, CSAIL, Freiburg 079,
@@ -9,8 +10,9 @@ Seattle, ...; the repository does not carry them: keep it small). Each is emulat
 sonar ring, the laser map as truth): with its corrected poses, with the issue's drift applied
 to them (3 % scale, 0.8°/m, seed 0) and, unless ``--no-odometry``, with its own wheel
 odometry; then scored as ``compare_methods --drifted`` scores (true / drifted / refined /
-true poses refined: F1, aligned F1, ATE). The emulated logs are made under ``--work``
-(default ``build/buildings``) when missing.
+true poses refined: F1, aligned F1, ATE); ``--config`` sets the refined runs'
+``[pose_refinement]``. The emulated logs are made under ``--work`` (default
+``build/buildings``) when missing.
 """
 
 from __future__ import annotations
@@ -74,6 +76,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--work", type=Path, default=REPO / "build" / "buildings")
     ap.add_argument("--no-odometry", action="store_true", help="only the drifted rows")
     ap.add_argument("--tolerance", type=float, default=0.10, help="match distance, m")
+    ap.add_argument("--config", type=Path, help="TOML whose [pose_refinement] the refined runs use")
     args = ap.parse_args(argv)
     from formats.errors import SonarmapError
 
@@ -86,7 +89,7 @@ def main(argv: list[str] | None = None) -> int:
             continue
         for case in cases:
             try:  # a case run refuses (a drifted extent beyond grid.max_cells) is reported
-                row = score_drift_cases([case], args.work, args.tolerance)
+                row = score_drift_cases([case], args.work, args.tolerance, args.config)
             except SonarmapError as err:
                 print(f"{case[0]}: skipped: {err}", file=sys.stderr, flush=True)
                 continue

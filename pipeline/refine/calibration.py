@@ -69,13 +69,14 @@ import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 
 from formats.angles import wrap_angle
 from formats.arrays import F64, I64
+from pipeline.config import TiltMode
 from pipeline.drift import DriftModel, Steps, apply_drift, systematic_factors
 from pipeline.refine.echoes import Echoes
 from pipeline.refine.memo import Memo
@@ -94,7 +95,6 @@ MAX_ECHOES_CONSISTENCY_SCAN = 800  # ... in its scan over the whole bias range (
 SCALE_STEP = 0.01  # coarse step of the scale search (fraction)
 CONSISTENT_SPAN = 8  # the bias's value by consistency within ± this many coarse steps
 MIN_EVIDENCE = 2.0
-TiltMode = Literal["off", "fallback", "always"]  # the surfaces' patch models (_patch_models)
 _A = npt.NDArray[Any]
 Segments = tuple[_A, _A, _A, _A, _A, _A, _A, _A, _A]  # kernels.step_segments' arrays
 

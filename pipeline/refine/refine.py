@@ -161,7 +161,8 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
                 sigma_xy=cfg.odometry_sigma_xy, sigma_yaw=math.radians(cfg.odometry_sigma_yaw_deg),
                 iterations=cfg.local_iterations, min_gain=cfg.local_min_gain,
                 min_consistency_gain=cfg.local_min_consistency_gain,
-                strong_gain=cfg.local_strong_gain, res=cfg.field_resolution_m,
+                strong_gain=cfg.local_strong_gain, held_out=cfg.local_held_out,
+                res=cfg.field_resolution_m,
                 sigma=cfg.field_sigma_m)
             ox, oy, oyaw = local.x, local.y, local.yaw
             metrics["local"] = local.metrics
@@ -345,9 +346,14 @@ def summary(metrics: dict[str, Any], cfg: PoseRefinementConfig) -> str:
             needed = consistency_needed(gain, cfg.local_min_consistency_gain,
                                         cfg.local_strong_gain)
             d = gate_digits(local["consistency_gain"], needed)
-            parts.append(f"no local corrections ({gain:.2f} per parameter, but the echoes "
-                         f"{consistency_change(local['consistency_gain'], d)}, "
-                         f"< {needed:.{d}%})")
+            if local["consistency_gain"] >= needed:  # refused by the held-out half
+                held = consistency_change(local["held_out_consistency_gain"], 2)
+                parts.append(f"no local corrections ({gain:.2f} per parameter, but fitted to "
+                             f"half the echoes they leave the other half {held})")
+            else:
+                parts.append(f"no local corrections ({gain:.2f} per parameter, but the echoes "
+                             f"{consistency_change(local['consistency_gain'], d)}, "
+                             f"< {needed:.{d}%})")
         else:
             parts.append(f"no local corrections ({gain:.2f} < {cfg.local_min_gain:g} per "
                          "parameter)")

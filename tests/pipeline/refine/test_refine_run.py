@@ -165,6 +165,12 @@ def test_summary_says_what_was_applied_and_why_a_scale_was_not() -> None:
     strong = {**applied, "local": {**inconsistent["local"], "gain_per_parameter": 6.4}}
     assert ("; no local corrections (6.40 per parameter, but the echoes 0.7% less consistent, "
             "< 0.0%);") in summary(strong, cfg)
+    # past both tests, refused by the echoes the corrections were not fitted to
+    held_out = {**applied, "local": {**inconsistent["local"], "gain_per_parameter": 5.87,
+                                     "consistency_gain": 0.0011,
+                                     "held_out_consistency_gain": -0.0003}}
+    assert ("; no local corrections (5.87 per parameter, but fitted to half the echoes they "
+            "leave the other half 0.03% less consistent);") in summary(held_out, cfg)
     gated = {**applied, "local": {"stretches": 2, "iterations": 0, "gain_per_parameter": 0.35}}
     assert "; no local corrections (0.35 < 0.5 per parameter);" in summary(gated, cfg)
     unsharp = {**steep, "heading_bias_rejected": {"candidate_deg_per_m": -0.081,

@@ -198,3 +198,44 @@ def test_corrections_the_patches_strongly_support_need_only_keep_the_echoes_as_c
     assert after < 0.5 * np.sqrt(np.mean(dx**2))
     assert not weak.metrics["applied"] and weak.metrics["note"].endswith("(< 100.0%)")
     np.testing.assert_array_equal(weak.x, x + dx)
+
+
+def test_corrections_fitted_to_noise_are_refused_by_the_echoes_they_were_not_fitted_to(
+        true_run) -> None:
+    # True poses with the first two gates opened (any loss gain, a consistency loss of up
+    # to 50 %): the corrections fit the echoes' noise. In sample they cost the echoes
+    # 0.1 % of consistency; fitted to the even echoes, they cost the odd ones 0.2 %.
+    (t, x, y, yaw), echoes = true_run
+    kw = {**KW, "min_gain": -1e9, "min_consistency_gain": -0.5}
+    off = correct_stretches(t, x, y, yaw, echoes, **kw)
+    measured = correct_stretches(t, x, y, yaw, echoes, **kw, held_out="measure")
+    gated = correct_stretches(t, x, y, yaw, echoes, **kw, held_out="gate")
+    assert off.metrics["applied"] and "held_out_consistency_gain" not in off.metrics
+    # "measure" reports the held-out gain and decides as "off"
+    assert measured.metrics["applied"]
+    np.testing.assert_array_equal(measured.x, off.x)
+    held = measured.metrics["held_out_consistency_gain"]
+    assert -0.01 < held < 0.0
+    assert not gated.metrics["applied"] and gated.metrics["held_out_consistency_gain"] == held
+    assert gated.metrics["note"] == ("not applied: fitted to half the echoes, they leave the "
+                                     f"other half {abs(held):.2%} less consistent")
+    assert gated.x is x and gated.y is y and gated.yaw is yaw
+
+
+def test_a_real_displacement_passes_the_held_out_test(true_run) -> None:
+    # The displaced lap: fitted to the even echoes, the corrections make the odd ones
+    # several percent more consistent, and the corrections fitted to all are applied.
+    (t, x, y, yaw), echoes = true_run
+    ramp = _wander(x, y)
+    dx, dy = 0.12 * ramp, -0.09 * ramp
+    plain = correct_stretches(t, x + dx, y + dy, yaw, echoes, **KW)
+    gated = correct_stretches(t, x + dx, y + dy, yaw, echoes, **KW, held_out="gate")
+    assert gated.metrics["applied"] and gated.metrics["held_out_consistency_gain"] > 0.03
+    np.testing.assert_array_equal(gated.x, plain.x)
+    np.testing.assert_array_equal(gated.yaw, plain.yaw)
+
+
+def test_the_held_out_test_is_not_asked_of_corrections_the_first_gates_refuse(true_run) -> None:
+    (t, x, y, yaw), echoes = true_run
+    out = correct_stretches(t, x, y, yaw, echoes, **KW, held_out="gate")
+    assert not out.metrics["applied"] and "held_out_consistency_gain" not in out.metrics
