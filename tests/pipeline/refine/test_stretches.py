@@ -51,6 +51,12 @@ def _wander(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return np.clip((travel - travel[-1] / 3) / 4.0, 0.0, 1.0)
 
 
+def _displaced_lap(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """From a third of the run on, the odometry wanders 0.15 m off (a random walk's jump)."""
+    ramp = _wander(x, y)
+    return 0.12 * ramp, -0.09 * ramp
+
+
 def test_true_poses_are_left_exactly_as_they_are(true_run) -> None:
     (t, x, y, yaw), echoes = true_run
     out = correct_stretches(t, x, y, yaw, echoes, **KW)
@@ -62,9 +68,7 @@ def test_true_poses_are_left_exactly_as_they_are(true_run) -> None:
 
 def test_a_displaced_second_lap_is_pulled_back_onto_the_first(true_run) -> None:
     (t, x, y, yaw), echoes = true_run
-    # from a third of the run on, the odometry wanders 0.15 m off (a random walk's jump)
-    ramp = _wander(x, y)
-    dx, dy = 0.12 * ramp, -0.09 * ramp
+    dx, dy = _displaced_lap(x, y)
     out = correct_stretches(t, x + dx, y + dy, yaw, echoes, **KW)
     before = np.sqrt(np.mean(dx**2 + dy**2))
     after = np.sqrt(np.mean((out.x - x) ** 2 + (out.y - y) ** 2))
@@ -226,8 +230,7 @@ def test_a_real_displacement_passes_the_held_out_test(true_run) -> None:
     # The displaced lap: fitted to the even echoes, the corrections make the odd ones
     # several percent more consistent, and the corrections fitted to all are applied.
     (t, x, y, yaw), echoes = true_run
-    ramp = _wander(x, y)
-    dx, dy = 0.12 * ramp, -0.09 * ramp
+    dx, dy = _displaced_lap(x, y)
     plain = correct_stretches(t, x + dx, y + dy, yaw, echoes, **KW)
     gated = correct_stretches(t, x + dx, y + dy, yaw, echoes, **KW, held_out="gate")
     assert gated.metrics["applied"] and gated.metrics["held_out_consistency_gain"] > 0.03
