@@ -164,12 +164,13 @@ def correct_stretches(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
         metrics["applied"] = False
         return Corrected(*given, metrics)
     if held_out == "gate":
-        metrics["held_out_consistency_gain"] = _held_out_gain(solve, given, echoes, res, sigma)
-    if held_out == "gate" and metrics["held_out_consistency_gain"] < 0.0:
-        metrics["note"] = ("not applied: fitted to half the echoes, they leave the other half "
-                           f"{consistency_change(metrics['held_out_consistency_gain'], 2)}")
-        metrics["applied"] = False
-        return Corrected(*given, metrics)
+        held = metrics["held_out_consistency_gain"] = _held_out_gain(solve, given, echoes, res,
+                                                                     sigma)
+        if held < 0.0:
+            metrics["note"] = ("not applied: fitted to half the echoes, they leave the other "
+                               f"half {consistency_change(held, 2)}")
+            metrics["applied"] = False
+            return Corrected(*given, metrics)
     metrics["applied"] = True
     return Corrected(*fitted.poses, metrics)
 
