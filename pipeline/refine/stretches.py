@@ -146,13 +146,13 @@ def correct_stretches(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
     scored = echoes.take(_thin(len(echoes), MAX_ECHOES_CONSISTENCY))
     fitted = solve(x, y, yaw, matched, min_gain)
     metrics = fitted.metrics
-    if fitted.gain_per_parameter is not None and fitted.gain_per_parameter < min_gain:
+    if metrics.get("gain_per_parameter", math.inf) < min_gain:
         metrics["note"] = (f"not applied: the patches' loss falls by "
-                           f"{fitted.gain_per_parameter:.2f} per parameter (< {min_gain:g})")
+                           f"{metrics['gain_per_parameter']:.2f} per parameter (< {min_gain:g})")
     if not metrics["iterations"]:
         metrics["applied"] = False
         return Corrected(*given, metrics)
-    gain = _consistency_gain(t_ns, given, fitted.poses, scored, res, sigma)
+    gain = _track_consistency_gain(t_ns, given, fitted.poses, scored, res, sigma)
     metrics["consistency_gain"] = gain
     if held_out == "measure":
         metrics["held_out_consistency_gain"] = _held_out_gain(solve, given, echoes, res, sigma)
@@ -186,15 +186,15 @@ def _held_out_gain(solve: _Solver, given: tuple[F64, F64, F64], echoes: Echoes, 
     if not apart.metrics["iterations"]:
         return 0.0
     scored = odd.take(_thin(len(odd), MAX_ECHOES_CONSISTENCY))
-    return _consistency_gain(solve.t_ns, given, apart.poses, scored, res, sigma)
+    return _track_consistency_gain(solve.t_ns, given, apart.poses, scored, res, sigma)
 
 
 @dataclass(frozen=True)
 class _Fitted:
-    """The poses after a run of solves, and the gate's numbers of the first."""
+    """The poses after a run of solves, and what they did (the first solve's gate numbers,
+    absent where none ran: one stretch, no echo, no patch)."""
 
     poses: tuple[F64, F64, F64]
-    gain_per_parameter: float | None  # None: no solve (one stretch, no echo, no patch)
     metrics: dict[str, Any]
 
 
@@ -215,7 +215,6 @@ class _Solver:
         loss by less than ``min_gain`` per parameter."""
         t_ns = self.t_ns
         metrics: dict[str, Any] = {"stretches": 0, "iterations": 0}
-        gain_per_parameter = None
         for it in range(self.iterations):
             travel = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(x), np.diff(y)))])
             # stretches numbered 0 … n − 1 over the ones poses fall in (a jump may skip one)
@@ -241,7 +240,7 @@ class _Solver:
                     break
             x, y, yaw = _apply(x, y, yaw, travel, centre, corr)
             metrics["iterations"] = it + 1
-        return _Fitted((x, y, yaw), gain_per_parameter, metrics)
+        return _Fitted((x, y, yaw), metrics)
 
 
 def consistency_needed(gain_per_parameter: float, min_consistency_gain: float,
@@ -252,8 +251,9 @@ def consistency_needed(gain_per_parameter: float, min_consistency_gain: float,
     return 0.0 if gain_per_parameter >= strong_gain else min_consistency_gain
 
 
-def _consistency_gain(t_ns: I64, given: tuple[F64, F64, F64], corrected: tuple[F64, F64, F64],
-                      echoes: Echoes, res: float, sigma: float) -> float:
+def _track_consistency_gain(t_ns: I64, given: tuple[F64, F64, F64],
+                            corrected: tuple[F64, F64, F64], echoes: Echoes, res: float,
+                            sigma: float) -> float:
     """How much more consistent (fraction) ``echoes`` are on the ``corrected`` track than on
     the ``given`` one."""
     return (_consistency(t_ns, *corrected, echoes, res, sigma)
