@@ -365,14 +365,14 @@ class _Consistency(_Compiled):
 
 def density_sharpness(x: F64, y: F64, res: float, sigma: float) -> float:
     """``Σ ρ² / (Σ ρ)²`` of the points' histogram blurred by a Gaussian of ``sigma`` m."""
-    from scipy.ndimage import gaussian_filter
+    from pipeline.refine.kernels import gaussian_blur
 
     x0, y0 = float(x.min()) - 4 * sigma, float(y.min()) - 4 * sigma
     w = int((float(x.max()) + 4 * sigma - x0) / res) + 1
     h = int((float(y.max()) + 4 * sigma - y0) / res) + 1
     cell = ((y - y0) / res).astype(np.int64) * w + ((x - x0) / res).astype(np.int64)
     hist = np.bincount(cell, minlength=h * w).reshape(h, w).astype(np.float64)
-    dens = gaussian_filter(hist, sigma / res, mode="constant", truncate=3.0)
+    dens = gaussian_blur(hist, sigma / res)
     total = float(dens.sum())
     return float((dens * dens).sum() / (total * total)) if total > 0 else 0.0
 

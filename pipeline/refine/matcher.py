@@ -50,7 +50,7 @@ class LikelihoodField:
         ``1 − exp(−ρ/ρ_med)`` (``ρ_med`` the median over cells with evidence), so a wall seen
         by few echoes counts nearly as much as one seen by many. Arcs of echoes from different
         viewpoints cross where the obstacle is, so its cells hold the most evidence."""
-        from scipy.ndimage import gaussian_filter
+        from pipeline.refine.kernels import gaussian_blur
 
         x, y = x.ravel(), y.ravel()
         x0 = math.floor((float(x.min()) - margin) / res) * res
@@ -66,7 +66,7 @@ class LikelihoodField:
                            (0, 1, (1 - ax) * ay), (1, 1, ax * ay)):
             flat += np.bincount((iy + dy) * w + ix + dx, weights=wt, minlength=h * w)
         counts = flat.reshape(h, w)
-        dens = gaussian_filter(counts, sigma / res, mode="constant", truncate=3.0)
+        dens = gaussian_blur(counts, sigma / res)
         level = float(np.median(dens[dens > 0.01 * dens.max()])) if dens.max() > 0 else 1.0
         vals = (1.0 - np.exp(-dens / level)).astype(np.float32)
         return LikelihoodField(x0, y0, res, vals)

@@ -102,6 +102,7 @@ import numpy as np
 from formats.angles import wrap_angle
 from formats.arrays import F64, I64
 from pipeline.config import HeldOut
+from pipeline.refine import surfaces
 from pipeline.refine.calibration import (
     MAX_ECHOES_CONSISTENCY,
     _Consistency,
@@ -110,6 +111,7 @@ from pipeline.refine.calibration import (
     gate_digits,
 )
 from pipeline.refine.echoes import Echoes
+from pipeline.refine.surfaces import CAUCHY, MAD_SIGMA, Cones
 from pipeline.se2 import transform_points
 
 IRLS_STEPS = 6
@@ -136,8 +138,6 @@ def correct_stretches(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
     ``res``, ``sigma``: the second gate's (echo consistency at cells ``2 res``, blur
     ``sigma``, as the calibration's); ``held_out``: the second gate judged on echoes the
     corrections were not fitted to (module docstring, *held out*)."""
-    from pipeline.refine import surfaces
-
     given = (x, y, yaw)
     solve = _Solver(t_ns, stretch_m, sigma_xy, sigma_yaw, iterations)
     # only the echoes each score reads (thinned evenly, as the scores thin them) follow the
@@ -179,8 +179,6 @@ def _held_out_gain(solve: _Solver, given: tuple[F64, F64, F64], echoes: Echoes, 
                    sigma: float) -> float:
     """The consistency gain of the odd echoes under corrections fitted to the even ones
     (0 where those find none to fit)."""
-    from pipeline.refine import surfaces
-
     even, odd = (echoes.take(np.arange(start, len(echoes), 2)) for start in (0, 1))
     apart = solve(*given, even.take(_thin(len(even), surfaces.MAX_ECHOES)))
     if not apart.metrics["iterations"]:
@@ -215,6 +213,7 @@ class _Solver:
         loss by less than ``min_gain`` per parameter."""
         t_ns = self.t_ns
         metrics: dict[str, Any] = {"stretches": 0, "iterations": 0}
+        cones = Cones(echoes, window_m=0.0)  # the echoes' arcs, the same for every solve
         for it in range(self.iterations):
             travel = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(x), np.diff(y)))])
             # stretches numbered 0 … n − 1 over the ones poses fall in (a jump may skip one)
@@ -227,7 +226,7 @@ class _Solver:
             centre = np.column_stack(
                 [np.bincount(stretch, x, n), np.bincount(stretch, y, n),
                  np.bincount(stretch, travel, n)]) / np.maximum(count, 1)[:, None]
-            solved = _solve(t_ns, x, y, yaw, echoes.on_track(t_ns, x, y, yaw), stretch, centre,
+            solved = _solve(t_ns, cones, echoes.on_track(t_ns, x, y, yaw).odo, stretch, centre,
                             self.stretch_m, self.sigma_xy, self.sigma_yaw)
             if solved is None:
                 break
@@ -268,25 +267,22 @@ def _consistency(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, res: float
                         sigma=sigma)(0.0, 0.0)
 
 
-def _solve(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, stretch: I64, centre: F64,
+def _solve(t_ns: I64, cones: Cones, poses: F64, stretch: I64, centre: F64,
            stretch_m: float, sigma_xy: float, sigma_yaw: float
            ) -> tuple[F64, float, float, int] | None:
     """(corrections (stretches, 3), the patches' robust loss without and with them, the
-    parameters) of one linearised solve; ``stretch``: each pose's, ``centre``: each
+    parameters) of one linearised solve of the echoes of ``cones`` at ``poses`` (the
+    track's stamped ``t_ns``); ``stretch``: each pose's, ``centre``: each
     stretch's mean x, y and travel. The patches' offsets are eliminated (each is the
     weighted mean of its rows), which leaves a dense system of 3 unknowns per stretch."""
     from scipy import sparse
 
-    from pipeline.refine.surfaces import CAUCHY, MAD_SIGMA, SurfaceScale
-
-    surfaces = SurfaceScale(t_ns, x, y, yaw, echoes, 0.0, window_m=0.0)
-    poses = surfaces.poses(0.0)
-    idx, patch, nx, ny, phi = surfaces._associate(poses)
+    idx, patch, nx, ny, phi = cones.associate(poses)
     n_patch = int(patch.max(initial=-1)) + 1
     n = centre.shape[0]
     if n_patch == 0:
         return None
-    e = surfaces.echoes
+    e = cones.echoes
     pose = poses[idx]
     ox, oy = transform_points(pose, e.sx[idx], e.sy[idx])
     ray = pose[:, 2] + phi

@@ -119,7 +119,7 @@ def normal_angles_at(density: F64, rows: I64, cols: I64) -> F64:
     return np.asarray(0.5 * np.arctan2(2 * t[:, 2], t[:, 0] - t[:, 1]))[at.ravel()]
 
 
-Association = tuple[I64, I64, F64, F64, F64]  # SurfaceScale._associate's patches
+Association = tuple[I64, I64, F64, F64, F64]  # Cones.associate's patches
 
 
 # Surface associations remembered, by (echoes, heading bias, k₀): both patch models
@@ -128,19 +128,13 @@ Association = tuple[I64, I64, F64, F64, F64]  # SurfaceScale._associate's patche
 Associations = Memo[tuple[int, float, float], Association]
 
 
-class SurfaceScale:
-    """``f(k₀)`` of the module docstring for one log's echoes, its fixed point, and the
-    same for the heading bias at a given scale. ``associations``: where the patches
-    associated under a ``k₀`` are remembered (``echoes`` kept alive meanwhile: its ``id``
-    is in the key)."""
+class Cones:
+    """Echoes' whole cones in the base frame (their rays and arc points, computed once) and
+    each echo's stretch of travel (``window_m``; 0: one stretch), associated with surface
+    patches under any poses of the echoes (:meth:`associate`)."""
 
-    def __init__(self, t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, bias: float,
-                 window_m: float = WINDOW_M, tilt: bool = False,
-                 associations: Associations | None = None):
-        self.source, self.associations = echoes, associations
-        echoes = echoes.take(_thin(len(echoes), MAX_ECHOES))  # memory and time bounded
-        self.placed = _Placed(t_ns, x, y, yaw, echoes, len(echoes))
-        self.echoes, self.bias, self.tilt = echoes, bias, tilt
+    def __init__(self, echoes: Echoes, window_m: float):
+        self.echoes = echoes
         self.phi = echoes.arc_angles(1.0, ARC_POINTS)  # the whole cone's rays, base frame
         self.bx, self.by = echoes.arc(1.0, ARC_POINTS)
         # each echo's stretch of travel (odometry, independent of the scale tested)
@@ -149,15 +143,10 @@ class SurfaceScale:
         self.stretch = (np.floor(travel / window_m) if window_m > 0
                         else np.zeros(len(echoes))).astype(np.int64)
 
-    def poses(self, k: float) -> F64:
-        return self.placed.poses(k, self.bias * (1.0 + k))
-
-    def _associate(self, pose: F64) -> Association:
+    def associate(self, pose: F64) -> Association:
         """(echo index, patch, patch normal x, y, hit ray angle in the base frame) with the
         echoes at ``pose`` (one row per echo)."""
-        from scipy.ndimage import gaussian_filter
-
-        from pipeline.refine.kernels import free_samples
+        from pipeline.refine.kernels import free_samples, gaussian_blur
 
         e = self.echoes
         if len(e) == 0:
@@ -183,8 +172,7 @@ class SurfaceScale:
                     np.clip(((px - x0) / CELL_M).astype(np.int64), 0, w - 1))
 
         def density(counts: F64) -> F64:
-            return np.asarray(gaussian_filter(counts, SIGMA_M / CELL_M, mode="constant",
-                                              truncate=3.0))
+            return gaussian_blur(counts, SIGMA_M / CELL_M)
 
         r, c = cells(wx, wy)
         hit = density(np.bincount((r * w + c).ravel(), minlength=h * w).reshape(h, w)
@@ -217,6 +205,28 @@ class SurfaceScale:
         norm = np.maximum(np.hypot(mx, my), 1e-12)
         return idx, patch, (mx / norm)[patch], (my / norm)[patch], self.phi[idx, best[idx]]
 
+
+
+class SurfaceScale:
+    """``f(k₀)`` of the module docstring for one log's echoes, its fixed point, and the
+    same for the heading bias at a given scale. ``associations``: where the patches
+    associated under a ``k₀`` are remembered (``echoes`` kept alive meanwhile: its ``id``
+    is in the key)."""
+
+    def __init__(self, t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, bias: float,
+                 window_m: float = WINDOW_M, tilt: bool = False,
+                 associations: Associations | None = None):
+        self.source, self.associations = echoes, associations
+        echoes = echoes.take(_thin(len(echoes), MAX_ECHOES))  # memory and time bounded
+        self.placed = _Placed(t_ns, x, y, yaw, echoes, len(echoes))
+        self.cones = Cones(echoes, window_m)
+        self.echoes, self.stretch, self.bias, self.tilt = echoes, self.cones.stretch, bias, tilt
+
+    def poses(self, k: float) -> F64:
+        return self.placed.poses(k, self.bias * (1.0 + k))
+
+    def _associate(self, pose: F64) -> Association:
+        return self.cones.associate(pose)
     def __call__(self, k0: float) -> float:
         return self.evaluate(k0)[0]
 

@@ -1,6 +1,6 @@
 """Independent evaluations of the calibration search run on parallel threads.
 
-numpy (large array operations), scipy.ndimage and the ``nogil`` numba kernels
+numpy (large array operations) and the ``nogil`` numba kernels
 (:mod:`pipeline.refine.kernels`) release the GIL, so candidate calibrations evaluate
 side by side: 1.6-1.9× on two cores for the surface fits. Each evaluation is pure (it
 reads shared arrays, writes only its own), so the results — and every decision taken on

@@ -1,6 +1,6 @@
-"""Pose refinement's compiled kernels (pipeline/refine/kernels.py) against the numpy they
-replace: the structure tensor read at a few cells, and the free cones counted without their
-samples' arrays — the same numbers bit for bit; the consistency's Gaussian weights and the
+"""Pose refinement's compiled kernels (pipeline/refine/kernels.py) against the numpy and
+scipy they replace: the structure tensor read at a few cells, the free cones counted without
+their samples' arrays, the densities' Gaussian blur — the same numbers bit for bit; the consistency's Gaussian weights and the
 odometry summed per segment of travel — the same to rounding."""
 
 from __future__ import annotations
@@ -11,7 +11,12 @@ import numpy as np
 import pytest
 from scipy.ndimage import gaussian_filter
 
-from pipeline.refine.kernels import free_samples, gaussian_weights, structure_tensor_at
+from pipeline.refine.kernels import (
+    free_samples,
+    gaussian_blur,
+    gaussian_weights,
+    structure_tensor_at,
+)
 from pipeline.refine.surfaces import TENSOR_SIGMA_CELLS, normal_angles, normal_angles_at
 
 
@@ -35,6 +40,25 @@ def test_the_structure_tensor_at_cells_is_the_whole_grid_filter_bit_for_bit(
     at = structure_tensor_at(gx, gy, rows, cols, gaussian_weights(TENSOR_SIGMA_CELLS, 4.0))
     for k in range(3):
         assert np.array_equal(at[:, k], whole[k].ravel())
+
+
+@pytest.mark.parametrize("sd", [1.0, 0.5, 2.0, 1.5])
+@pytest.mark.parametrize("density", _densities(), ids=lambda d: f"{d.shape[0]}x{d.shape[1]}")
+def test_the_blur_is_scipys_constant_mode_gaussian_filter_bit_for_bit(
+        density: np.ndarray, sd: float) -> None:
+    blurred = gaussian_blur(density, sd)
+    assert blurred.shape == density.shape
+    assert np.array_equal(blurred, gaussian_filter(density, sd, mode="constant", truncate=3.0))
+
+
+def test_the_blur_spreads_a_unit_over_the_weights_and_loses_what_falls_outside() -> None:
+    grid = np.zeros((9, 9))
+    grid[4, 4] = 1.0
+    w = gaussian_weights(1.0)  # radius 3
+    assert np.allclose(gaussian_blur(grid, 1.0)[1:8, 1:8], np.outer(w, w), rtol=0, atol=1e-17)
+    edge = np.zeros((9, 9))
+    edge[0, 4] = 1.0  # half the blur falls off the grid (zeros beyond it, nothing reflected)
+    assert gaussian_blur(edge, 1.0).sum() == pytest.approx(w[3:].sum(), abs=1e-15)
 
 
 def test_the_normals_at_cells_are_the_whole_grids_and_point_across_a_wall() -> None:
