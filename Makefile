@@ -8,7 +8,7 @@ STAMP  := $(VENV)/.installed-stamp
 DEMO_LOG := sample_logs/office/office.mcap
 DEMO_OUT := demo_out/office
 
-.PHONY: setup demo test lint layers typecheck unit mutate bench fuzz goldens samples compare clean
+.PHONY: setup demo test lint layers typecheck unit mutate bench fuzz goldens samples compare refine-time clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -c 'import sys; sys.exit("sonarmap needs Python 3.11+") if sys.version_info < (3, 11) else None'
@@ -89,6 +89,11 @@ compare: $(STAMP) $(RADISH_LOGS)
 	  $(foreach b,$(RADISH),$(COMPARE_DIR)/$(b).mcap $(COMPARE_DIR)/$(b).laser.yaml)
 	$(BIN)/python -m benchmarks.compare_methods --drifted
 	$(BIN)/python -m benchmarks.drift_variety
+
+# The pose refinement's time target (issue 17): whole `sonarmap run` processes unrefined and
+# refined on make compare's drifted cases and a loop floor (~5 min).
+refine-time: $(STAMP)
+	$(BIN)/python -m benchmarks.refine_time
 
 clean:
 	rm -rf $(VENV) demo_out build *.egg-info .pytest_cache .mypy_cache .ruff_cache

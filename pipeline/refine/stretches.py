@@ -307,19 +307,21 @@ def _solve(t_ns: I64, cones: Cones, poses: F64, stretch: I64, centre: F64,
     sol, w = np.zeros(n_par), np.ones(idx.size)
     res = residuals(sol, w)
     scale = 1.0
+    # the systems' sparsity, the same in every step
+    pairs = (col[:, :, None] * n_par + col[:, None, :]).ravel()
+    block_rows, block_cols = np.repeat(patch, 3), col.ravel()
     for _ in range(IRLS_STEPS):
         sigma = MAD_SIGMA * float(np.median(np.abs(res))) + 1e-6
         scale = CAUCHY * sigma
         w = 1.0 / (1.0 + (res / scale) ** 2) / sigma**2
         # normal equations with the offsets eliminated: Gᵀ W G − Bᵀ D⁻¹ B + prior
         wg = design * w[:, None]
-        pairs = (col[:, :, None] * n_par + col[:, None, :]).ravel()
         normal = np.bincount(pairs, (wg[:, :, None] * design[:, None, :]).ravel(),
                              n_par * n_par).reshape(n_par, n_par).astype(np.float64)
-        rhs = np.bincount(col.ravel(), (wg * q[:, None]).ravel(), n_par).astype(np.float64)
+        rhs = np.bincount(block_cols, (wg * q[:, None]).ravel(), n_par).astype(np.float64)
         weight = np.bincount(patch, w, n_patch)
         # each patch's weighted design summed (sparse: a patch is seen from a few stretches)
-        blocks = sparse.csr_matrix((wg.ravel(), (np.repeat(patch, 3), col.ravel())),
+        blocks = sparse.csr_matrix((wg.ravel(), (block_rows, block_cols)),
                                    shape=(n_patch, n_par))
         wq = np.bincount(patch, w * q, n_patch)
         normal -= (blocks.T @ sparse.diags(1.0 / weight) @ blocks).toarray()
