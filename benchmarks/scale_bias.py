@@ -37,20 +37,20 @@ from pathlib import Path
 import numpy as np
 
 from formats.arrays import F64
-from pipeline.refine.calibration import MAX_ECHOES_CONSISTENCY, _Consistency, _Placed, _thin
 from pipeline.refine.echoes import Echoes
+from pipeline.refine.scores import MAX_ECHOES_CONSISTENCY, Consistency, Placed, thin
 from pipeline.se2 import transform_points
 
 SCALES = np.round(np.arange(-0.06, 0.0601, 0.01), 3)
 
 
-class HeldOutLikelihood(_Placed):
+class HeldOutLikelihood(Placed):
     """The cross-fitted forward-model log-likelihood per reading (module docstring)."""
 
     def __init__(self, t_ns: np.ndarray, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
                  res: float = 0.1, sigma: float = 0.1, prior: float = 1.0, p0: float = 0.3):
         super().__init__(t_ns, x, y, yaw, echoes, MAX_ECHOES_CONSISTENCY)
-        keep = _thin(len(echoes), MAX_ECHOES_CONSISTENCY)
+        keep = thin(len(echoes), MAX_ECHOES_CONSISTENCY)
         bx, by = echoes.arc(1.0)  # the whole beam, as the consistency score
         self.bx, self.by, self.r = bx[keep], by[keep], echoes.range_m[keep]
         self.fold = np.arange(keep.shape[0]) % 2  # even / odd readings
@@ -156,8 +156,8 @@ def main(argv: list[str] | None = None) -> int:
     for name, clean, _, truth, _ in cases:
         track, echoes = log_echoes(clean)
         scores: list[Callable[[float, float], float]] = [
-            _Consistency(*track, echoes, res=2 * pr.field_resolution_m, sigma=pr.field_sigma_m),
-            _Consistency(*track, echoes, res=0.02, sigma=0.03),
+            Consistency(*track, echoes, res=2 * pr.field_resolution_m, sigma=pr.field_sigma_m),
+            Consistency(*track, echoes, res=0.02, sigma=0.03),
             HeldOutLikelihood(*track, echoes),
         ]
         peaks = [peak(np.array([s(float(k), 0.0) for k in SCALES])) for s in scores]

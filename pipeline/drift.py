@@ -42,6 +42,14 @@ class DriftModel:
     noise_xy: float = 0.0  # m per √m, per translation axis
     noise_yaw: float = 0.0  # rad per √rad turned
 
+    @staticmethod
+    def removing(scale_error: float, heading_bias: float) -> DriftModel:
+        """The model that removes a systematic error of ``scale_error`` (fraction) and
+        ``heading_bias`` (rad per metre driven): applied to odometry with that error, it
+        gives the poses without it (pose refinement's calibration)."""
+        return DriftModel(scale_error=1.0 / (1.0 + scale_error) - 1.0,
+                          heading_bias_deg_per_m=-math.degrees(heading_bias) / (1.0 + scale_error))
+
     @property
     def is_zero(self) -> bool:
         return (self.scale_error, self.heading_bias_deg_per_m, self.noise_xy, self.noise_yaw) == (

@@ -4,14 +4,12 @@ echoes of the whole run agree best.
 Wheel odometry errs mostly systematically — a wheel radius off by a few percent, a
 wheelbase or gyro bias that turns the heading by a fraction of a degree per metre (the
 :mod:`pipeline.drift` model). Two numbers shared by the whole run are far better
-determined by all the echoes at once than by any local match. For a candidate scale error
-``k`` and heading bias ``b`` the odometry is re-integrated with the inverse model
-(:func:`pipeline.drift.apply_drift`) and every echo's arc points are placed in the world.
-Two measures of agreement, for two jobs:
+determined by all the echoes at once than by any local match. A candidate scale error
+``k`` and heading bias ``b`` is scored by how well the echoes agree with the odometry
+re-integrated under it (:mod:`pipeline.refine.scores`: their *sharpness* and their
+*echo consistency*); this module searches the candidates and decides what is applied.
 
-1. **Heading bias: sharpness** of the arc points' density, ``Σ ρ² / (Σ ρ)²`` of their
-   Gaussian-blurred histogram (Rényi's quadratic entropy up to a sign and a log; Sheehan et
-   al. calibrated lidars with it). A heading error rotates whole stretches of the run
+1. **Heading bias: sharpness.** A heading error rotates whole stretches of the run
    against each other and blurs every wall, so sharpness peaks at the right bias. The
    search scans a grid over ``±max_bias`` (steps that turn the heading by at most 4°
    over the whole path) with ``k = 0`` on a quarter of the echoes, binned in ``2σ`` bins
@@ -22,7 +20,7 @@ Two measures of agreement, for two jobs:
    poses of a large building by 0.1 m and costs up to 0.11 F1), on odometry with 0.8°/m of
    bias 7-77 %. Sharpness rewards any alignment, a lattice's aliases too (the orchard's
    true poses: +3.7 % under +0.23°/m), so the bias must also make the echoes more
-   consistent (below) than none by ``min_gain``, and its value is the most consistent
+   consistent than none by ``min_gain``, and its value is the most consistent
    near the sharpest (:func:`_consistency_gain`, :func:`_most_consistent`). A coarse
    scan of the consistency over the whole range checks the finding
    (:func:`_consistent_bias`): where sharpness applies none, or a bias beyond the scan's
@@ -37,28 +35,11 @@ Two measures of agreement, for two jobs:
    applied only when its standard error establishes it, with the heading bias searched
    again at the scale found, see :func:`_surface_calibration`; where the offset-only
    patches establish none, patches with their orientation fitted too, if the two models
-   agree, :func:`_patch_models`) or
-   ``"consistency"``, below: **the bias again, jointly, near the first answer, by echo
-   consistency.**
-   Sharpness is *biased in scale*: a robot driving along a wall leaves echo points spaced
-   by its travel, so a too-short scale packs the same wall into fewer cells and the
-   density grows as ``1/(1 + k)`` with no wall moving into place (measured: every log's
-   sharpness peaks at the largest scale searched, true poses included). The same happens
-   to any score that rewards overlap, including a submap matcher's correlation (pooled
-   submaps of a wall pulled together along it). The consistency score asks instead, at
-   each echo, what the *whole log's* evidence says about the cells on its arc: ``H`` = the
-   blurred density of echo arc points, ``F`` = the blurred density of points on the echoes'
-   free cones (from the sonar to ``2σ`` short of the arc, sampled every cell, as the
-   attribution method counts free space, ALGORITHM.md §9); an arc point's consistency is
-   ``H / (H + F)`` — the share of the observations of that place that were echoes — and an
-   echo scores the best of its arc points that enough evidence covers (the echo came from
-   somewhere on its arc). The score is the mean over echoes; both densities are deposited
-   cloud-in-cell and read at each arc point's own position, so it moves continuously with
-   the calibration (nearest-cell counts made it a step function whose peak moved by
-   ±0.005°/m with the grid's orientation). Packing a wall tighter scales
-   ``H`` and ``F`` alike and leaves the ratio unchanged; an echo placed where other
-   readings saw free space scores low. The search is a grid over ``±max_scale`` in 1 %
-   steps × the bias ± 2 of its coarse steps, refined twice (steps / 4).
+   agree, :func:`_patch_models`) or ``"consistency"``: the bias again, jointly with the
+   scale, near the first answer, by echo consistency (sharpness is biased in scale: a
+   too-short scale packs a wall into fewer cells; the consistency's ratio is not), a grid
+   over ``±max_scale`` in 1 % steps × the bias ± 2 of its coarse steps, refined twice
+   (steps / 4).
 
 Everything is deterministic (no random draws; echoes are thinned evenly).
 """
@@ -69,34 +50,27 @@ import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 
-from formats.angles import wrap_angle
 from formats.arrays import F64, I64
 from pipeline.config import TiltMode
-from pipeline.drift import DriftModel, Steps, apply_drift, systematic_factors
+from pipeline.drift import DriftModel, apply_drift
 from pipeline.refine.echoes import Echoes
-from pipeline.refine.memo import Memo
+from pipeline.refine.scores import (
+    MAX_ECHOES_CONSISTENCY_SCAN,
+    BinnedSharpness,
+    Consistency,
+    Sharpness,
+)
+from pipeline.refine.surfaces import Associations, FixedPoint, SurfaceScale, fixed_points
 from pipeline.refine.threads import parallel_map
-from pipeline.se2 import transform_points
-
-if TYPE_CHECKING:  # surfaces.py builds on this module's _Placed
-    from pipeline.refine.surfaces import Associations, FixedPoint, SurfaceScale
 
 FAR_TEST_Z = 2.0  # _far_agrees: the far echoes' scale within 2 errors of the difference
 MODELS_TEST_Z = 2.0  # _patch_models_agree: the two patch models' scales within 2 errors
-MAX_ECHOES = 8_000  # echoes used for the sharpness (evenly thinned beyond)
-MAX_ECHOES_SCAN = 2_000  # ... in the first, binned scan over the whole bias range
-MAX_ECHOES_CONSISTENCY = 2_500  # echoes used for the consistency score
-MAX_ECHOES_CONSISTENCY_SCAN = 800  # ... in its scan over the whole bias range (_consistent_bias)
 SCALE_STEP = 0.01  # coarse step of the scale search (fraction)
 CONSISTENT_SPAN = 8  # the bias's value by consistency within ± this many coarse steps
-MIN_EVIDENCE = 2.0
-_A = npt.NDArray[Any]
-Segments = tuple[_A, _A, _A, _A, _A, _A, _A, _A, _A]  # kernels.step_segments' arrays
 
 
 @dataclass(frozen=True)
@@ -123,10 +97,7 @@ class Calibration:
     @property
     def inverse(self) -> DriftModel:
         """The drift model that removes this calibration's error."""
-        return DriftModel(
-            scale_error=1.0 / (1.0 + self.scale_error) - 1.0,
-            heading_bias_deg_per_m=-math.degrees(self.heading_bias) / (1.0 + self.scale_error),
-        )
+        return DriftModel.removing(self.scale_error, self.heading_bias)
 
     def correct(self, x: F64, y: F64, yaw: F64) -> tuple[F64, F64, F64]:
         """Odometry poses with this calibration's error removed."""
@@ -142,239 +113,6 @@ class BiasRejected:
     candidate: float
     sharper: float
     more_consistent: float
-
-
-def _thin(n: int, at_most: int) -> I64:
-    if n <= at_most:
-        return np.arange(n)
-    return np.linspace(0, n - 1, at_most).round().astype(np.int64)
-
-
-class _Placed:
-    """A subset of the echoes with the odometry spliced in, placed under a calibration."""
-
-    def __init__(self, t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, at_most: int):
-        self.keep = keep = _thin(len(echoes), at_most)  # the echoes kept, by index
-        # The echoes' odometry poses are spliced into the pose sequence (by stamp), so one
-        # re-integration gives the calibrated pose of every echo too.
-        t_all = np.concatenate([t_ns, echoes.t_ns[keep]])
-        order = np.argsort(t_all, kind="stable")
-        odo = echoes.odo[keep]
-        self.x = np.concatenate([x, odo[:, 0]])[order]
-        self.y = np.concatenate([y, odo[:, 1]])[order]
-        self.yaw = np.concatenate([yaw, odo[:, 2]])[order]
-        self.motion = Steps.of(self.x, self.y, self.yaw)  # re-integrated under each calibration
-        where = np.empty(order.shape[0], np.int64)
-        where[order] = np.arange(order.shape[0])
-        self.echo_at = where[t_ns.shape[0]:]
-        self.bx, self.by = echoes.bx[keep], echoes.by[keep]
-        self.sx, self.sy = echoes.sx[keep], echoes.sy[keep]
-        self._known: Memo[tuple[float, float], float] = Memo()  # scores, by (k, b)
-        self._segments: Segments | None = None  # poses_many's steps, once
-
-    def poses_many(self, ks: F64, bs: F64) -> F64:
-        """(len(ks), echoes, 3): the echoes' poses under each calibration ``(ks[j], bs[j])``
-        (compiled: ``self.motion.drifted_many`` at the echoes to ~1e-11 m, the steps
-        summed per segment once per distinct bias, :func:`pipeline.refine.kernels.poses_at`)."""
-        from pipeline.refine.kernels import poses_at, step_segments
-
-        models = [Calibration(float(k), float(b)).inverse for k, b in zip(ks, bs, strict=True)]
-        m, i = self.motion, self.echo_at
-        scale, bias, same = systematic_factors(models)
-        given = np.stack([m.x[i], m.y[i], m.yaw[i]], axis=-1)  # the odometry's own poses
-        if m.x.shape[0] < 2 or same.all():  # no step, or no calibration: the poses as given
-            return np.broadcast_to(given, (len(models), i.shape[0], 3)).copy()
-        if self._segments is None:  # the steps' segments: the same for every calibration
-            self._segments = step_segments(float(m.yaw[0]), m.lx, m.ly, m.dyaw, m.ds, i)
-        out = poses_at(float(m.x[0]), float(m.y[0]), *self._segments, scale, bias)
-        out[..., 2] = wrap_angle(out[..., 2])
-        out[same] = given  # as drifted_many
-        return np.asarray(out)
-
-    def poses(self, k: float, b: float) -> F64:
-        """(echoes, 3): the echoes' poses under the calibration ``(k, b)``."""
-        return np.asarray(self.poses_many(np.array([k]), np.array([b]))[0])
-
-    def remembered(self, k: float, b: float, score: Callable[[F64], float]) -> float:
-        """``score`` of the echoes' poses under ``(k, b)``, computed once per calibration:
-        a score is a pure function of it, and the searches ask for the same ones again."""
-        return self._known.get((float(k), float(b)), lambda: score(self.poses(k, b)))
-
-    def arcs(self, pose: F64) -> tuple[F64, F64]:
-        return transform_points(pose[:, None, :], self.bx, self.by)
-
-
-class _Compiled(_Placed):
-    """A score with a compiled kernel (``_compiled``, of the echoes' poses) and its numpy
-    reference (``reference=True``, which the kernel's tests compare it with)."""
-
-    reference: bool = False
-
-    def __call__(self, k: float, b: float) -> float:
-        raise NotImplementedError
-
-    def _compiled(self, pose: F64) -> float:
-        raise NotImplementedError
-
-    def scan(self, k: float, bs: F64, chunk: int = 64) -> list[float]:
-        """The score at ``k`` and each bias of ``bs``, as calls would give (the poses
-        integrated ``chunk`` biases at a time, the chunks on parallel threads)."""
-        if self.reference:
-            return [self(k, float(b)) for b in bs]
-
-        def score(lo: int) -> list[float]:
-            part = bs[lo:lo + chunk]
-            return [self._compiled(pose) for pose in self.poses_many(np.full(part.shape, k), part)]
-
-        return [v for part in parallel_map(score, range(0, len(bs), chunk)) for v in part]
-
-
-class _Sharpness(_Placed):
-    """Sharpness of the echoes' density under a candidate calibration."""
-
-    def __init__(self, t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
-                 res: float, sigma: float):
-        super().__init__(t_ns, x, y, yaw, echoes, MAX_ECHOES)
-        self.res, self.sigma = res, sigma
-
-    def __call__(self, k: float, b: float) -> float:
-        return self.remembered(k, b, self._score)
-
-    def _score(self, pose: F64) -> float:
-        wx, wy = self.arcs(pose)
-        return density_sharpness(wx.ravel(), wy.ravel(), self.res, self.sigma)
-
-
-class _BinnedSharpness(_Compiled):
-    """The sharpness's coarse stand-in for the wide scan: ``Σ n² / (Σ n)²`` of the points'
-    counts ``n`` in square bins of ``2σ``, averaged over two grids offset by half a bin
-    (no dense grid, no blur: a wrong bias spreads the points over a large area). Compiled
-    (:func:`pipeline.refine.kernels.binned_sharpness`, bit for bit the numpy version below,
-    ``reference=True``)."""
-
-    def __init__(self, t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *, sigma: float,
-                 reference: bool = False):
-        super().__init__(t_ns, x, y, yaw, echoes, MAX_ECHOES_SCAN)
-        self.bin = 2 * sigma
-        self.reference = reference
-
-    def _compiled(self, pose: F64) -> float:
-        from pipeline.refine.kernels import binned_sharpness
-
-        wx, wy = self.arcs(pose)
-        return float(binned_sharpness(wx.ravel(), wy.ravel(), self.bin))
-
-    def __call__(self, k: float, b: float) -> float:
-        pose = self.poses(k, b)
-        if not self.reference:
-            return self._compiled(pose)
-        wx, wy = self.arcs(pose)
-        total = 0.0
-        for shift in (0.0, 0.5):
-            ix = np.floor(wx.ravel() / self.bin + shift).astype(np.int64)
-            iy = np.floor(wy.ravel() / self.bin + shift).astype(np.int64)
-            _, n = np.unique(ix * (1 << 32) + iy, return_counts=True)
-            total += float((n.astype(np.float64) ** 2).sum()) / float(n.sum()) ** 2
-        return total / 2
-
-
-class _Consistency(_Compiled):
-    """Echo consistency ``H / (H + F)`` under a candidate calibration (module docstring),
-    compiled (:mod:`pipeline.refine.kernels`); ``reference=True``: the numpy
-    version below, which the kernel's tests compare it with."""
-
-    def __init__(self, t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
-                 res: float, sigma: float, reference: bool = False,
-                 at_most: int = MAX_ECHOES_CONSISTENCY):
-        super().__init__(t_ns, x, y, yaw, echoes, at_most)
-        self.reference = reference
-        # The whole cone: an oblique surface's nearest point, which made the echo, lies at
-        # the cone's edge (the sharpness's narrower arc would put it in front of the wall).
-        self.bx, self.by = echoes.take(self.keep).arc(1.0)
-        self.res, self.sigma, self.band = res, sigma, 2 * sigma
-        reach = float(np.hypot(self.bx - self.sx[:, None], self.by - self.sy[:, None]).max(
-            initial=0.0))
-        self.steps = np.arange(1, int(reach / res) + 1) * res  # along each ray, m
-
-    def _compiled(self, pose: F64) -> float:
-        from pipeline.refine.kernels import consistency_score
-
-        wx, wy = self.arcs(pose)
-        ox, oy = transform_points(pose, self.sx, self.sy)  # each sonar's position
-        return float(consistency_score(
-            np.ascontiguousarray(wx), np.ascontiguousarray(wy), ox, oy, self.steps,
-            self.band, self.res, 4 * self.sigma, self.sigma / self.res, self._radius(),
-            MIN_EVIDENCE))
-
-    def _radius(self) -> int:
-        """The blur read over ± this many cells (4σ)."""
-        return math.ceil(4 * self.sigma / self.res)
-
-    def __call__(self, k: float, b: float) -> float:
-        return self.remembered(k, b, self._score)
-
-    def _score(self, pose: F64) -> float:
-        if not self.reference:
-            return self._compiled(pose)
-        wx, wy = self.arcs(pose)
-        ox, oy = transform_points(pose, self.sx, self.sy)  # each sonar's position
-        dx, dy = wx - ox[:, None], wy - oy[:, None]
-        r = np.hypot(dx, dy)
-        along = self.steps[None, None, :]
-        free = along < (r[..., None] - self.band)
-        frac = along / np.maximum(r[..., None], 1e-9)
-        fx = (ox[:, None, None] + dx[..., None] * frac)[free]
-        fy = (oy[:, None, None] + dy[..., None] * frac)[free]
-        res, rad, sd = self.res, self._radius(), self.sigma / self.res
-        margin = 4 * self.sigma + (rad + 2) * res
-        x0 = min(float(wx.min()), float(ox.min())) - margin
-        y0 = min(float(wy.min()), float(oy.min())) - margin
-        w = int((max(float(wx.max()), float(ox.max())) + margin - x0) / res) + 2
-        h = int((max(float(wy.max()), float(oy.max())) + margin - y0) / res) + 2
-
-        def shared(px: F64, py: F64) -> F64:  # cloud in cell: each point over four cells
-            u, v = (px.ravel() - x0) / res - 0.5, (py.ravel() - y0) / res - 0.5
-            c0, r0 = np.floor(u).astype(np.int64), np.floor(v).astype(np.int64)
-            fc, fr = u - c0, v - r0
-            grid = np.zeros((h, w))
-            for dr, dc, part in ((0, 0, (1 - fr) * (1 - fc)), (0, 1, (1 - fr) * fc),
-                                 (1, 0, fr * (1 - fc)), (1, 1, fr * fc)):
-                np.add.at(grid, (r0 + dr, c0 + dc), part)
-            return grid
-
-        def weights(at: F64) -> tuple[I64, F64]:  # each point's window and Gaussian weights
-            c0 = np.floor(at).astype(np.int64) - rad
-            cells = c0[..., None] + np.arange(2 * rad + 2)
-            g = np.exp(-0.5 * ((at[..., None] - cells) / sd) ** 2)
-            return cells, g / g.sum(axis=-1, keepdims=True)
-
-        cols, wu = weights((wx - x0) / res - 0.5)
-        rows, wv = weights((wy - y0) / res - 0.5)
-
-        def read(grid: F64) -> F64:  # the blurred density at each arc point
-            window = grid[rows[..., :, None], cols[..., None, :]]
-            return np.asarray(np.einsum("nam,naq,namq->na", wv, wu, window))
-
-        hh, ff = read(shared(wx, wy)), read(shared(fx, fy))
-        seen = hh + ff
-        ratio = np.where(seen >= MIN_EVIDENCE, hh / np.maximum(seen, 1e-12), -1.0)
-        best = ratio.max(axis=1)
-        scored = best >= 0
-        return float(best[scored].mean()) if scored.any() else 0.0
-
-
-def density_sharpness(x: F64, y: F64, res: float, sigma: float) -> float:
-    """``Σ ρ² / (Σ ρ)²`` of the points' histogram blurred by a Gaussian of ``sigma`` m."""
-    from pipeline.refine.kernels import gaussian_blur
-
-    x0, y0 = float(x.min()) - 4 * sigma, float(y.min()) - 4 * sigma
-    w = int((float(x.max()) + 4 * sigma - x0) / res) + 1
-    h = int((float(y.max()) + 4 * sigma - y0) / res) + 1
-    cell = ((y - y0) / res).astype(np.int64) * w + ((x - x0) / res).astype(np.int64)
-    hist = np.bincount(cell, minlength=h * w).reshape(h, w).astype(np.float64)
-    dens = gaussian_blur(hist, sigma / res)
-    total = float(dens.sum())
-    return float((dens * dens).sum() / (total * total)) if total > 0 else 0.0
 
 
 def _bias_steps(x: F64, y: F64, max_bias: float) -> F64:
@@ -404,7 +142,7 @@ def _grid_max(f: Callable[[float, float], float], ks: npt.ArrayLike, bs: npt.Arr
     return _best_of(grid, parallel_map(lambda kb: float(f(*kb)), grid), best)
 
 
-def _consistency_gain(consistent: _Consistency, k: float, b: float) -> float:
+def _consistency_gain(consistent: Consistency, k: float, b: float) -> float:
     """How much more consistent (fraction) the heading bias ``b`` makes the echoes than none
     at the scale ``k``; a bias must gain ``min_gain`` here too: sharpness rewards any
     alignment, including a lattice's aliases (the orchard's true poses sharpen by 2.8-3.7 %
@@ -425,7 +163,7 @@ def gate_digits(change: float, needed: float) -> int:
     return next((d for d in (1, 2) if f"{abs(change):.{d}%}" != f"{needed:.{d}%}"), 3)
 
 
-def _most_consistent(consistent: _Consistency, k: float, b0: float, db: float) -> float:
+def _most_consistent(consistent: Consistency, k: float, b0: float, db: float) -> float:
     """The heading bias of best echo consistency at the scale ``k`` within
     :data:`CONSISTENT_SPAN` steps ``db`` of ``b0`` (the sharpest), refined twice (steps / 4).
     Sharpness finds the bias's neighbourhood over the whole range; its peak can sit on a
@@ -442,8 +180,8 @@ def _most_consistent(consistent: _Consistency, k: float, b0: float, db: float) -
 
 
 def _consistent_bias(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes,
-                     consistent: _Consistency, bs: F64, *, res: float, sigma: float,
-                     min_gain: float, sharp: _Sharpness, strong_gain: float) -> float:
+                     consistent: Consistency, bs: F64, *, res: float, sigma: float,
+                     min_gain: float, sharp: Sharpness, strong_gain: float) -> float:
     """The heading bias by echo consistency alone: the most consistent over the whole
     range, coarsely (every other step of ``bs``, :data:`MAX_ECHOES_CONSISTENCY_SCAN`
     echoes, cells and blur twice the score's, on parallel threads: the peak spans ±1.5
@@ -466,7 +204,7 @@ def _consistent_bias(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes,
     odometry with yaw noise alone (0.01 rad/√rad, no bias) the scan found aliases 1.4-3.2 %
     less sharp and 3.5-5.7 % more consistent (Belgioioso −1.65°/m, a full turn over its
     219 m: F1 0.257 → 0.046; FHW +0.03°/m: 0.188 → 0.138)."""
-    scan = _Consistency(t_ns, x, y, yaw, echoes, res=4 * res, sigma=2 * sigma,
+    scan = Consistency(t_ns, x, y, yaw, echoes, res=4 * res, sigma=2 * sigma,
                         at_most=MAX_ECHOES_CONSISTENCY_SCAN)
     coarse = bs[(len(bs) // 2) % 2::2]  # every other step, 0 among them
     found = _best_of([(0.0, b) for b in coarse.tolist()], scan.scan(0.0, coarse),
@@ -481,7 +219,7 @@ def _consistent_bias(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes,
     return b
 
 
-def _heading_bias(sharp: _Sharpness, consistent: _Consistency, k: float, b0: float,
+def _heading_bias(sharp: Sharpness, consistent: Consistency, k: float, b0: float,
                   db: float, start: tuple[float, float, float], none: float,
                   min_gain: float, strong_gain: float) -> tuple[float, BiasRejected | None]:
     """The heading bias at the scale ``k``: the sharpest within ±2 steps ``db`` of ``b0``
@@ -566,14 +304,14 @@ def calibrate(
     no disagreement either way).
     ``far_echoes``: the echoes out to a longer range (a superset of ``echoes``), which the
     surfaces' scale uses where they pass :func:`_far_agrees`."""
-    sharp = _Sharpness(t_ns, x, y, yaw, echoes, res=max(res, sigma), sigma=sigma)
+    sharp = Sharpness(t_ns, x, y, yaw, echoes, res=max(res, sigma), sigma=sigma)
     base = sharp(0.0, 0.0)
     bs = _bias_steps(x, y, max_bias)
     # The coarse scan over the whole range on fewer echoes and cells; the refinements on all.
-    scan = _BinnedSharpness(t_ns, x, y, yaw, echoes, sigma=sigma)
+    scan = BinnedSharpness(t_ns, x, y, yaw, echoes, sigma=sigma)
     b_scan = _best_of([(0.0, b) for b in bs.tolist()], scan.scan(0.0, bs),
                       (scan(0.0, 0.0), 0.0, 0.0))[2]
-    consistent = _Consistency(t_ns, x, y, yaw, echoes, res=2 * res, sigma=sigma)
+    consistent = Consistency(t_ns, x, y, yaw, echoes, res=2 * res, sigma=sigma)
     db = float(bs[1] - bs[0])  # the coarse bias step
     b, rejected = _heading_bias(sharp, consistent, 0.0, b_scan, db, (base, 0.0, 0.0), base,
                                 min_gain, strong_gain)
@@ -590,8 +328,6 @@ def calibrate(
     if max_scale <= 0:
         return Calibration(0.0, best[2], best[0], base, bias_rejected=rejected)
     if scale_score == "surfaces":
-        from pipeline.refine.surfaces import Associations
-
         associations = Associations()  # shared by the two patch models
 
         def surfaces(oriented: bool) -> Calibration:
@@ -619,8 +355,8 @@ def calibrate(
 
 
 def _surface_calibration(
-    t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, sharp: _Sharpness,
-    consistent: _Consistency, base: float, best: tuple[float, float, float],
+    t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, sharp: Sharpness,
+    consistent: Consistency, base: float, best: tuple[float, float, float],
     rejected: BiasRejected | None, by_consistency: bool, *, max_scale: float, bias_step: float, max_slope: float,
     min_gain: float, min_z: float, systematic: float, window_m: float, tilt: bool,
     strong_gain: float, far_echoes: Echoes | None, associations: Associations,
@@ -663,8 +399,6 @@ def _surface_calibration(
     near and far asked again under it (Örebro with 3 % and 0.8°/m: +2.4 ± 1.8 % against
     +4.2 ± 1.6 %, then +2.8 ± 0.7 % from all echoes, z 3.3; Freiburg 101's real odometry:
     its bias stays 0, and it stays out)."""
-    from pipeline.refine.surfaces import SurfaceScale
-
     k, b, found_rejected = 0.0, best[2], rejected
     # The first scale, which also chooses the echoes (near, or out to the far range) for
     # both; where near and far disagree, the far one (the more precise) is the first.
@@ -763,8 +497,6 @@ def _surface_scale(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes,
     """The surfaces' scale under the heading ``bias`` (per reported metre): (the patches
     used, their fixed point, whether from the far echoes, the far echoes' fixed point where
     it disputes the near one's; see :func:`_surface_calibration`)."""
-    from pipeline.refine.surfaces import SurfaceScale, fixed_points
-
     surfaces = SurfaceScale(t_ns, x, y, yaw, echoes, bias, window_m, tilt, associations)
     if far_echoes is None or len(far_echoes) <= len(echoes):
         return surfaces, surfaces.fixed_point(), False, None

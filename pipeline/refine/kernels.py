@@ -1,8 +1,8 @@
 """Pose refinement's inner loops compiled (numba, ``@njit(cache=True, nogil=True)``:
 they release the GIL, so candidate calibrations score on parallel threads); the numpy
-versions in :mod:`pipeline.refine.calibration` stay as the reference the tests compare with.
+versions in :mod:`pipeline.refine.scores` stay as the reference the tests compare with.
 
-* :func:`consistency_score` — the echo consistency (``_Consistency``). The numpy version
+* :func:`consistency_score` — the echo consistency (``Consistency``). The numpy version
   builds every free-cone sample as an array (echoes × arc points × steps along each ray),
   shares each hit and free sample bilinearly among the four cells around it (cloud in
   cell), and reads the Gaussian-blurred densities at each arc point's own position (the
@@ -16,11 +16,11 @@ versions in :mod:`pipeline.refine.calibration` stay as the reference the tests c
   step function of the calibration (10 cm cells, 10 cm blur): under grid orientations a
   degree apart its peak over the heading bias moved by ±0.005°/m on Örebro, the whole
   precision a 60 m building needs (benchmarks/RESULTS.md, fourteenth session).
-* :func:`binned_sharpness` — the wide heading-bias scan's score (``_BinnedSharpness``):
+* :func:`binned_sharpness` — the wide heading-bias scan's score (``BinnedSharpness``):
   points counted per bin in a hash table instead of sorted by ``numpy.unique``; the counts
   are integers, so the score is the reference's bit for bit.
 * :func:`poses_at` — the odometry re-integrated under many calibrations, read at the
-  echoes' poses (``_Placed.poses_many``): :meth:`pipeline.drift.Steps.drifted_many`'s
+  echoes' poses (``Placed.poses_many``): :meth:`pipeline.drift.Steps.drifted_many`'s
   poses to ~1e-11 m without its (calibrations × poses) arrays. A heading bias turns each
   step by the bias times the travel before it, so the steps are summed per segment of
   travel once (:func:`step_segments`: Taylor moments in the travel) and each calibration
@@ -223,7 +223,7 @@ def consistency_score(wx: np.ndarray, wy: np.ndarray, ox: np.ndarray, oy: np.nda
 @njit(cache=True, nogil=True)
 def binned_sharpness(x: np.ndarray, y: np.ndarray, size: float) -> float:
     """``Σ n² / (Σ n)²`` of the points' counts ``n`` in square bins of ``size``, averaged
-    over two grids offset by half a bin (``_BinnedSharpness``)."""
+    over two grids offset by half a bin (``scores.BinnedSharpness``)."""
     n = x.shape[0]
     if n == 0:
         return 0.0

@@ -103,14 +103,9 @@ from formats.angles import wrap_angle
 from formats.arrays import F64, I64
 from pipeline.config import HeldOut
 from pipeline.refine import surfaces
-from pipeline.refine.calibration import (
-    MAX_ECHOES_CONSISTENCY,
-    _Consistency,
-    _thin,
-    consistency_change,
-    gate_digits,
-)
+from pipeline.refine.calibration import consistency_change, gate_digits
 from pipeline.refine.echoes import Echoes
+from pipeline.refine.scores import MAX_ECHOES_CONSISTENCY, Consistency, thin
 from pipeline.refine.surfaces import CAUCHY, MAD_SIGMA, Cones
 from pipeline.se2 import transform_points
 
@@ -142,8 +137,8 @@ def correct_stretches(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
     solve = _Solver(t_ns, stretch_m, sigma_xy, sigma_yaw, iterations)
     # only the echoes each score reads (thinned evenly, as the scores thin them) follow the
     # corrected track: a long log's hundreds of thousands are not interpolated each solve
-    matched = echoes.take(_thin(len(echoes), surfaces.MAX_ECHOES))
-    scored = echoes.take(_thin(len(echoes), MAX_ECHOES_CONSISTENCY))
+    matched = echoes.take(thin(len(echoes), surfaces.MAX_ECHOES))
+    scored = echoes.take(thin(len(echoes), MAX_ECHOES_CONSISTENCY))
     fitted = solve(x, y, yaw, matched, min_gain)
     metrics = fitted.metrics
     if metrics.get("gain_per_parameter", math.inf) < min_gain:
@@ -180,10 +175,10 @@ def _held_out_gain(solve: _Solver, given: tuple[F64, F64, F64], echoes: Echoes, 
     """The consistency gain of the odd echoes under corrections fitted to the even ones
     (0 where those find none to fit)."""
     even, odd = (echoes.take(np.arange(start, len(echoes), 2)) for start in (0, 1))
-    apart = solve(*given, even.take(_thin(len(even), surfaces.MAX_ECHOES)))
+    apart = solve(*given, even.take(thin(len(even), surfaces.MAX_ECHOES)))
     if not apart.metrics["iterations"]:
         return 0.0
-    scored = odd.take(_thin(len(odd), MAX_ECHOES_CONSISTENCY))
+    scored = odd.take(thin(len(odd), MAX_ECHOES_CONSISTENCY))
     return _track_consistency_gain(solve.t_ns, given, apart.poses, scored, res, sigma)
 
 
@@ -261,9 +256,9 @@ def _track_consistency_gain(t_ns: I64, given: tuple[F64, F64, F64],
 
 def _consistency(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, res: float,
                  sigma: float) -> float:
-    """The echoes' consistency (:class:`pipeline.refine.calibration._Consistency`) with
+    """The echoes' consistency (:class:`pipeline.refine.scores.Consistency`) with
     their poses on the track ``(x, y, yaw)``."""
-    return _Consistency(t_ns, x, y, yaw, echoes.on_track(t_ns, x, y, yaw), res=2 * res,
+    return Consistency(t_ns, x, y, yaw, echoes.on_track(t_ns, x, y, yaw), res=2 * res,
                         sigma=sigma)(0.0, 0.0)
 
 

@@ -68,9 +68,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from formats.arrays import F64, I64
-from pipeline.refine.calibration import _Placed, _thin
 from pipeline.refine.echoes import Echoes
 from pipeline.refine.memo import Memo
+from pipeline.refine.scores import Placed, thin
 from pipeline.refine.threads import parallel_map
 from pipeline.se2 import transform_points
 
@@ -217,8 +217,8 @@ class SurfaceScale:
                  window_m: float = WINDOW_M, tilt: bool = False,
                  associations: Associations | None = None):
         self.source, self.associations = echoes, associations
-        echoes = echoes.take(_thin(len(echoes), MAX_ECHOES))  # memory and time bounded
-        self.placed = _Placed(t_ns, x, y, yaw, echoes, len(echoes))
+        echoes = echoes.take(thin(len(echoes), MAX_ECHOES))  # memory and time bounded
+        self.placed = Placed(t_ns, x, y, yaw, echoes, len(echoes))
         self.cones = Cones(echoes, window_m)
         self.echoes, self.stretch, self.bias, self.tilt = echoes, self.cones.stretch, bias, tilt
 
