@@ -13,9 +13,10 @@ from pipeline.config import Config
 from pipeline.refine import Echoes, collect_echoes
 
 
-def log_echoes(log: Path, max_range_m: float, max_gap_ns: int = 10**9
-               ) -> tuple[tuple[np.ndarray, ...], Echoes]:
-    """A log's pose track (t, x, y, yaw) and its echoes out to ``max_range_m``."""
+def log_echoes(log: Path, max_range_m: float, max_gap_ns: int = 10**9,
+               arc_fraction: float = 0.8) -> tuple[tuple[np.ndarray, ...], Echoes]:
+    """A log's pose track (t, x, y, yaw) and its echoes out to ``max_range_m`` (each placed
+    along ``arc_fraction`` of its half beam)."""
     from pipeline.run import surveyed
 
     cfg = Config()
@@ -23,7 +24,8 @@ def log_echoes(log: Path, max_range_m: float, max_gap_ns: int = 10**9
         sv, sensors = surveyed(reader, cfg)
         echoes = collect_echoes(sv.ordered_ranges(reader), sv.track, sensors,
                                 eps_max=cfg.mapper.eps_max, max_echo_range_m=max_range_m,
-                                arc_fraction=0.8, time_offset_ns=0, max_gap_ns=max_gap_ns)
+                                arc_fraction=arc_fraction, time_offset_ns=0,
+                                max_gap_ns=max_gap_ns)
     return tuple(np.asarray(getattr(sv.track, a)) for a in ("t_ns", "x", "y", "yaw")), echoes
 
 

@@ -10,15 +10,16 @@ import math
 import numpy as np
 import pytest
 
-from formats import open_log
 from formats.angles import wrap_angle
 from formats.presets import PRESETS
-from pipeline.config import Config
 from pipeline.drift import DriftModel
-from pipeline.refine import Echoes, collect_echoes
+from pipeline.refine import Echoes
 from pipeline.refine.scores import BinnedSharpness, Consistency, Placed, Sharpness
 from pipeline.simulate import SimOptions, simulate, write_simulation
 from pipeline.simulate.world import world_from_dict
+from tests.pipeline.refine.conftest import log_echoes
+
+Run = tuple[tuple[np.ndarray, ...], Echoes]  # the pose track (t, x, y, yaw), its echoes
 
 WORLD = {
     "polygon": [{"points": [[0, 0], [10, 0], [10, 6], [0, 6]]}],
@@ -29,54 +30,44 @@ WAYPOINTS = [[1.5, 1.5], [8.5, 3.0], [8.5, 4.8], [1.5, 4.8], [1.5, 1.5], [8.5, 3
 
 
 @pytest.fixture(scope="module")
-def true_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[object, Echoes]:
-    from pipeline.run import prepare
-
+def true_run(tmp_path_factory: pytest.TempPathFactory) -> Run:
+    """A room driven by a Pioneer's 16 sonars: its true poses and echoes (whole cones)."""
     sim = simulate(world_from_dict(WORLD), WAYPOINTS,
                    SimOptions(seed=3, speed=0.4, ring_rate_hz=5.0,
                               mounts=PRESETS["pioneer-p3dx"]))
     log = tmp_path_factory.mktemp("cal") / "room.mcap"
     write_simulation(sim, log, "mcap")
-    cfg = Config()
-    with open_log(log, cfg) as reader:
-        sv, sensors, _ = prepare(reader, cfg)
-        echoes = collect_echoes(sv.ordered_ranges(reader), sv.track, sensors, eps_max=cfg.mapper.eps_max,
-                                max_echo_range_m=3.0, arc_fraction=1.0, time_offset_ns=0,
-                                max_gap_ns=10**9)
-    return sv.track, echoes
+    return log_echoes(log, 3.0, arc_fraction=1.0)
 
 
-def scores(true_run: tuple[object, Echoes], kind: type, res: float) -> dict[float, float]:
-    track, echoes = true_run
-    t, x, y, yaw = (np.asarray(getattr(track, a)) for a in ("t_ns", "x", "y", "yaw"))
+def scores(true_run: Run, kind: type, res: float) -> dict[float, float]:
+    (t, x, y, yaw), echoes = true_run
     f = kind(t, x, y, yaw, echoes, res=res, sigma=0.1)
     return {k: f(k, 0.0) for k in (-0.04, 0.0, 0.04)}
 
 
-def test_sharpness_prefers_a_shorter_scale_on_true_poses(true_run: tuple[object, Echoes]
+def test_sharpness_prefers_a_shorter_scale_on_true_poses(true_run: Run
                                                          ) -> None:
     s = scores(true_run, Sharpness, 0.05)
     assert s[0.04] > s[0.0] > s[-0.04]  # shrinking the path packs the echoes: "sharper"
 
 
-def test_consistency_peaks_at_the_true_scale(true_run: tuple[object, Echoes]) -> None:
+def test_consistency_peaks_at_the_true_scale(true_run: Run) -> None:
     c = scores(true_run, Consistency, 0.1)
     assert c[0.0] > c[0.04] and c[0.0] > c[-0.04]
     assert all(0.0 < v <= 1.0 for v in c.values())
 
 
-def test_consistency_drops_under_a_heading_bias(true_run: tuple[object, Echoes]) -> None:
-    track, echoes = true_run
-    t, x, y, yaw = (np.asarray(getattr(track, a)) for a in ("t_ns", "x", "y", "yaw"))
+def test_consistency_drops_under_a_heading_bias(true_run: Run) -> None:
+    (t, x, y, yaw), echoes = true_run
     f = Consistency(t, x, y, yaw, echoes, res=0.1, sigma=0.1)
     assert f(0.0, 0.0) > f(0.0, math.radians(0.5)) + 0.02
 
 
 @pytest.mark.parametrize(("k", "b_deg"), [(0.0, 0.0), (0.03, 0.8), (-0.05, -1.5)])
-def test_the_compiled_consistency_gives_the_reference_score(true_run: tuple[object, Echoes],
+def test_the_compiled_consistency_gives_the_reference_score(true_run: Run,
                                                            k: float, b_deg: float) -> None:
-    track, echoes = true_run
-    t, x, y, yaw = (np.asarray(getattr(track, a)) for a in ("t_ns", "x", "y", "yaw"))
+    (t, x, y, yaw), echoes = true_run
     compiled = Consistency(t, x, y, yaw, echoes, res=0.1, sigma=0.1)
     reference = Consistency(t, x, y, yaw, echoes, res=0.1, sigma=0.1, reference=True)
     got, want = compiled(k, math.radians(b_deg)), reference(k, math.radians(b_deg))
@@ -85,9 +76,8 @@ def test_the_compiled_consistency_gives_the_reference_score(true_run: tuple[obje
 
 
 def test_a_thinned_consistency_scores_the_whole_cones_of_the_echoes_it_keeps(
-        true_run: tuple[object, Echoes]) -> None:
-    track, echoes = true_run
-    t, x, y, yaw = (np.asarray(getattr(track, a)) for a in ("t_ns", "x", "y", "yaw"))
+        true_run: Run) -> None:
+    (t, x, y, yaw), echoes = true_run
     at_most = len(echoes) // 3
     thinned = Consistency(t, x, y, yaw, echoes, res=0.1, sigma=0.1, at_most=at_most)
     keep = np.linspace(0, len(echoes) - 1, at_most).round().astype(np.int64)
@@ -156,9 +146,8 @@ def test_the_compiled_binned_sharpness_counts_points_per_bin() -> None:
 
 @pytest.mark.parametrize("b_deg", [0.0, 0.8, -2.5])
 def test_the_compiled_binned_sharpness_is_the_reference_bit_for_bit(
-        true_run: tuple[object, Echoes], b_deg: float) -> None:
-    track, echoes = true_run
-    t, x, y, yaw = (np.asarray(getattr(track, a)) for a in ("t_ns", "x", "y", "yaw"))
+        true_run: Run, b_deg: float) -> None:
+    (t, x, y, yaw), echoes = true_run
     compiled = BinnedSharpness(t, x, y, yaw, echoes, sigma=0.1)
     reference = BinnedSharpness(t, x, y, yaw, echoes, sigma=0.1, reference=True)
     want = reference(0.0, math.radians(b_deg))
@@ -167,10 +156,9 @@ def test_the_compiled_binned_sharpness_is_the_reference_bit_for_bit(
 
 
 @pytest.mark.parametrize("thinned", [None, 40])
-def test_the_compiled_poses_are_drifted_many_to_a_nanometre(true_run: tuple[object, Echoes],
+def test_the_compiled_poses_are_drifted_many_to_a_nanometre(true_run: Run,
                                                             thinned: int | None) -> None:
-    track, echoes = true_run
-    t, x, y, yaw = (np.asarray(getattr(track, a)) for a in ("t_ns", "x", "y", "yaw"))
+    (t, x, y, yaw), echoes = true_run
     placed = Placed(t, x, y, yaw, echoes, thinned or len(echoes))
     at_odometry = np.column_stack([placed.x[placed.echo_at], placed.y[placed.echo_at],
                                    placed.yaw[placed.echo_at]])
@@ -198,9 +186,8 @@ def test_the_compiled_poses_are_drifted_many_to_a_nanometre(true_run: tuple[obje
 
 
 def test_the_scores_answer_a_calibration_asked_again_from_memory(
-        true_run: tuple[object, Echoes], monkeypatch: pytest.MonkeyPatch) -> None:
-    track, echoes = true_run
-    t, x, y, yaw = (np.asarray(getattr(track, a)) for a in ("t_ns", "x", "y", "yaw"))
+        true_run: Run, monkeypatch: pytest.MonkeyPatch) -> None:
+    (t, x, y, yaw), echoes = true_run
     consistent = Consistency(t, x, y, yaw, echoes, res=0.1, sigma=0.1)
     sharp = Sharpness(t, x, y, yaw, echoes, res=0.1, sigma=0.1)
     c, h = consistent(0.01, 0.002), sharp(0.01, 0.002)
@@ -218,9 +205,8 @@ def test_the_scores_answer_a_calibration_asked_again_from_memory(
         consistent(0.01, 0.003)  # a new calibration is computed
 
 
-def test_the_consistency_scan_gives_the_scores_calls_give(true_run: tuple[object, Echoes]) -> None:
-    track, echoes = true_run
-    t, x, y, yaw = (np.asarray(getattr(track, a)) for a in ("t_ns", "x", "y", "yaw"))
+def test_the_consistency_scan_gives_the_scores_calls_give(true_run: Run) -> None:
+    (t, x, y, yaw), echoes = true_run
     f = Consistency(t, x, y, yaw, echoes, res=0.2, sigma=0.2, at_most=300)
     bs = np.radians(np.linspace(-3.0, 3.0, 9))
     assert f.scan(0.01, bs, chunk=4) == [f(0.01, float(b)) for b in bs]
