@@ -205,7 +205,7 @@ def _consistent_bias(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes,
     less sharp and 3.5-5.7 % more consistent (Belgioioso −1.65°/m, a full turn over its
     219 m: F1 0.257 → 0.046; FHW +0.03°/m: 0.188 → 0.138)."""
     scan = Consistency(t_ns, x, y, yaw, echoes, res=4 * res, sigma=2 * sigma,
-                        at_most=MAX_ECHOES_CONSISTENCY_SCAN)
+                       at_most=MAX_ECHOES_CONSISTENCY_SCAN)
     coarse = bs[(len(bs) // 2) % 2::2]  # every other step, 0 among them
     found = _best_of([(0.0, b) for b in coarse.tolist()], scan.scan(0.0, coarse),
                      (scan(0.0, 0.0), 0.0, 0.0))

@@ -259,7 +259,7 @@ def _consistency(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, res: float
     """The echoes' consistency (:class:`pipeline.refine.scores.Consistency`) with
     their poses on the track ``(x, y, yaw)``."""
     return Consistency(t_ns, x, y, yaw, echoes.on_track(t_ns, x, y, yaw), res=2 * res,
-                        sigma=sigma)(0.0, 0.0)
+                       sigma=sigma)(0.0, 0.0)
 
 
 def _solve(t_ns: I64, cones: Cones, poses: F64, stretch: I64, centre: F64,

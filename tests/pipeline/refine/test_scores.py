@@ -46,8 +46,7 @@ def scores(true_run: Run, kind: type, res: float) -> dict[float, float]:
     return {k: f(k, 0.0) for k in (-0.04, 0.0, 0.04)}
 
 
-def test_sharpness_prefers_a_shorter_scale_on_true_poses(true_run: Run
-                                                         ) -> None:
+def test_sharpness_prefers_a_shorter_scale_on_true_poses(true_run: Run) -> None:
     s = scores(true_run, Sharpness, 0.05)
     assert s[0.04] > s[0.0] > s[-0.04]  # shrinking the path packs the echoes: "sharper"
 
