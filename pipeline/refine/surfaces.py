@@ -88,6 +88,9 @@ MIN_TILTED_PATCH_ECHOES = 4  # a patch whose orientation is fitted too keeps 2 r
 TENSOR_SIGMA_CELLS = 1.5
 K0S = (-0.04, -0.02, 0.0, 0.02, 0.04)
 STEP = 0.005
+# _fit: an echo that moves by less than this per unit of the parameter (m: 10 nm for 1 %
+# of scale) does not depend on it; where none does, the parameter is undetermined
+UNMOVED_M = 1e-6
 WINDOW_M = 30.0
 TILT_MIN_SPREAD_M2 = 1e-6  # hits spread along a patch by less (Σ squares, m²): no orientation fitted
 CAUCHY = 2.385  # the Cauchy loss's scale in residual σ (95 % efficiency at a Gaussian)
@@ -286,6 +289,8 @@ class SurfaceScale:
         # The residuals are linear over a step: r and ∂r/∂θ at the best from its neighbours.
         j = int(np.clip(round((best - float(candidates[0])) / step), 1, len(candidates) - 2))
         dr = (residuals[j + 1] - residuals[j - 1]) / (2 * step)
+        if not np.any(np.abs(dr) > UNMOVED_M):  # no echo moves with the parameter (no
+            return math.nan, math.nan  # travel): its minimum would be round-off's choice
         r = residuals[j] + dr * (best - float(candidates[j]))
         psi = 2 * r / (s * s + r * r)
         dpsi = 2 * (s * s - r * r) / (s * s + r * r) ** 2

@@ -206,3 +206,47 @@ def test_the_grid_is_sized_from_the_refined_poses(drifted_log: Path, tmp_path: P
                                           r"grid.max_cells = 115000"):
         run(drifted_log, tmp_path / "unrefined", dataclasses.replace(base, grid=grid))
     assert not (tmp_path / "unrefined").exists()
+
+
+@pytest.mark.parametrize("motion", ["standing", "turning in place"])
+def test_a_robot_that_does_not_travel_keeps_its_poses(motion: str, tmp_path: Path) -> None:
+    # The office log's first 20 s of readings with every pose at its first position: with
+    # no travel no echo moves with a scale (it was a round-off minimum, +0.0 % ± NaN, when
+    # turning) and there is no heading bias per metre to find: the poses stay as logged.
+    import csv
+    import shutil
+
+    from pipeline.run import run
+
+    src = Path(__file__).resolve().parents[3] / "sample_logs" / "office" / "office_csv"
+    log = tmp_path / "log"
+    log.mkdir()
+    shutil.copy(src / "sensors.csv", log / "sensors.csv")
+    with (src / "poses.csv").open(newline="") as f:
+        header, first, *rest = list(csv.reader(f))
+    t0 = float(first[0])
+    poses = [first, *(p for p in rest if float(p[0]) < t0 + 20.0)]
+    turn = motion == "turning in place"
+    with (log / "poses.csv").open("w", newline="") as f:
+        csv.writer(f).writerows([header, *(
+            [p[0], first[1], first[2], f"{math.remainder(0.05 * i, math.tau) if turn else 0.0:.6f}"]
+            for i, p in enumerate(poses))])
+    with (src / "ranges.csv").open(newline="") as f:
+        head, *readings = list(csv.reader(f))
+    with (log / "ranges.csv").open("w", newline="") as f:
+        csv.writer(f).writerows([head, *(r for r in readings if float(r[0]) < t0 + 20.0)])
+
+    res = run(log, tmp_path / "run", Config(pose_refinement=PoseRefinementConfig(enabled=True)))
+    pr = res.metrics.pose_refinement
+    assert pr is not None and pr["echoes"] > 100
+    assert pr["search_scale_error"] == 0.0 and pr["search_heading_bias_deg_per_m"] == 0.0
+    assert pr["moved_max_m"] == 0.0
+    assert pr["summary"] == (
+        "pose refinement: scale error undetermined (no surface patch constrains it: no travel "
+        "between its echoes), not applied; no heading bias; poses moved 0.00 m mean, 0.00 m max")
+    assert "scale_estimate" not in pr
+    refined = read_trajectory(tmp_path / "run" / "trajectory.csv")
+    odometry = read_trajectory(tmp_path / "run" / "odometry.csv")
+    np.testing.assert_array_equal(refined.x, odometry.x)
+    np.testing.assert_array_equal(refined.yaw, odometry.yaw)
+    assert len(refined) == len(poses)

@@ -211,6 +211,18 @@ def test_too_few_echoes_for_any_patch_give_no_scale(runs: dict[str, tuple[Any, A
     assert cal.scale_error == 0.0
 
 
+def test_no_travel_leaves_the_scale_undetermined(runs: dict[str, tuple[Any, Any, Any]]) -> None:
+    # The track turned in place at its first position: no echo moves with the scale, so
+    # no candidate is better than another (it was the round-off's minimum, k = 0 with a
+    # NaN error); the fixed point is undetermined.
+    track, echoes, _ = runs["drifted"]
+    t, yaw = np.asarray(track.t_ns), np.asarray(track.yaw)
+    x, y = np.full(len(t), float(track.x[0])), np.full(len(t), float(track.y[0]))
+    scale = SurfaceScale(t, x, y, yaw, echoes.on_track(t, x, y, yaw), BIAS)
+    assert all(math.isnan(f) and math.isnan(se) for f, se in map(scale.evaluate, K0S))
+    assert math.isnan(scale.fixed_point().value)
+
+
 def test_a_long_log_is_thinned_evenly(runs: dict[str, tuple[Any, Any, Any]],
                                       monkeypatch: pytest.MonkeyPatch) -> None:
     import pipeline.refine.surfaces as surfaces
