@@ -330,8 +330,7 @@ def summary(metrics: dict[str, Any], cfg: PoseRefinementConfig) -> str:
         parts.append("scale error undetermined (fixed-point slope "
                      f"{metrics['scale_fixed_point_slope']:.2f}), not applied")
     elif cfg.calibration_max_scale > 0 and cfg.calibration_scale_score == "surfaces":
-        parts.append("scale error undetermined (no surface patch constrains it: "
-                     "no travel between its echoes), not applied")
+        parts.append("scale error undetermined (no surface seen from two places), not applied")
     bias = metrics.get("search_heading_bias_deg_per_m")
     if bias:
         parts.append(f"heading bias {bias:+.2f}°/m")

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -138,6 +139,11 @@ def test_summary_says_what_was_applied_and_why_a_scale_was_not() -> None:
                "search_heading_bias_deg_per_m": -0.83, **moved}
     assert ("scale error not established (-2.3% ± 2.4%, z 0.9 < 3), not applied; heading "
             "bias -0.83°/m") in summary(doubted, cfg)
+    unseen = {"search_scale_error": 0.0, "search_heading_bias_deg_per_m": 0.8, **moved}
+    assert summary(unseen, cfg).startswith("pose refinement: scale error undetermined (no "
+                                           "surface seen from two places), not applied; heading")
+    assert summary(unseen, dataclasses.replace(cfg, calibration_max_scale=0.0)).startswith(
+        "pose refinement: heading bias +0.80°/m")  # no scale searched: nothing said of it
     steep = {**doubted, "scale_z": 4.0, "search_heading_bias_deg_per_m": 0.0}
     assert ("not established (-2.3% ± 2.4%, fixed-point slope 0.79), not applied; no "
             "heading bias") in summary(steep, cfg)
@@ -192,8 +198,6 @@ def test_summary_says_what_was_applied_and_why_a_scale_was_not() -> None:
 def test_the_grid_is_sized_from_the_refined_poses(drifted_log: Path, tmp_path: Path) -> None:
     # The drifted odometry's box (377 x 322 cells) is larger than the room's (the refined
     # poses': 371 x 298); a grid.max_cells between the two refuses the unrefined run only.
-    import dataclasses
-
     from formats.errors import ConfigError
     from pipeline.run import run
 
@@ -242,8 +246,8 @@ def test_a_robot_that_does_not_travel_keeps_its_poses(motion: str, tmp_path: Pat
     assert pr["search_scale_error"] == 0.0 and pr["search_heading_bias_deg_per_m"] == 0.0
     assert pr["moved_max_m"] == 0.0
     assert pr["summary"] == (
-        "pose refinement: scale error undetermined (no surface patch constrains it: no travel "
-        "between its echoes), not applied; no heading bias; poses moved 0.00 m mean, 0.00 m max")
+        "pose refinement: scale error undetermined (no surface seen from two places), not "
+        "applied; no heading bias; poses moved 0.00 m mean, 0.00 m max")
     assert "scale_estimate" not in pr
     refined = read_trajectory(tmp_path / "run" / "trajectory.csv")
     odometry = read_trajectory(tmp_path / "run" / "odometry.csv")
