@@ -226,19 +226,22 @@ def test_a_robot_that_does_not_travel_keeps_its_poses(motion: str, tmp_path: Pat
     log = tmp_path / "log"
     log.mkdir()
     shutil.copy(src / "sensors.csv", log / "sensors.csv")
-    with (src / "poses.csv").open(newline="") as f:
-        header, first, *rest = list(csv.reader(f))
-    t0 = float(first[0])
-    poses = [first, *(p for p in rest if float(p[0]) < t0 + 20.0)]
+
+    def first_20_s(name: str) -> tuple[list[str], list[list[str]]]:
+        with (src / name).open(newline="") as f:
+            header, *rows = list(csv.reader(f))
+        return header, [r for r in rows if float(r[0]) < float(rows[0][0]) + 20.0]
+
+    def write(name: str, header: list[str], rows: list[list[str]]) -> None:
+        with (log / name).open("w", newline="") as f:
+            csv.writer(f).writerows([header, *rows])
+
+    header, poses = first_20_s("poses.csv")
     turn = motion == "turning in place"
-    with (log / "poses.csv").open("w", newline="") as f:
-        csv.writer(f).writerows([header, *(
-            [p[0], first[1], first[2], f"{math.remainder(0.05 * i, math.tau) if turn else 0.0:.6f}"]
-            for i, p in enumerate(poses))])
-    with (src / "ranges.csv").open(newline="") as f:
-        head, *readings = list(csv.reader(f))
-    with (log / "ranges.csv").open("w", newline="") as f:
-        csv.writer(f).writerows([head, *(r for r in readings if float(r[0]) < t0 + 20.0)])
+    write("poses.csv", header, [
+        [p[0], poses[0][1], poses[0][2], f"{math.remainder(0.05 * i, math.tau) if turn else 0.0:.6f}"]
+        for i, p in enumerate(poses)])
+    write("ranges.csv", *first_20_s("ranges.csv"))
 
     res = run(log, tmp_path / "run", Config(pose_refinement=PoseRefinementConfig(enabled=True)))
     pr = res.metrics.pose_refinement
