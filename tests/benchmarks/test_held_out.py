@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks.held_out import WORLDS, world_file
+from benchmarks.held_out import MODELS, WORLDS, world_file
 
 
 def test_a_world_named_alone_is_the_sample_world(tmp_path: Path) -> None:
@@ -35,3 +35,14 @@ def test_a_turned_world_keeps_its_shape_and_turns_its_path(tmp_path: Path) -> No
     rows = path.with_name("rooms-90.waypoints.csv").read_text(encoding="utf-8").splitlines()
     assert rows[0] == "x,y" and rows[1] == f"{cx - (5.5 - cy)},{cy + (1.0 - cx)}"
     assert math.isclose(float(rows[1].split(",")[1]), -5.5)
+
+
+@pytest.mark.parametrize("name", sorted(MODELS))
+def test_a_drift_model_s_label_states_its_values(name: str) -> None:
+    label, scale, bias, noise_xy, noise_yaw = MODELS[name]
+    words = [w.strip() for w in label.split(",")]
+    assert words[0] == f"{scale * 100:+g} %"
+    assert words[1] == f"{bias:+g}°/m"
+    noise = " ".join(words[2:])
+    assert (f"{noise_xy:g} m/√m" in noise) == (noise_xy > 0)
+    assert (f"{noise_yaw:g} rad/√rad" in noise) == (noise_yaw > 0)
