@@ -97,7 +97,7 @@ def register(app: typer.Typer) -> None:
         workers: Annotated[
             int | None,
             typer.Option("--workers", "-w", min=1,
-                         help="Local worker processes (default: number of CPUs)."),
+                         help="Local worker processes (default: the CPUs this process may use)."),
         ] = None,
         scheduler: Annotated[
             str | None,

@@ -47,6 +47,7 @@ from formats.errors import ConfigError, FormatError, InputError, OutputError, So
 from formats.tables import markdown_table
 from formats.text_file import read_text
 from pipeline.config import Config, config_from_dict, load_config
+from pipeline.cores import usable_cores
 from pipeline.metrics_schema import finite, read_metrics
 
 if TYPE_CHECKING:
@@ -458,7 +459,7 @@ def _client_inner(
         with client:
             yield client
         return
-    n = workers if workers is not None else (os.cpu_count() or 1)
+    n = workers if workers is not None else usable_cores()
     if n < 1:
         raise ConfigError(f"--workers must be >= 1, got {n}")
     if memory_limit != "auto":

@@ -9,18 +9,19 @@ them, in their given order — do not depend on the threads.
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import TypeVar
+
+from pipeline.cores import usable_cores
 
 T = TypeVar("T")
 R = TypeVar("R")
 
 
 def parallel_map(fn: Callable[[T], R], items: Sequence[T]) -> list[R]:
-    """``[fn(item) for item in items]``, on up to one thread per core."""
-    workers = min(len(items), os.cpu_count() or 1)
+    """``[fn(item) for item in items]``, on up to one thread per usable core."""
+    workers = min(len(items), usable_cores())
     if workers <= 1:
         return [fn(item) for item in items]
     with ThreadPoolExecutor(max_workers=workers) as pool:

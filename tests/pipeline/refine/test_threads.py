@@ -30,7 +30,19 @@ def test_the_calibration_is_the_same_on_one_thread(monkeypatch: pytest.MonkeyPat
     kwargs = dict(max_scale=0.05, max_bias=math.radians(3.0), res=0.05, sigma=0.1,
                   min_gain=0.01, far_echoes=far)
     many = calibrate(*track, near, **kwargs)
-    monkeypatch.setattr(threads.os, "cpu_count", lambda: 1)
+    monkeypatch.setattr(threads, "usable_cores", lambda: 1)
     one = calibrate(*track, near, **kwargs)
     np.testing.assert_equal(dataclasses.astuple(one), dataclasses.astuple(many))  # NaN = NaN
     assert many.scale_far_echoes and math.isfinite(many.scale_estimate)
+
+
+def test_one_usable_core_evaluates_on_the_calling_thread(monkeypatch: pytest.MonkeyPatch) -> None:
+    import threading
+
+    def where(_: int) -> int:
+        return threading.get_ident()
+
+    monkeypatch.setattr(threads, "usable_cores", lambda: 1)
+    assert set(parallel_map(where, range(6))) == {threading.get_ident()}
+    monkeypatch.setattr(threads, "usable_cores", lambda: 2)
+    assert threading.get_ident() not in parallel_map(where, range(6))
