@@ -29,6 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from benchmarks.compare_methods import DRIFT_BIAS_DEG_PER_M, DRIFT_CASES, DRIFT_SCALE, drifted_case
+from pipeline.cores import usable_cores
 from pipeline.drift import DriftModel
 
 REPO = Path(__file__).resolve().parents[1]
@@ -109,6 +110,9 @@ def main(argv: list[str] | None = None) -> int:
         rows.append(time_case(name, log, work, args.rounds))
         print(f"{name}: {rows[-1].ratio:.2f}×", file=sys.stderr, flush=True)
     print(markdown(rows))
+    cores = usable_cores()
+    print(f"on {cores} usable core{'s' * (cores != 1)} (the process's CPU affinity; "
+          "`taskset -c 0` runs it on one)")
     if args.work is None:
         shutil.rmtree(work, ignore_errors=True)
     return 0
