@@ -208,6 +208,18 @@ class PoseRefinementConfig:
         "with yaw noise 0.90 -> 0.96 of true-pose F1, every correction applied elsewhere kept); "
         "'measure': that gain reported in metrics.json, not judged; 'off': not fitted",
         default="gate")
+    compass: bool = doc_field(
+        "after the calibration, take out the heading bias left where the walls' directions "
+        "drift along the run (a building whose walls run along two perpendicular "
+        "directions; pipeline/refine/compass.py)", default=True)
+    compass_window_m: float = doc_field("... the walls' directions measured per this much "
+                                        "travel, m", default=20.0)
+    compass_max_bias_deg_per_m: float = doc_field(
+        "... a drift searched in ± this, deg/m (the calibration's misses measured: 0.07-0.09)",
+        default=0.15)
+    compass_min_z: float = doc_field(
+        "... applied when the drift stands this many standard errors from 0 (as unlikely: "
+        "Student's t over the windows fitted)", default=4.0)
     match_submaps: bool = doc_field("after the calibration, match submaps and solve the pose "
                                "graph (off: measured worse on sonar, see RESULTS.md)",
                                default=False)
@@ -495,6 +507,12 @@ def _check_ranges(cfg: Config) -> None:
          "must be in [0, 0.5)", pr.calibration_max_scale)
     need(0 < pr.calibration_max_slope <= 1, "pose_refinement.calibration_max_slope",
          "must be in (0, 1]", pr.calibration_max_slope)
+    need(math.isfinite(pr.compass_window_m) and pr.compass_window_m > 0,
+         "pose_refinement.compass_window_m", "must be > 0", pr.compass_window_m)
+    need(0 < pr.compass_max_bias_deg_per_m <= 5, "pose_refinement.compass_max_bias_deg_per_m",
+         "must be in (0, 5]", pr.compass_max_bias_deg_per_m)
+    need(pr.compass_min_z >= 0, "pose_refinement.compass_min_z", "must be >= 0",
+         pr.compass_min_z)
     need(pr.calibration_scale_min_z >= 0, "pose_refinement.calibration_scale_min_z",
          "must be >= 0", pr.calibration_scale_min_z)
     need(pr.calibration_scale_systematic >= 0, "pose_refinement.calibration_scale_systematic",

@@ -48,6 +48,7 @@ from pipeline.refine.calibration import (
     consistency_change,
     gate_digits,
 )
+from pipeline.refine.compass import compass_correction
 from pipeline.refine.echoes import Echoes
 from pipeline.refine.graph import (
     GraphOptions,
@@ -155,6 +156,12 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
     if cfg.calibration_search and len(echoes) >= cfg.submap_min_echoes:
         cal0 = configured_calibration(tt, tx, ty, tyaw, all_echoes, cfg)
         ox, oy, oyaw = cal0.correct(tx, ty, tyaw)
+        if cfg.compass:
+            turned = compass_correction(
+                tt, ox, oy, oyaw, echoes, window_m=cfg.compass_window_m,
+                max_bias=math.radians(cfg.compass_max_bias_deg_per_m), min_z=cfg.compass_min_z)
+            ox, oy, oyaw = turned.x, turned.y, turned.yaw
+            metrics["compass"] = turned.metrics
         if cfg.local_corrections:
             local = correct_stretches(
                 tt, ox, oy, oyaw, echoes, stretch_m=cfg.local_stretch_m,
@@ -338,6 +345,10 @@ def summary(metrics: dict[str, Any], cfg: PoseRefinementConfig) -> str:
         parts.append("no heading bias" + _why_no_bias(metrics.get("heading_bias_rejected"),
                                                       cfg.calibration_min_gain,
                                                       cfg.calibration_strong_gain))
+    compass = metrics.get("compass")
+    if compass and compass.get("applied"):
+        parts.append(f"heading drift against the walls {compass['bias_left_deg_per_m']:+.3f}°/m "
+                     f"(z {compass['z']:.1f}) taken out")
     local = metrics.get("local")
     if local and "gain_per_parameter" in local:
         gain = local["gain_per_parameter"]

@@ -193,6 +193,13 @@ def test_summary_says_what_was_applied_and_why_a_scale_was_not() -> None:
             "2.4% less consistent, < 1%);") in summary(weak, cfg)
     assert summary({"echoes": 12, **moved}, cfg).startswith(
         "pose refinement: no calibration (12 echoes); poses moved")
+    compassed = {**applied, "compass": {"windows": 18, "bias_left_deg_per_m": -0.0739,
+                                        "bias_left_standard_error": 0.0031, "z": 23.6,
+                                        "applied": True}}
+    assert ("heading bias +0.80°/m; heading drift against the walls -0.074°/m (z 23.6) "
+            "taken out; poses moved") in summary(compassed, cfg)
+    kept_out = {**applied, "compass": {**compassed["compass"], "z": 1.2, "applied": False}}
+    assert "walls" not in summary(kept_out, cfg)
 
 
 def test_the_grid_is_sized_from_the_refined_poses(drifted_log: Path, tmp_path: Path) -> None:

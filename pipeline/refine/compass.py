@@ -1,0 +1,306 @@
+"""The building's walls as a compass (``[pose_refinement] compass``): the heading bias
+left after the calibration, measured against the directions the walls run in.
+
+The calibration finds the heading bias from how well the echoes agree, and that is
+precise where the robot revisits places. A long tour that rarely does (Acapulco's
+convention centre, 837 m) leaves it 0.07°/m off, and the end of the run 60° turned. But
+indoor walls mostly run along two perpendicular directions (a Manhattan world), and a
+sonar passing a wall draws it: where the track's heading is wrong by ``e`` at travel
+``s``, every wall drawn from there is turned by ``e``. The walls are a reference the
+whole run shares without a single revisit, so the lever arm is the run's length.
+
+* **Chords**: per sensor, its first echo in each ``CHORD_STEP_M`` of travel joined to the
+  next (the echo's axis point, placed with the current poses): ``CHORD_MIN_M`` …
+  ``CHORD_MAX_M`` long, over at most ``CHORD_MAX_TRAVEL_M`` of travel and
+  ``CHORD_MAX_TURN_DEG`` of turn, the range changing by under ``CHORD_MAX_DRANGE_M`` (one
+  wall, not a corner or a door).
+* **The lattice angle** ``φ_w`` per window of ``window_m`` of travel: the chords'
+  directions modulo 90°, averaged as ``4θ`` unit vectors weighted by length², refined
+  over the chords within ``INLIER_DEG`` (walls, not clutter); its standard error from
+  their scatter. A window needs ``MIN_CHORDS`` of them, the run three windows.
+* **The drift** ``c`` (``φ_w = φ₀ + c·s_w``, ``|c| ≤ max_bias``): first the ``c`` on which
+  the most pairs of windows agree once ``c·Δs`` is taken out (a kernel over their
+  offsets modulo 90°; windows of a wing turned off the lattice agree with none, MIT
+  CSAIL's 27° wing), then iteratively reweighted least squares on the windows unwrapped
+  onto that lattice (Cauchy weights, scale ``CAUCHY`` × the residuals' MAD σ). The
+  residuals' σ has a floor, ``WALL_FLOOR_DEG``: on true poses real buildings' windows
+  scatter 0.45-1.8° about their lattice (eight Radish buildings), a simulated floor's
+  straight walls 0.02-0.05°, where a chord's lean of a few hundredths of a degree that
+  changes along the run would stand 14 errors from 0 (the sample corridor, 5 m windows).
+  ``c``'s standard error is the larger of the weighted model's and a sandwich over the
+  residuals with neighbouring windows correlated (Newey-West, ``HAC_LAG``).
+
+**Gate.** The correction is applied when ``c`` stands as far from 0 as ``min_z`` errors
+would with the error known: Student's t over the windows the robust weights keep (the
+drifted Freiburg 101's six windows gave −0.082°/m at z 3.1 for a drift near 0; six need
+17, twenty 5.2). The odometry
+is then re-integrated with its heading turned by ``−c`` per metre
+(:func:`pipeline.drift.apply_drift`'s heading bias: the start pose, the frame, is kept).
+Measured (``python -m benchmarks.buildings``, benchmarks/RESULTS.md, twenty-seventh
+session): Acapulco drifted by 3 % and 0.8°/m, calibrated to 0.88°/m, gives ``c`` =
+−0.074 ± 0.003°/m (z 24): refined F1 0.18 → 0.48 of true poses, ATE 8.35 → 0.34 m. On
+the true poses and real odometry of eight buildings and every simulated floor of
+``drift_variety`` and ``held_out``, z ≤ 1.9 (nothing applied). Tried and not kept: the
+echoes' consistency as a second gate (Acapulco's correct heading makes them 3.4 % *less*
+consistent: that score's flat landscape is why the calibration missed), and a random
+walk of heading on top of the drift, its σ by REML (Acapulco's true poses: the walls'
+own 5-17° bends taken for heading, ATE 0 → 1.9 m).
+
+Deterministic: no random draws.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from formats.angles import wrap_angle
+from formats.arrays import F64, I64
+from pipeline.drift import DriftModel, apply_drift
+from pipeline.refine.echoes import Echoes
+from pipeline.refine.submaps import path_length_at
+from pipeline.refine.surfaces import CAUCHY, MAD_SIGMA
+
+CHORD_STEP_M = 0.5
+CHORD_MIN_M = 0.3
+CHORD_MAX_M = 3.0
+CHORD_MAX_TRAVEL_M = 2.0
+CHORD_MAX_TURN_DEG = 5.0
+CHORD_MAX_DRANGE_M = 0.3
+INLIER_DEG = 8.0
+MIN_CHORDS = 5
+IRLS_STEPS = 8
+HAC_LAG = 2
+WALL_FLOOR_DEG = 0.5
+
+
+@dataclass(frozen=True)
+class Chords:
+    """Wall chords in the world: direction (rad), length (m), travel at their middle (m)."""
+
+    angle: F64
+    length: F64
+    travel: F64
+
+
+@dataclass(frozen=True)
+class Lattice:
+    """Per window of travel: its middle (m), the lattice angle (rad, unwrapped along the
+    run) and its standard error (rad)."""
+
+    travel: F64
+    angle: F64
+    standard_error: F64
+
+
+@dataclass(frozen=True)
+class BiasFit:
+    """The lattice's drift along the run: ``c`` (rad/m) and its standard error, the
+    lattice's angle ``φ₀`` (rad), the residuals' robust σ (rad), the windows used."""
+
+    bias: float
+    standard_error: float
+    angle: float
+    wall_sigma: float
+    windows: int
+    dof: float  # the fit's degrees of freedom: the windows its robust weights keep, less 2
+
+    @property
+    def z(self) -> float:
+        return abs(self.bias) / self.standard_error if self.standard_error > 0 else math.inf
+
+    def z_needed(self, min_z: float) -> float:
+        """The ``z`` that is as unlikely under no drift, with the standard error estimated
+        from :attr:`dof` degrees of freedom (Student's t), as ``min_z`` with it known: a
+        fit of six windows needs 17, of twenty 5.2, for ``min_z`` 4."""
+        from scipy.stats import norm, t
+
+        return float(t.isf(norm.sf(min_z), max(self.dof, 1.0)))
+
+
+def sensor_ids(echoes: Echoes) -> I64:
+    """One id per sensor mount (position and axis in the base frame)."""
+    key = np.round(np.column_stack([echoes.sx, echoes.sy, echoes.axis]), 9)
+    return np.unique(key, axis=0, return_inverse=True)[1].ravel().astype(np.int64)
+
+
+def wall_chords(echoes: Echoes, t_ns: I64, x: F64, y: F64, yaw: F64) -> Chords:
+    """The chords along each sensor's echoes on the track ``(x, y, yaw)`` (module
+    docstring): per sensor, its first echo in each ``CHORD_STEP_M`` of travel, joined to
+    the next such echo (however fast the sensor fires, a chord spans some travel)."""
+    placed = echoes.on_track(t_ns, x, y, yaw)
+    pose = placed.odo
+    mid = echoes.bx.shape[1] // 2
+    c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+    bx, by = echoes.bx[:, mid], echoes.by[:, mid]
+    wx, wy = pose[:, 0] + c * bx - s * by, pose[:, 1] + s * bx + c * by
+    travel = path_length_at(t_ns, x, y, echoes.t_ns)
+    sid = sensor_ids(echoes)
+    step = np.floor(travel / CHORD_STEP_M).astype(np.int64)
+    order = np.lexsort((np.arange(len(sid)), step, sid))  # by sensor, step, then time
+    first = np.ones(order.size, bool)
+    first[1:] = (sid[order][1:] != sid[order][:-1]) | (step[order][1:] != step[order][:-1])
+    pick = order[first]  # each sensor's first echo per step of travel, in travel order
+    a, b = pick[:-1], pick[1:]
+    dx, dy = wx[b] - wx[a], wy[b] - wy[a]
+    length = np.hypot(dx, dy)
+    ok = ((sid[a] == sid[b]) & (length >= CHORD_MIN_M) & (length <= CHORD_MAX_M)
+          & (np.abs(travel[b] - travel[a]) <= CHORD_MAX_TRAVEL_M)
+          & (np.abs(wrap_angle(pose[b, 2] - pose[a, 2])) <= math.radians(CHORD_MAX_TURN_DEG))
+          & (np.abs(echoes.range_m[b] - echoes.range_m[a]) < CHORD_MAX_DRANGE_M))
+    return Chords(np.arctan2(dy, dx)[ok], length[ok], 0.5 * (travel[a] + travel[b])[ok])
+
+
+def _off_lattice(angle: F64, phi: float) -> F64:
+    """Each direction's offset (rad) from the nearest of the lattice ``phi``'s four."""
+    return np.asarray((angle - phi + math.pi / 4) % (math.pi / 2) - math.pi / 4)
+
+
+def lattice_angle(angle: F64, length: F64) -> tuple[float, float, int]:
+    """(the lattice angle modulo 90°, its standard error, the inlier chords) of one
+    window's chords; NaN where fewer than :data:`MIN_CHORDS` agree."""
+    if angle.size < MIN_CHORDS:
+        return math.nan, math.nan, 0
+    w = length**2
+    phi = float(np.angle((w * np.exp(4j * angle)).sum())) / 4
+    band = math.radians(INLIER_DEG)
+    for _ in range(4):
+        d = _off_lattice(angle, phi)
+        keep = np.abs(d) < band
+        if keep.sum() < MIN_CHORDS:
+            return math.nan, math.nan, int(keep.sum())
+        phi += float((w[keep] * d[keep]).sum() / w[keep].sum())
+    d = _off_lattice(angle, phi)
+    keep = np.abs(d) < band
+    n = int(keep.sum())
+    if n < MIN_CHORDS:
+        return math.nan, math.nan, n
+    wk = w[keep]
+    spread = math.sqrt(float((wk * d[keep] ** 2).sum() / wk.sum()))
+    n_eff = float(wk.sum() ** 2 / (wk**2).sum())
+    return phi, spread / math.sqrt(max(n_eff - 1.0, 1.0)), n
+
+
+def window_lattice(chords: Chords, window_m: float) -> Lattice:
+    """The lattice angle (modulo 90°) of each window of ``window_m`` of travel that has
+    one."""
+    win = np.floor(chords.travel / window_m).astype(np.int64)
+    mids, angles, errors = [], [], []
+    for k in np.unique(win):
+        i = win == k
+        phi, se, _ = lattice_angle(chords.angle[i], chords.length[i])
+        if math.isfinite(phi):
+            mids.append(float(chords.travel[i].mean()))
+            angles.append(phi)
+            errors.append(se)
+    return Lattice(np.array(mids), np.array(angles), np.array(errors))
+
+
+def _pair_agreement(lattice: Lattice, biases: F64, wall_sigma: float) -> F64:
+    """Per candidate bias ``c``: how well every pair of windows agrees on one lattice once
+    the heading drift ``c·s`` is taken out (Gaussian kernel of their offset modulo 90°
+    in their errors and the walls' spread; pairs on different lattices add ~0)."""
+    i, j = np.triu_indices(lattice.travel.size, k=1)
+    ds = lattice.travel[j] - lattice.travel[i]
+    dphi = lattice.angle[j] - lattice.angle[i]
+    var = lattice.standard_error[i] ** 2 + lattice.standard_error[j] ** 2 + 2 * wall_sigma**2
+    out = np.empty(biases.size)
+    for k, c in enumerate(biases):
+        d = _off_lattice(dphi - c * ds, 0.0)
+        out[k] = float(np.exp(-0.5 * d**2 / var).sum())
+    return out
+
+
+def fit_bias(lattice: Lattice, max_bias: float, wall_sigma: float = math.radians(1.0)
+             ) -> BiasFit | None:
+    """The heading drift ``c`` (|c| ≤ ``max_bias``, rad/m) on which the windows agree best
+    (module docstring), its standard error from the windows of the lattice it finds;
+    None under three windows or where no two windows share a lattice."""
+    s, n = lattice.travel, lattice.travel.size
+    if n < 3:
+        return None
+    span = float(s.max() - s.min())
+    step = 0.25 * wall_sigma / max(span, 1.0)
+    biases = np.arange(-max_bias, max_bias + 0.5 * step, step)
+    score = _pair_agreement(lattice, biases, wall_sigma)
+    best = int(np.argmax(score))
+    c = float(biases[best])
+    # the lattice: the window angles, drift taken out, nearest the densest of them
+    psi = lattice.angle - c * s
+    agree = np.array([np.exp(-0.5 * (_off_lattice(psi, float(p)) / wall_sigma) ** 2).sum()
+                      for p in psi])
+    phi0 = float(psi[int(np.argmax(agree))])
+    # the windows unwrapped onto that lattice, for the fit
+    y = phi0 + _off_lattice(psi, phi0) + c * s
+    design = np.column_stack([np.ones_like(s), s])
+    sol = np.array([phi0, c])
+    sigma = max(wall_sigma, math.radians(WALL_FLOOR_DEG))
+    for _ in range(IRLS_STEPS):
+        res = y - design @ sol
+        robust = 1.0 / (1.0 + (res / (CAUCHY * sigma)) ** 2)
+        ww = robust / (sigma**2 + lattice.standard_error**2)
+        normal = design.T @ (design * ww[:, None])
+        sol = np.linalg.solve(normal, design.T @ (ww * y))
+        sigma = max(MAD_SIGMA * float(np.median(np.abs(res))), math.radians(WALL_FLOOR_DEG))
+    res = y - design @ sol
+    inv = np.linalg.inv(normal)
+    # sandwich covariance with the windows' scores correlated over HAC_LAG neighbours
+    # (Newey-West: a corridor's walls, off the lattice by the same amount, span windows)
+    score = design * (ww * res)[:, None]
+    meat = score.T @ score
+    for lag in range(1, HAC_LAG + 1):
+        cross = score[lag:].T @ score[:-lag]
+        meat += (1.0 - lag / (HAC_LAG + 1)) * (cross + cross.T)
+    sandwich = float((inv @ meat @ inv)[1, 1]) * n / (n - 2)
+    # never below the model's own: windows that agree better than the walls' floor (a
+    # simulated floor's straight walls) do not make a drift of a few tenths of a degree real
+    variance = max(sandwich, float(inv[1, 1]))
+    kept = float(robust.sum() ** 2 / (robust**2).sum())  # windows the weights keep
+    return BiasFit(float(sol[1]), math.sqrt(variance), float(sol[0]), sigma, int(n), kept - 2.0)
+
+
+def metrics_of(fit: BiasFit | None, lattice: Lattice) -> dict[str, Any]:
+    """What the compass measured, for ``metrics.json``."""
+    out: dict[str, Any] = {"windows": int(lattice.travel.size)}
+    if fit is not None:
+        out.update(bias_left_deg_per_m=math.degrees(fit.bias),
+                   bias_left_standard_error=math.degrees(fit.standard_error),
+                   z=fit.z, lattice_deg=math.degrees(fit.angle) % 90.0,
+                   wall_sigma_deg=math.degrees(fit.wall_sigma))
+    return out
+
+
+@dataclass(frozen=True)
+class Compassed:
+    """The track after the compass (as given where its gate kept the correction out) and
+    what it measured."""
+
+    x: F64
+    y: F64
+    yaw: F64
+    metrics: dict[str, Any]
+
+
+def compass_correction(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
+                       window_m: float, max_bias: float, min_z: float) -> Compassed:
+    """The track ``(x, y, yaw)`` at ``t_ns`` with the heading bias its walls establish
+    taken out, or as given (module docstring)."""
+    lattice = window_lattice(wall_chords(echoes, t_ns, x, y, yaw), window_m)
+    fit = fit_bias(lattice, max_bias)
+    metrics = metrics_of(fit, lattice)
+    metrics["applied"] = False
+    if fit is None:
+        metrics["note"] = "not applied: fewer than 3 windows of travel show a wall lattice"
+        return Compassed(x, y, yaw, metrics)
+    needed = metrics["z_needed"] = fit.z_needed(min_z)
+    if fit.z < needed:
+        metrics["note"] = (f"not applied: the heading drift against the walls, "
+                           f"{math.degrees(fit.bias):+.4f}°/m, is not established "
+                           f"(z {fit.z:.1f} < {needed:.1f} for {fit.windows} windows)")
+        return Compassed(x, y, yaw, metrics)
+    metrics["applied"] = True
+    turned = apply_drift(x, y, yaw, DriftModel(heading_bias_deg_per_m=-math.degrees(fit.bias)))
+    return Compassed(*turned, metrics)

@@ -1,0 +1,143 @@
+"""The walls as a compass (pipeline.refine.compass): a heading bias left after the
+calibration shows as the walls' lattice turning along the run, and is taken out where it
+stands clear of the walls' own spread; true poses and buildings off the lattice are left
+as they are."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from pipeline.drift import DriftModel, apply_drift
+from pipeline.refine import compass
+from pipeline.refine.compass import Lattice, fit_bias, lattice_angle, window_lattice
+
+KW = dict(window_m=20.0, max_bias=math.radians(0.3), min_z=4.0)
+
+
+def test_the_lattice_angle_of_turned_walls_among_clutter():
+    rng = np.random.default_rng(3)
+    walls = math.radians(25.0) + rng.integers(0, 4, 40) * math.pi / 2
+    walls += rng.normal(0.0, math.radians(0.5), 40)
+    clutter = rng.uniform(-math.pi, math.pi, 12)
+    angle = np.concatenate([walls, clutter])
+    length = np.concatenate([rng.uniform(0.5, 2.0, 40), rng.uniform(0.5, 2.0, 12)])
+    phi, se, n = lattice_angle(angle, length)
+    assert math.degrees(phi) % 90 == pytest.approx(25.0, abs=0.3)
+    assert 0 < math.degrees(se) < 0.3
+    assert 40 <= n < 52  # the walls, and clutter only where it happens to lie along them
+
+
+def test_too_few_chords_give_no_lattice():
+    phi, se, n = lattice_angle(np.zeros(compass.MIN_CHORDS - 1),
+                               np.ones(compass.MIN_CHORDS - 1))
+    assert math.isnan(phi) and math.isnan(se) and n == 0
+
+
+def _windows(drift_deg_per_m: float, wing: slice | None = None, seed: int = 0) -> Lattice:
+    """Forty windows along 800 m whose walls turn with a heading drift, walls spread 1°,
+    a wing of the building turned 27° where ``wing`` says; modulo 90° like the chords'."""
+    rng = np.random.default_rng(seed)
+    s = 10.0 + 20.0 * np.arange(40)
+    angle = math.radians(3.0) + math.radians(drift_deg_per_m) * s
+    angle += rng.normal(0.0, math.radians(1.0), s.size)
+    if wing is not None:
+        angle[wing] += math.radians(27.0)
+    angle = (angle + math.pi / 4) % (math.pi / 2) - math.pi / 4
+    return Lattice(s, angle, np.full(s.size, math.radians(0.3)))
+
+
+def test_a_drift_is_found_across_the_wrap_and_past_a_turned_wing():
+    fit = fit_bias(_windows(-0.074, wing=slice(15, 19)), math.radians(0.3))
+    assert fit is not None
+    assert math.degrees(fit.bias) == pytest.approx(-0.074, abs=3 * math.degrees(fit.standard_error))
+    assert math.degrees(fit.standard_error) < 0.003
+    assert fit.z > 20
+    assert math.degrees(fit.angle) % 90 == pytest.approx(3.0, abs=1.0)
+
+
+def test_no_drift_is_not_established():
+    for seed in range(5):
+        fit = fit_bias(_windows(0.0, wing=slice(15, 19), seed=seed), math.radians(0.3))
+        assert fit is not None and fit.z < 3
+
+
+def test_windows_that_agree_better_than_real_walls_do_not_establish_a_drift():
+    """A simulated floor's straight walls scatter the windows by hundredths of a degree;
+    the walls' floor (WALL_FLOOR_DEG) keeps a trend of tenths of a degree unproven."""
+    s = np.array([2.0, 7.0, 12.0, 17.0, 22.0, 25.0])
+    angle = math.radians(0.3) / 25.0 * s  # 0.3° over the run, nothing else
+    fit = fit_bias(Lattice(s, angle, np.full(6, math.radians(0.02))), math.radians(0.3))
+    assert fit is not None and fit.z < 1
+
+
+def test_few_windows_must_stand_further_from_zero():
+    """The standard error is estimated from the windows themselves: with few, Student's t
+    asks more of ``z`` than ``min_z`` (the drifted Freiburg 101, six windows: a drift 0.08°/m
+    off at z 3.1 that applied would have turned its map)."""
+    fit = fit_bias(_windows(-0.074), math.radians(0.3))
+    assert fit is not None and 35 < fit.dof <= 38
+    assert 4.0 < fit.z_needed(4.0) < 4.6
+    few = dataclasses.replace(fit, dof=4.0)
+    assert few.z_needed(4.0) == pytest.approx(17.45, abs=0.01)
+    assert dataclasses.replace(fit, dof=1e6).z_needed(4.0) == pytest.approx(4.0, abs=1e-3)
+
+
+def test_fewer_than_three_windows_fit_nothing():
+    assert fit_bias(Lattice(np.array([10.0, 30.0]), np.zeros(2), np.full(2, 0.01)), 0.01) is None
+
+
+@pytest.fixture(scope="module")
+def intel():
+    from pathlib import Path
+
+    from tests.pipeline.refine.conftest import log_echoes
+
+    log = Path(__file__).resolve().parents[3] / "sample_logs" / "intel-lab" / "intel.mcap"
+    return log_echoes(log, 3.0)
+
+
+def test_a_heading_bias_left_on_the_intel_lab_is_taken_out(intel):
+    (t, x, y, yaw), echoes = intel
+    dx, dy, dyaw = apply_drift(x, y, yaw, DriftModel(heading_bias_deg_per_m=0.03))
+    out = compass.compass_correction(t, dx, dy, dyaw, echoes.on_track(t, dx, dy, dyaw), **KW)
+    m = out.metrics
+    assert m["applied"] is True
+    assert m["bias_left_deg_per_m"] == pytest.approx(0.03, abs=0.005)
+    assert m["z"] > 8 and m["windows"] >= 20 and 4.5 < m["z_needed"] < 6
+    before = float(np.sqrt(np.mean((dx - x) ** 2 + (dy - y) ** 2)))
+    after = float(np.sqrt(np.mean((out.x - x) ** 2 + (out.y - y) ** 2)))
+    assert before > 1.0 and after < before / 10
+    assert out.x[0] == dx[0] and out.yaw[0] == dyaw[0]  # the start pose is the frame
+
+
+def test_true_poses_are_left_exactly_as_they_are(intel):
+    (t, x, y, yaw), echoes = intel
+    out = compass.compass_correction(t, x, y, yaw, echoes, **KW)
+    assert out.metrics["applied"] is False
+    assert "not established" in out.metrics["note"] and out.metrics["z"] < 2
+    assert out.x is x and out.y is y and out.yaw is yaw
+
+
+def test_a_run_too_short_for_three_windows_is_left_alone(sample_echoes):
+    (t, x, y, yaw), echoes = sample_echoes("corridor", 3.0)
+    out = compass.compass_correction(t, x, y, yaw, echoes, **KW)  # 26 m: two windows
+    assert out.metrics == {"windows": 2, "applied": False,
+                           "note": "not applied: fewer than 3 windows of travel show a wall "
+                                   "lattice"}
+    assert out.x is x
+
+
+def test_chords_follow_the_walls_of_the_simulated_corridor(sample_echoes):
+    (t, x, y, yaw), echoes = sample_echoes("corridor", 3.0)
+    chords = compass.wall_chords(echoes, t, x, y, yaw)
+    assert chords.angle.size > 100
+    assert np.all((chords.length >= compass.CHORD_MIN_M) & (chords.length <= compass.CHORD_MAX_M))
+    off = np.degrees(np.abs((chords.angle + math.pi / 4) % (math.pi / 2) - math.pi / 4))
+    assert np.median(off) < 3.0  # the corridor's walls run along the axes
+    lattice = window_lattice(chords, 5.0)
+    assert lattice.travel.size >= 5
+    assert np.all(np.abs(np.degrees(lattice.angle)) % 90 < 1.0)
