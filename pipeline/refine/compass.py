@@ -36,7 +36,11 @@ drifted Freiburg 101's six windows gave −0.082°/m at z 3.1 for a drift near 0
 17, twenty 5.2). The odometry
 is then re-integrated with its heading turned by ``−c`` per metre
 (:func:`pipeline.drift.apply_drift`'s heading bias: the start pose, the frame, is kept).
-Measured (``python -m benchmarks.buildings``, benchmarks/RESULTS.md, twenty-seventh
+And the windows must share a lattice: their robust scatter about it under
+``MAX_WALL_SIGMA_DEG``, half of the 26° that directions with no lattice scatter modulo 90°
+(on true poses the buildings scatter 0.45-4.7°, the Freiburg campus outdoors 2.4°; MIT's
+Infinite Corridor, curled into circles by an alias of its heading bias, 35°: its "drift"
+is the curl's). Measured (``python -m benchmarks.buildings``, benchmarks/RESULTS.md, twenty-seventh
 session): Acapulco drifted by 3 % and 0.8°/m, calibrated to 0.88°/m, gives ``c`` =
 −0.074 ± 0.003°/m (z 24): refined F1 0.18 → 0.48 of true poses, ATE 8.35 → 0.34 m. On
 the true poses and real odometry of eight buildings and every simulated floor of
@@ -75,6 +79,9 @@ MIN_CHORDS = 5
 IRLS_STEPS = 8
 HAC_LAG = 2
 WALL_FLOOR_DEG = 0.5
+# directions with no lattice at all scatter 90°/√12 = 26° modulo 90°; windows that scatter
+# half that about the lattice fitted share none (a track curled by a wrong bias: 35°)
+MAX_WALL_SIGMA_DEG = 0.5 * 90.0 / math.sqrt(12.0)
 
 
 @dataclass(frozen=True)
@@ -294,6 +301,11 @@ def compass_correction(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
     metrics["applied"] = False
     if fit is None:
         metrics["note"] = "not applied: fewer than 3 windows of travel show a wall lattice"
+        return Compassed(x, y, yaw, metrics)
+    if fit.wall_sigma > math.radians(MAX_WALL_SIGMA_DEG):
+        metrics["note"] = (f"not applied: the windows share no lattice (they scatter "
+                           f"{math.degrees(fit.wall_sigma):.1f}° about it, > "
+                           f"{MAX_WALL_SIGMA_DEG:.0f}°)")
         return Compassed(x, y, yaw, metrics)
     needed = metrics["z_needed"] = fit.z_needed(min_z)
     if fit.z < needed:

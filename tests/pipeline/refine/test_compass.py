@@ -86,6 +86,22 @@ def test_few_windows_must_stand_further_from_zero():
     assert dataclasses.replace(fit, dof=1e6).z_needed(4.0) == pytest.approx(4.0, abs=1e-3)
 
 
+def test_windows_without_a_lattice_are_not_a_compass(intel, monkeypatch):
+    """Chords in every direction (a track curled by a wrong bias): whatever drift fits
+    their windows is not applied."""
+    (t, x, y, yaw), echoes = intel
+    real = compass.wall_chords(echoes, t, x, y, yaw)
+    rng = np.random.default_rng(1)
+    scattered = compass.Chords(rng.uniform(-math.pi, math.pi, real.angle.size), real.length,
+                               real.travel)
+    monkeypatch.setattr(compass, "wall_chords", lambda *args: scattered)
+    out = compass.compass_correction(t, x, y, yaw, echoes, **KW)
+    assert out.metrics["applied"] is False and out.x is x
+    assert out.metrics["wall_sigma_deg"] > compass.MAX_WALL_SIGMA_DEG == pytest.approx(12.99,
+                                                                                      abs=0.01)
+    assert out.metrics["note"].startswith("not applied: the windows share no lattice")
+
+
 def test_fewer_than_three_windows_fit_nothing():
     assert fit_bias(Lattice(np.array([10.0, 30.0]), np.zeros(2), np.full(2, 0.01)), 0.01) is None
 
