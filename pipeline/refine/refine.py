@@ -2,7 +2,9 @@
 
 0. **Calibration** (:mod:`~pipeline.refine.calibration`, ``calibration_search``): the
    odometry's scale error and heading bias that the echoes agree on; the rest works on
-   the odometry corrected by them. Then, ``local_corrections``
+   the odometry corrected by them. Then ``compass`` (:mod:`~pipeline.refine.compass`):
+   the heading bias left, where the walls' directions drift along the run. Then
+   ``local_corrections``
    (:mod:`~pipeline.refine.stretches`): a rigid correction per stretch of travel where the
    surface patches that its visits share establish one (the odometry's random walk). With
    ``match_submaps = false`` (the default, see below) this is the refinement.

@@ -145,6 +145,8 @@ def test_a_run_too_short_for_three_windows_is_left_alone(sample_echoes):
                            "note": "not applied: fewer than 3 windows of travel show a wall "
                                    "lattice"}
     assert out.x is x
+    none = compass.compass_correction(t, x, y, yaw, echoes.take(np.arange(0)), **KW)
+    assert none.metrics["windows"] == 0 and none.metrics["applied"] is False
 
 
 def test_chords_follow_the_walls_of_the_simulated_corridor(sample_echoes):
