@@ -159,3 +159,42 @@ def test_chords_follow_the_walls_of_the_simulated_corridor(sample_echoes):
     lattice = window_lattice(chords, 5.0)
     assert lattice.travel.size >= 5
     assert np.all(np.abs(np.degrees(lattice.angle)) % 90 < 1.0)
+
+
+def test_a_round_hall_is_no_compass(tmp_path):
+    """A ring corridor (walls of a 48-gon, radii 5 and 9 m) driven four times round: its
+    walls turn with the travel as a drift would, but they share no lattice."""
+    from pipeline.simulate import SimOptions, simulate, write_simulation
+    from pipeline.simulate.world import world_from_dict
+    from tests.pipeline.refine.conftest import log_echoes
+
+    def ring(radius: float, n: int) -> list[list[float]]:
+        return [[radius * math.cos(2 * math.pi * k / n), radius * math.sin(2 * math.pi * k / n)]
+                for k in range(n)]
+
+    world = world_from_dict({"polygon": [{"points": ring(9.0, 48)}, {"points": ring(5.0, 48)}]})
+    waypoints = ring(7.0, 24) * 4
+    log = tmp_path / "round.mcap"
+    write_simulation(simulate(world, [*waypoints, waypoints[0]],
+                              SimOptions(seed=3, speed=0.5, ring_rate_hz=5.0)), log, "mcap")
+    (t, x, y, yaw), echoes = log_echoes(log, 3.0)
+    dx, dy, dyaw = apply_drift(x, y, yaw, DriftModel(heading_bias_deg_per_m=0.05))
+    out = compass.compass_correction(t, dx, dy, dyaw, echoes.on_track(t, dx, dy, dyaw),
+                                     **{**KW, "max_bias": math.radians(0.15)})
+    assert out.metrics["windows"] >= 8 and out.metrics["applied"] is False
+    assert out.x is dx
+    assert out.metrics["wall_sigma_deg"] > compass.MAX_WALL_SIGMA_DEG
+    assert out.metrics["note"].startswith("not applied: the windows share no lattice")
+
+
+def test_a_drift_beyond_the_range_searched_is_not_applied(intel):
+    """The range is what a calibration leaves (0.07-0.09°/m measured); beyond it, a turning
+    the walls show is more likely the building's (a round one) than the odometry's."""
+    (t, x, y, yaw), echoes = intel
+    dx, dy, dyaw = apply_drift(x, y, yaw, DriftModel(heading_bias_deg_per_m=0.2))
+    out = compass.compass_correction(t, dx, dy, dyaw, echoes.on_track(t, dx, dy, dyaw),
+                                     **{**KW, "max_bias": math.radians(0.15)})
+    assert out.metrics["applied"] is False and out.x is dx
+    assert out.metrics["bias_left_deg_per_m"] == pytest.approx(0.2, abs=0.01)
+    assert out.metrics["note"] == ("not applied: the walls' drift, +0.202°/m, leaves the "
+                                   "± 0.15°/m searched")
