@@ -117,8 +117,7 @@ def range_rate_scale(echoes: Echoes, truth_map: Path) -> RangeRate:
     sx, sy = transform_points(odo, echoes.sx, echoes.sy)  # each sonar's position
     gx, gy, found = normals.gradients(sx, sy, odo[:, 2] + echoes.axis, echoes.half,
                                       echoes.range_m)
-    mounts = np.column_stack([echoes.sx, echoes.sy, echoes.axis])
-    _, sonar = np.unique(mounts, axis=0, return_inverse=True)
+    sonar = echoes.mounts()
     first, second = [], []
     for k in np.unique(sonar):
         idx = np.flatnonzero(sonar.ravel() == k)

@@ -30,25 +30,28 @@ whole run shares without a single revisit, so the lever arm is the run's length.
   ``c``'s standard error is the larger of the weighted model's and a sandwich over the
   residuals with neighbouring windows correlated (Newey-West, ``HAC_LAG``).
 
-**Gate.** The correction is applied when ``c`` stands as far from 0 as ``min_z`` errors
-would with the error known: Student's t over the windows the robust weights keep (the
-drifted Freiburg 101's six windows gave −0.082°/m at z 3.1 for a drift near 0; six need
-17, twenty 5.2). The odometry
-is then re-integrated with its heading turned by ``−c`` per metre
-(:func:`pipeline.drift.apply_drift`'s heading bias: the start pose, the frame, is kept).
-And the windows must share a lattice: their robust scatter about it under
-``MAX_WALL_SIGMA_DEG``, half of the 26° that directions with no lattice scatter modulo 90°
-(on true poses the buildings scatter 0.45-4.7°, the Freiburg campus outdoors 2.4°; MIT's
-Infinite Corridor, curled into circles by an alias of its heading bias, 35°: its "drift"
-is the curl's). Measured (``python -m benchmarks.buildings``, benchmarks/RESULTS.md, twenty-seventh
+**Gate.** The correction is applied where the windows share a lattice (their robust
+scatter about it under ``MAX_WALL_SIGMA_DEG``, half of the 26° that directions with none
+scatter modulo 90°: on true poses the buildings scatter 0.45-4.7°, the Freiburg campus
+outdoors 2.4°; MIT's Infinite Corridor, curled into circles by an alias of its heading bias,
+35°, its "drift" the curl's), the fitted ``c`` stays within ``max_bias`` (the turn a round
+building's walls take is not the odometry's), and ``c`` stands as far from 0 as ``min_z``
+errors would with the error known: Student's t over the windows the robust weights keep
+(the drifted Freiburg 101's six windows gave −0.082°/m at z 3.1 for a drift near 0; six
+windows need 17, twenty 5.2). The odometry is then re-integrated with its heading turned by
+``−c`` per metre (:func:`pipeline.drift.apply_drift`'s heading bias; the start pose, the
+frame, is kept).
+
+Measured (``python -m benchmarks.buildings``, benchmarks/RESULTS.md, twenty-seventh
 session): Acapulco drifted by 3 % and 0.8°/m, calibrated to 0.88°/m, gives ``c`` =
-−0.074 ± 0.003°/m (z 24): refined F1 0.18 → 0.48 of true poses, ATE 8.35 → 0.34 m. On
-the true poses and real odometry of eight buildings and every simulated floor of
-``drift_variety`` and ``held_out``, z ≤ 1.9 (nothing applied). Tried and not kept: the
-echoes' consistency as a second gate (Acapulco's correct heading makes them 3.4 % *less*
-consistent: that score's flat landscape is why the calibration missed), and a random
-walk of heading on top of the drift, its σ by REML (Acapulco's true poses: the walls'
-own 5-17° bends taken for heading, ATE 0 → 1.9 m).
+−0.074 ± 0.003°/m (z 24): refined F1 0.18 → 0.49 of true poses, ATE 8.35 → 0.33 m; the
+Freiburg campus 0.06 → 0.16. On the true poses and real odometry of nine buildings and on
+every true-pose run of ``drift_variety``, ``held_out`` and ``make compare``, z ≤ 1.9
+(nothing applied). Tried and not kept: the echoes' consistency as a second gate
+(Acapulco's correct heading makes them 3.4 % *less* consistent: that score's flat
+landscape is why the calibration missed), and a random walk of heading on top of the
+drift, its σ by REML (Acapulco's true poses: the walls' own 5-17° bends taken for heading,
+ATE 0 → 1.9 m).
 
 Deterministic: no random draws.
 """
@@ -67,6 +70,7 @@ from pipeline.drift import DriftModel, apply_drift
 from pipeline.refine.echoes import Echoes
 from pipeline.refine.submaps import path_length_at
 from pipeline.refine.surfaces import CAUCHY, MAD_SIGMA
+from pipeline.se2 import transform_points
 
 CHORD_STEP_M = 0.5
 CHORD_MIN_M = 0.3
@@ -128,24 +132,15 @@ class BiasFit:
         return float(-stdtrit(max(self.dof, 1.0), ndtr(-min_z)))
 
 
-def sensor_ids(echoes: Echoes) -> I64:
-    """One id per sensor mount (position and axis in the base frame)."""
-    key = np.round(np.column_stack([echoes.sx, echoes.sy, echoes.axis]), 9)
-    return np.unique(key, axis=0, return_inverse=True)[1].ravel().astype(np.int64)
-
-
 def wall_chords(echoes: Echoes, t_ns: I64, x: F64, y: F64, yaw: F64) -> Chords:
     """The chords along each sensor's echoes on the track ``(x, y, yaw)`` (module
     docstring): per sensor, its first echo in each ``CHORD_STEP_M`` of travel, joined to
     the next such echo (however fast the sensor fires, a chord spans some travel)."""
-    placed = echoes.on_track(t_ns, x, y, yaw)
-    pose = placed.odo
-    mid = echoes.bx.shape[1] // 2
-    c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
-    bx, by = echoes.bx[:, mid], echoes.by[:, mid]
-    wx, wy = pose[:, 0] + c * bx - s * by, pose[:, 1] + s * bx + c * by
+    pose = echoes.on_track(t_ns, x, y, yaw).odo
+    mid = echoes.bx.shape[1] // 2  # the arc's middle point: the beam's axis
+    wx, wy = transform_points(pose, echoes.bx[:, mid], echoes.by[:, mid])
     travel = path_length_at(t_ns, x, y, echoes.t_ns)
-    sid = sensor_ids(echoes)
+    sid = echoes.mounts()
     step = np.floor(travel / CHORD_STEP_M).astype(np.int64)
     order = np.lexsort((np.arange(len(sid)), step, sid))  # by sensor, step, then time
     first = np.ones(order.size, bool)
@@ -223,9 +218,9 @@ def _pair_agreement(lattice: Lattice, biases: F64, wall_sigma: float) -> F64:
 
 def fit_bias(lattice: Lattice, max_bias: float, wall_sigma: float = math.radians(1.0)
              ) -> BiasFit | None:
-    """The heading drift ``c`` (|c| ≤ ``max_bias``, rad/m) on which the windows agree best
-    (module docstring), its standard error from the windows of the lattice it finds;
-    None under three windows or where no two windows share a lattice."""
+    """The heading drift ``c`` on which the windows agree best (searched over
+    ``|c| ≤ max_bias``, rad/m, then fitted: module docstring) and its standard error, from
+    the windows unwrapped onto the lattice it finds; None under three windows."""
     s, n = lattice.travel, lattice.travel.size
     if n < 3:
         return None

@@ -56,6 +56,12 @@ class Echoes:
     def __len__(self) -> int:
         return int(self.t_ns.shape[0])
 
+    def mounts(self) -> I64:
+        """Per echo, the number of its sensor's mount (position and axis in the base frame):
+        the echoes of one sonar share it."""
+        key = np.column_stack([self.sx, self.sy, self.axis])
+        return np.unique(key, axis=0, return_inverse=True)[1].ravel().astype(np.int64)
+
     def on_track(self, t_ns: I64, x: F64, y: F64, yaw: F64) -> Echoes:
         """These echoes with their odometry read again from the pose track ``(x, y, yaw)``
         at ``t_ns`` (interpolated at each echo's stamp)."""

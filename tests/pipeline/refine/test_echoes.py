@@ -20,3 +20,15 @@ def test_within_keeps_the_echoes_out_to_the_range_in_their_order() -> None:
     assert out.t_ns.tolist() == [1, 2, 4]
     assert out.bx.shape == (3, 3) and out.odo.shape == (3, 3)
     assert len(_echoes([4.0, 5.0]).within(3.0)) == 0
+
+
+def test_mounts_number_the_sensors_by_position_and_axis() -> None:
+    import dataclasses
+
+    e = _echoes([1.0, 2.0, 1.5, 2.5, 0.8, 1.1])
+    # two sonars at one position facing apart, a third beside them, interleaved in time
+    e = dataclasses.replace(e, sx=np.array([0.1, 0.1, 0.2, 0.1, 0.1, 0.2]),
+                            axis=np.array([0.0, 1.5, 0.0, 0.0, 1.5, 0.0]))
+    ids = e.mounts()
+    assert ids.dtype == np.int64 and ids.tolist() == [0, 1, 2, 0, 1, 2]
+    assert _echoes([]).mounts().size == 0
