@@ -59,6 +59,19 @@ def test_a_drift_is_found_across_the_wrap_and_past_a_turned_wing():
     assert math.degrees(fit.angle) % 90 == pytest.approx(3.0, abs=1.0)
 
 
+def test_a_small_drift_is_found_over_a_long_run():
+    """Eight kilometres, 400 windows: the coarse-to-fine search still lands on the drift
+    (0.03°/m: 240° over the run, wrapping the lattice's 90° many times)."""
+    rng = np.random.default_rng(0)
+    s = 10.0 + 20.0 * np.arange(400)
+    angle = math.radians(0.03) * s + rng.normal(0.0, math.radians(1.0), s.size)
+    angle = (angle + math.pi / 4) % (math.pi / 2) - math.pi / 4
+    fit = fit_bias(Lattice(s, angle, np.full(s.size, math.radians(0.3))), math.radians(0.15))
+    assert fit is not None
+    assert math.degrees(fit.bias) == pytest.approx(0.03, abs=3 * math.degrees(fit.standard_error))
+    assert math.degrees(fit.standard_error) < 1e-4
+
+
 def test_no_drift_is_not_established():
     for seed in range(5):
         fit = fit_bias(_windows(0.0, wing=slice(15, 19), seed=seed), math.radians(0.3))
