@@ -100,8 +100,8 @@ class Chords:
 
 @dataclass(frozen=True)
 class Lattice:
-    """Per window of travel: its middle (m), the lattice angle (rad, unwrapped along the
-    run) and its standard error (rad)."""
+    """Per window of travel: its middle (m), the lattice angle (rad, modulo 90°) and its
+    standard error (rad)."""
 
     travel: F64
     angle: F64
