@@ -120,7 +120,7 @@ def range_rate_scale(echoes: Echoes, truth_map: Path) -> RangeRate:
     sonar = echoes.mounts()
     first, second = [], []
     for k in np.unique(sonar):
-        idx = np.flatnonzero(sonar.ravel() == k)
+        idx = np.flatnonzero(sonar == k)
         first.append(idx[:-LAG])
         second.append(idx[LAG:])
     i, j = np.concatenate(first), np.concatenate(second)

@@ -68,6 +68,7 @@ from formats.angles import wrap_angle
 from formats.arrays import F64, I64
 from pipeline.drift import DriftModel, apply_drift
 from pipeline.refine.echoes import Echoes
+from pipeline.refine.stretches import Corrected
 from pipeline.refine.submaps import path_length_at
 from pipeline.refine.surfaces import CAUCHY, MAD_SIGMA
 from pipeline.se2 import transform_points
@@ -283,19 +284,8 @@ def metrics_of(fit: BiasFit | None, lattice: Lattice) -> dict[str, Any]:
     return out
 
 
-@dataclass(frozen=True)
-class Compassed:
-    """The track after the compass (as given where its gate kept the correction out) and
-    what it measured."""
-
-    x: F64
-    y: F64
-    yaw: F64
-    metrics: dict[str, Any]
-
-
 def compass_correction(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
-                       window_m: float, max_bias: float, min_z: float) -> Compassed:
+                       window_m: float, max_bias: float, min_z: float) -> Corrected:
     """The track ``(x, y, yaw)`` at ``t_ns`` with the heading bias its walls establish
     taken out, or as given (module docstring)."""
     lattice = window_lattice(wall_chords(echoes, t_ns, x, y, yaw), window_m)
@@ -304,24 +294,24 @@ def compass_correction(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
     metrics["applied"] = False
     if fit is None:
         metrics["note"] = "not applied: fewer than 3 windows of travel show a wall lattice"
-        return Compassed(x, y, yaw, metrics)
+        return Corrected(x, y, yaw, metrics)
     if fit.wall_sigma > math.radians(MAX_WALL_SIGMA_DEG):
         metrics["note"] = (f"not applied: the windows share no lattice (they scatter "
                            f"{math.degrees(fit.wall_sigma):.1f}° about it, > "
                            f"{MAX_WALL_SIGMA_DEG:.0f}°)")
-        return Compassed(x, y, yaw, metrics)
+        return Corrected(x, y, yaw, metrics)
     if abs(fit.bias) > max_bias:
         metrics["note"] = (f"not applied: the walls' drift, {math.degrees(fit.bias):+.3f}°/m, "
                            f"leaves the ± {math.degrees(max_bias):g}°/m searched")
-        return Compassed(x, y, yaw, metrics)
+        return Corrected(x, y, yaw, metrics)
     # Student's t only asks more than min_z (and its import costs a run 50 ms)
     needed = min_z if fit.z < min_z else fit.z_needed(min_z)
     if fit.z < needed:
         metrics["note"] = (f"not applied: the heading drift against the walls, "
                            f"{math.degrees(fit.bias):+.4f}°/m, is not established "
                            f"(z {fit.z:.1f} < {needed:.1f} for {fit.windows} windows)")
-        return Compassed(x, y, yaw, metrics)
+        return Corrected(x, y, yaw, metrics)
     metrics["z_needed"] = needed
     metrics["applied"] = True
     turned = apply_drift(x, y, yaw, DriftModel(heading_bias_deg_per_m=-math.degrees(fit.bias)))
-    return Compassed(*turned, metrics)
+    return Corrected(*turned, metrics)
