@@ -211,7 +211,10 @@ class PoseRefinementConfig:
     compass: bool = doc_field(
         "after the calibration, take out the heading bias left where the walls' directions "
         "drift along the run (a building whose walls run along two perpendicular "
-        "directions; pipeline/refine/compass.py)", default=True)
+        "directions; pipeline/refine/compass.py), overrule a bias whose track turns the "
+        "walls off their lattice (an alias: the walls' spectrum over twice "
+        "calibration_max_bias_deg_per_m), and find the scale again under the walls' heading",
+        default=True)
     compass_window_m: float = doc_field("... the walls' directions measured per this much "
                                         "travel, m", default=20.0)
     compass_max_bias_deg_per_m: float = doc_field(

@@ -284,15 +284,44 @@ def consistent_bias_accepted(sharper: float, more_consistent: float, min_gain: f
     return sharper >= 0.0 or more_consistent >= strong_gain
 
 
+def _searched_bias(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, sharp: Sharpness,
+                   consistent: Consistency, base: float, bs: F64, *, res: float, sigma: float,
+                   min_gain: float, strong_gain: float
+                   ) -> tuple[float, BiasRejected | None, bool, float]:
+    """The heading bias at ``k = 0`` over the candidates ``bs`` (module docstring, step 1):
+    (the bias, the sharpest one where it was not applied, whether found by the consistency
+    scan, the coarse step)."""
+    # The coarse scan over the whole range on fewer echoes and cells; the refinements on all.
+    scan = BinnedSharpness(t_ns, x, y, yaw, echoes, sigma=sigma)
+    b_scan = _best_of([(0.0, b) for b in bs.tolist()], scan.scan(0.0, bs),
+                      (scan(0.0, 0.0), 0.0, 0.0))[2]
+    db = float(bs[1] - bs[0])  # the coarse bias step
+    b, rejected = _heading_bias(sharp, consistent, 0.0, b_scan, db, (base, 0.0, 0.0), base,
+                                min_gain, strong_gain)
+    # Echo consistency over the whole range too: where sharpness found none (a lattice can
+    # make the right bias less sharp than none), or an alias of it that a more consistent
+    # bias elsewhere beats.
+    b_c = _consistent_bias(t_ns, x, y, yaw, echoes, consistent, bs, res=res, sigma=sigma,
+                           min_gain=min_gain, sharp=sharp, strong_gain=strong_gain)
+    by_consistency = b_c != 0.0 and (b == 0.0 or (
+        abs(b_c - b) > CONSISTENT_SPAN * db and consistent(0.0, b_c) > consistent(0.0, b)))
+    if by_consistency:
+        b, rejected = b_c, None
+    return b, rejected, by_consistency, db
+
+
 def calibrate(
     t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *, max_scale: float,
     max_bias: float, res: float, sigma: float, min_gain: float = 0.0,
     strong_gain: float = math.inf,
     scale_score: str = "surfaces", max_slope: float = 0.75, min_z: float = 3.0,
     systematic: float = 0.005, window_m: float = 30.0, tilt: TiltMode = "off",
-    far_echoes: Echoes | None = None,
+    far_echoes: Echoes | None = None, bias_centre: float = 0.0,
 ) -> Calibration:
-    """The calibration the echoes agree on (see the module docstring); ``max_scale = 0``
+    """The calibration the echoes agree on (see the module docstring), the heading bias
+    searched within ``bias_centre ± max_bias`` (the walls' bias where their spectrum
+    overruled a first calibration, :mod:`pipeline.refine.compass`) or, with ``max_bias =
+    0``, given: ``bias_centre`` (the walls' where they establish it); ``max_scale = 0``
     searches the heading bias alone, else the scale too by ``scale_score`` (``max_slope``,
     ``min_z``, ``systematic``: the surfaces' gates, see :func:`_surface_calibration`;
     ``window_m``: their travel window, ``tilt``: their patches' orientation fitted,
@@ -306,24 +335,14 @@ def calibrate(
     surfaces' scale uses where they pass :func:`_far_agrees`."""
     sharp = Sharpness(t_ns, x, y, yaw, echoes, res=max(res, sigma), sigma=sigma)
     base = sharp(0.0, 0.0)
-    bs = _bias_steps(x, y, max_bias)
-    # The coarse scan over the whole range on fewer echoes and cells; the refinements on all.
-    scan = BinnedSharpness(t_ns, x, y, yaw, echoes, sigma=sigma)
-    b_scan = _best_of([(0.0, b) for b in bs.tolist()], scan.scan(0.0, bs),
-                      (scan(0.0, 0.0), 0.0, 0.0))[2]
     consistent = Consistency(t_ns, x, y, yaw, echoes, res=2 * res, sigma=sigma)
-    db = float(bs[1] - bs[0])  # the coarse bias step
-    b, rejected = _heading_bias(sharp, consistent, 0.0, b_scan, db, (base, 0.0, 0.0), base,
-                                min_gain, strong_gain)
-    # Echo consistency over the whole range too: where sharpness found none (a lattice can
-    # make the right bias less sharp than none), or an alias of it that a more consistent
-    # bias elsewhere beats.
-    b_c = _consistent_bias(t_ns, x, y, yaw, echoes, consistent, bs, res=res, sigma=sigma,
-                           min_gain=min_gain, sharp=sharp, strong_gain=strong_gain)
-    by_consistency = b_c != 0.0 and (b == 0.0 or (
-        abs(b_c - b) > CONSISTENT_SPAN * db and consistent(0.0, b_c) > consistent(0.0, b)))
-    if by_consistency:
-        b, rejected = b_c, None
+    if max_bias == 0:  # the heading bias given (the walls', pipeline.refine.compass)
+        b, rejected, by_consistency, db = bias_centre, None, False, 0.0
+    else:
+        b, rejected, by_consistency, db = _searched_bias(
+            t_ns, x, y, yaw, echoes, sharp, consistent, base,
+            bias_centre + _bias_steps(x, y, max_bias), res=res, sigma=sigma,
+            min_gain=min_gain, strong_gain=strong_gain)
     best = (sharp(0.0, b) if b else base, 0.0, b)
     if max_scale <= 0:
         return Calibration(0.0, best[2], best[0], base, bias_rejected=rejected)
@@ -411,8 +430,10 @@ def _surface_calibration(
     if math.isfinite(first.value):
         k = float(np.clip(first.value, -max_scale, max_scale))
         b *= 1.0 + k  # the bias is held per reported metre while the scale varies
-        # The bias at that scale as at k = 0 (the same rule).
-        if by_consistency:
+        # The bias at that scale as at k = 0 (the same rule), unless given.
+        if bias_step == 0:
+            b_new = b
+        elif by_consistency:
             b_new = (_most_consistent(consistent, k, b, bias_step)
                      if _consistency_gain(consistent, k, b) >= min_gain else 0.0)
         else:

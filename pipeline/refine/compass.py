@@ -30,6 +30,21 @@ whole run shares without a single revisit, so the lever arm is the run's length.
   ``c``'s standard error is the larger of the weighted model's and a sandwich over the
   residuals with neighbouring windows correlated (Newey-West, ``HAC_LAG``).
 
+**The wall spectrum** (:func:`wall_spectrum`, :func:`spectrum_turn`): the windows reach
+``max_bias``; a calibration that took an alias of the bias (MIT's Infinite Corridor
+drifted by 0.8°/m, calibrated to −2.81°/m: its track curled into circles) leaves a turning
+no 20 m window can follow. The whole run's chords then say it at once: the lattice's
+strength ``R(c) = |Σ w·e^{4i(θ − c·s)}| / Σ w`` over drifts ``c`` (a Fourier transform over
+travel, frequency ``4c``) peaks where the turn is taken out (the Infinite Corridor: 0.04 at
+the calibration's bias, 0.93 turned by +3.62°/m, which lands at 0.78°/m per reported metre
+for a truth of 0.8 / 1.03). A turn beyond ``max_bias`` is taken as established where the
+turned lattice passes the Rayleigh test (``n·R² ≥ ln(candidates / SPECTRUM_ALPHA)``, no
+lattice at all being the null) and the track's own is at most ``SPECTRUM_MAX_RATIO`` of it;
+:func:`pipeline.refine.refine.refine_track` then calibrates again within ``max_bias`` of
+the walls' bias, so that the scale is found under the right heading. On the eight other
+buildings' drifted, true and real-odometry tracks the peak lies within 0.02°/m of the
+calibration's (``R`` level to 1 %), Acapulco's at its −0.074°/m.
+
 **Gate.** The correction is applied where the windows share a lattice (their robust
 scatter about it under ``MAX_WALL_SIGMA_DEG``, half of the 26° that directions with none
 scatter modulo 90°: on true poses the buildings scatter 0.45-4.7°, the Freiburg campus
@@ -40,7 +55,9 @@ errors would with the error known: Student's t over the windows the robust weigh
 (the drifted Freiburg 101's six windows gave −0.082°/m at z 3.1 for a drift near 0; six
 windows need 17, twenty 5.2). The odometry is then re-integrated with its heading turned by
 ``−c`` per metre (:func:`pipeline.drift.apply_drift`'s heading bias; the start pose, the
-frame, is kept).
+frame, is kept). Where it is applied, the calibration's scale is found again under the
+heading the walls establish (given, not searched: Acapulco's +3.7 % under the calibration's
+own 0.88°/m, +3.1 % under the walls' 0.80°/m, for a drift of 3 % and 0.8°/m).
 
 Measured (``python -m benchmarks.buildings``, benchmarks/RESULTS.md, twenty-seventh
 session): Acapulco drifted by 3 % and 0.8°/m, calibrated to 0.88°/m, gives ``c`` =
@@ -88,6 +105,10 @@ WALL_FLOOR_DEG = 0.5
 # directions with no lattice at all scatter 90°/√12 = 26° modulo 90°; windows that scatter
 # half that about the lattice fitted share none (a track curled by a wrong bias: 35°)
 MAX_WALL_SIGMA_DEG = 0.5 * 90.0 / math.sqrt(12.0)
+SPECTRUM_BIN_M = 0.25  # the wall spectrum's travel bins (phase error under 2·c·bin, 0.05 rad at 6°/m)
+SPECTRUM_PAD = 4  # its FFT padded to this many times the run: candidates a quarter lobe apart
+SPECTRUM_MAX_RATIO = 0.5  # the track's own lattice at most half as strong as the turned one's
+SPECTRUM_ALPHA = 1e-6  # the turned lattice's Rayleigh test over all candidates (Bonferroni)
 
 
 @dataclass(frozen=True)
@@ -132,6 +153,73 @@ class BiasFit:
         from scipy.special import ndtr, stdtrit  # not scipy.stats: 0.5 s of imports
 
         return float(-stdtrit(max(self.dof, 1.0), ndtr(-min_z)))
+
+
+@dataclass(frozen=True)
+class Turn:
+    """The wall spectrum's strongest drift: ``c`` (rad/m), the lattice's strength ``R`` there
+    and at no drift (0 … 1), the chords' effective number, the candidates searched."""
+
+    bias: float
+    strength: float
+    strength_at_zero: float
+    chords: float
+    candidates: int
+
+    @property
+    def rayleigh(self) -> float:
+        """The peak's Rayleigh statistic, ``n·R²``: ``P(R ≥ r) ≈ e^{−n r²}`` for directions
+        with no lattice."""
+        return self.chords * self.strength**2
+
+    def decisive(self) -> bool:
+        """Whether the turn is established (module docstring, *the wall spectrum*): the
+        turned lattice passes the Rayleigh test at ``SPECTRUM_ALPHA`` over every candidate
+        searched, and the track's own is at most ``SPECTRUM_MAX_RATIO`` of it."""
+        return (self.rayleigh >= math.log(self.candidates / SPECTRUM_ALPHA)
+                and self.strength_at_zero <= SPECTRUM_MAX_RATIO * self.strength)
+
+
+def lattice_strength(chords: Chords, bias: F64) -> F64:
+    """Per drift ``c`` in ``bias`` (rad/m): ``|Σ w·e^{4i(θ − c·s)}| / Σ w``, how well the
+    chords share one lattice once the heading drift ``c`` is taken out (1: every chord on
+    it; weights ``w`` = length²)."""
+    w = chords.length**2
+    phasor = w * np.exp(4j * chords.angle)
+    out = np.empty(bias.size)
+    for i in range(0, bias.size, 256):  # bounded memory: 256 × chords
+        c = bias[i:i + 256]
+        out[i:i + 256] = np.abs(np.exp(-4j * np.outer(c, chords.travel)) @ phasor)
+    return out / max(float(w.sum()), 1e-300)
+
+
+def wall_spectrum(chords: Chords, reach: float) -> Turn | None:
+    """The drift ``|c| ≤ reach`` (rad/m) under which the whole run's chords share one lattice
+    best: the strength over travel binned by ``SPECTRUM_BIN_M`` and Fourier transformed
+    (frequency ``4c``), then the best candidate refined on the chords themselves; None
+    without chords."""
+    if chords.angle.size == 0:
+        return None
+    w = chords.length**2
+    s0 = float(chords.travel.min())
+    b = np.floor((chords.travel - s0) / SPECTRUM_BIN_M).astype(np.int64)
+    phasor = w * np.exp(4j * chords.angle)
+    binned = np.bincount(b, phasor.real) + 1j * np.bincount(b, phasor.imag)
+    n = 1 << max(math.ceil(math.log2(SPECTRUM_PAD * binned.size)), 4)
+    spectrum = np.abs(np.fft.fft(binned, n))  # Σ Z_b e^{−iωs_b}, ω = 2πk / (n·bin)
+    omega = 2.0 * math.pi * np.fft.fftfreq(n, SPECTRUM_BIN_M)
+    c = omega / 4.0
+    inside = np.abs(c) <= reach
+    if not inside.any():
+        return None
+    step = float(2.0 * math.pi / (n * SPECTRUM_BIN_M) / 4.0)
+    best = float(c[inside][int(np.argmax(spectrum[inside]))])
+    fine = np.clip(best + step * np.linspace(-1.0, 1.0, 41), -reach, reach)
+    strength = lattice_strength(chords, fine)
+    i = int(np.argmax(strength))
+    zero = float(lattice_strength(chords, np.zeros(1))[0])
+    return Turn(float(fine[i]), float(strength[i]), zero,
+                float(w.sum() ** 2 / (w**2).sum()), int(inside.sum()))
 
 
 def wall_chords(echoes: Echoes, t_ns: I64, x: F64, y: F64, yaw: F64) -> Chords:
@@ -284,11 +372,36 @@ def metrics_of(fit: BiasFit | None, lattice: Lattice) -> dict[str, Any]:
     return out
 
 
+def spectrum_metrics(turn: Turn, applied: bool) -> dict[str, Any]:
+    """What the wall spectrum measured, for ``metrics.json``."""
+    return {"bias_deg_per_m": math.degrees(turn.bias), "strength": turn.strength,
+            "strength_at_zero": turn.strength_at_zero, "rayleigh": turn.rayleigh,
+            "rayleigh_needed": math.log(turn.candidates / SPECTRUM_ALPHA), "applied": applied}
+
+
+def spectrum_turn(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *, max_bias: float,
+                  reach: float) -> tuple[Turn | None, dict[str, Any]]:
+    """The wall spectrum's turn of the track ``(x, y, yaw)`` where it is established and
+    beyond ``max_bias`` (the windows' reach; searched up to ``reach``, rad/m), else None;
+    and what was measured, for ``metrics.json``."""
+    turn = wall_spectrum(wall_chords(echoes, t_ns, x, y, yaw), reach)
+    if turn is None:
+        return None, {"applied": False, "note": "no wall chords"}
+    applied = abs(turn.bias) > max_bias and turn.decisive()
+    return (turn if applied else None), spectrum_metrics(turn, applied)
+
+
 def compass_correction(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
                        window_m: float, max_bias: float, min_z: float) -> Corrected:
     """The track ``(x, y, yaw)`` at ``t_ns`` with the heading bias its walls establish
     taken out, or as given (module docstring)."""
     lattice = window_lattice(wall_chords(echoes, t_ns, x, y, yaw), window_m)
+    return _windows_correction(x, y, yaw, lattice, max_bias, min_z)
+
+
+def _windows_correction(x: F64, y: F64, yaw: F64, lattice: Lattice, max_bias: float,
+                        min_z: float) -> Corrected:
+    """The track with the drift the windows' ``lattice`` establishes taken out, or as given."""
     fit = fit_bias(lattice, max_bias)
     metrics = metrics_of(fit, lattice)
     metrics["applied"] = False

@@ -198,6 +198,9 @@ def test_a_round_hall_is_no_compass(tmp_path):
     assert out.x is dx
     assert out.metrics["wall_sigma_deg"] > compass.MAX_WALL_SIGMA_DEG
     assert out.metrics["note"].startswith("not applied: the windows share no lattice")
+    turn, m = compass.spectrum_turn(t, dx, dy, dyaw, echoes.on_track(t, dx, dy, dyaw),
+                                    max_bias=math.radians(0.15), reach=math.radians(6.0))
+    assert turn is None and m["applied"] is False  # nor does the spectrum find a lattice
 
 
 def test_a_drift_beyond_the_range_searched_is_not_applied(intel):
@@ -211,3 +214,49 @@ def test_a_drift_beyond_the_range_searched_is_not_applied(intel):
     assert out.metrics["bias_left_deg_per_m"] == pytest.approx(0.2, abs=0.01)
     assert out.metrics["note"] == ("not applied: the walls' drift, +0.202°/m, leaves the "
                                    "± 0.15°/m searched")
+
+
+def test_the_lattice_strength_peaks_at_the_drift_that_turns_the_walls():
+    """Chords on one lattice whose direction turns 1.2°/m along 300 m of travel: only that
+    drift taken out puts them back on it."""
+    rng = np.random.default_rng(5)
+    s = np.sort(rng.uniform(0.0, 300.0, 600))
+    angle = rng.integers(0, 4, s.size) * math.pi / 2 + math.radians(1.2) * s
+    chords = compass.Chords(angle + rng.normal(0.0, math.radians(1.0), s.size),
+                            rng.uniform(0.5, 2.0, s.size), s)
+    strength = compass.lattice_strength(chords, np.radians([0.0, 1.2, -1.2]))
+    assert strength[1] > 0.99 and strength[0] < 0.1 and strength[2] < 0.1
+    turn = compass.wall_spectrum(chords, math.radians(6.0))
+    assert turn is not None
+    assert math.degrees(turn.bias) == pytest.approx(1.2, abs=0.002)
+    assert turn.strength > 0.99 and turn.strength_at_zero < 0.1 and turn.decisive()
+    assert compass.wall_spectrum(compass.Chords(*(np.empty(0),) * 3), 0.1) is None
+
+
+def test_a_wall_spectrum_without_a_lattice_is_not_decisive():
+    """Directions with no lattice: some drift always scores best, by chance; the Rayleigh
+    test over every candidate searched refuses it (five seeds)."""
+    for seed in range(5):
+        rng = np.random.default_rng(seed)
+        s = np.sort(rng.uniform(0.0, 300.0, 400))
+        chords = compass.Chords(rng.uniform(-math.pi, math.pi, s.size),
+                                rng.uniform(0.5, 2.0, s.size), s)
+        turn = compass.wall_spectrum(chords, math.radians(6.0))
+        assert turn is not None and not turn.decisive()
+        assert turn.rayleigh < math.log(turn.candidates / compass.SPECTRUM_ALPHA)
+
+
+def test_the_spectrum_finds_a_heading_the_windows_cannot_reach(intel):
+    """The Intel lab's true poses turned by 1.5°/m (30° per 20 m window, beyond the
+    windows' fit): the spectrum finds the turn; on the true poses it finds none to make."""
+    (t, x, y, yaw), echoes = intel
+    dx, dy, dyaw = apply_drift(x, y, yaw, DriftModel(heading_bias_deg_per_m=1.5))
+    turn, m = compass.spectrum_turn(t, dx, dy, dyaw, echoes.on_track(t, dx, dy, dyaw),
+                                    max_bias=math.radians(0.15), reach=math.radians(6.0))
+    assert turn is not None and m["applied"] is True
+    assert m["bias_deg_per_m"] == pytest.approx(1.5, abs=0.02)
+    assert m["strength"] > 2 * m["strength_at_zero"] and m["rayleigh"] > m["rayleigh_needed"]
+    none, m0 = compass.spectrum_turn(t, x, y, yaw, echoes, max_bias=math.radians(0.15),
+                                     reach=math.radians(6.0))
+    assert none is None and m0["applied"] is False
+    assert abs(m0["bias_deg_per_m"]) < 0.15  # the peak is where the walls already are

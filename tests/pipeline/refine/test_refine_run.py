@@ -200,6 +200,14 @@ def test_summary_says_what_was_applied_and_why_a_scale_was_not() -> None:
             "taken out; poses moved") in summary(compassed, cfg)
     kept_out = {**applied, "compass": {**compassed["compass"], "z": 1.2, "applied": False}}
     assert "walls" not in summary(kept_out, cfg)
+    overruled = {**applied, "wall_spectrum": {"bias_deg_per_m": 3.623, "strength": 0.926,
+                                              "strength_at_zero": 0.041, "applied": True,
+                                              "overruled_deg_per_m": -2.812}}
+    assert ("heading bias +0.80°/m; the walls overruled a heading bias of -2.81°/m (their "
+            "lattice 0.04 → 0.93 turned by +3.62°/m), calibrated again there; poses moved"
+            ) in summary(overruled, cfg)
+    level = {**applied, "wall_spectrum": {**overruled["wall_spectrum"], "applied": False}}
+    assert "walls" not in summary(level, cfg)
 
 
 def test_the_grid_is_sized_from_the_refined_poses(drifted_log: Path, tmp_path: Path) -> None:
@@ -264,3 +272,96 @@ def test_a_robot_that_does_not_travel_keeps_its_poses(motion: str, tmp_path: Pat
     np.testing.assert_array_equal(refined.x, odometry.x)
     np.testing.assert_array_equal(refined.yaw, odometry.yaw)
     assert len(refined) == len(poses)
+
+
+@pytest.fixture(scope="module")
+def intel_drifted() -> tuple[object, object, tuple[np.ndarray, ...]]:
+    """The Intel lab's sample log turned by 0.8°/m (no scale error): its odometry track,
+    echoes on it, and the true poses."""
+    from pipeline.drift import DriftModel, apply_drift
+    from pipeline.pose_sync import PoseTrack
+    from tests.pipeline.refine.conftest import log_echoes
+
+    log = Path(__file__).resolve().parents[3] / "sample_logs" / "intel-lab" / "intel.mcap"
+    (t, x, y, yaw), echoes = log_echoes(log, PoseRefinementConfig().echo_reach_m)
+    dx, dy, dyaw = apply_drift(x, y, yaw, DriftModel(heading_bias_deg_per_m=0.8))
+    return PoseTrack(t, dx, dy, dyaw, "odom", "base_link"), echoes.on_track(t, dx, dy, dyaw), (
+        x, y)
+
+
+def _first_calibration_replaced(monkeypatch: pytest.MonkeyPatch, bias_deg_per_m: float,
+                                refused: bool = False) -> list[tuple[float, float | None]]:
+    """The refinement's first calibration replaced by one with the heading bias given (no
+    scale); later ones (near the walls' bias) as configured, or with ``refused`` the second
+    one by a calibration whose search passed no bias. Returns each call's (bias centre °/m,
+    search half-width rad/m or None: the configured)."""
+    import pipeline.refine.refine as refine
+    from pipeline.refine.calibration import Calibration
+
+    real = refine.configured_calibration
+    calls: list[tuple[float, float | None]] = []
+
+    def replaced(*args: object, bias_centre: float = 0.0, max_bias: float | None = None
+                 ) -> Calibration:
+        calls.append((math.degrees(bias_centre), max_bias))
+        if len(calls) == 1:
+            return Calibration(0.0, math.radians(bias_deg_per_m))
+        if refused and len(calls) == 2:
+            return Calibration(0.0, 0.0)
+        return real(*args, bias_centre=bias_centre, max_bias=max_bias)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(refine, "configured_calibration", replaced)
+    return calls
+
+
+def test_the_walls_overrule_an_alias_of_the_heading_bias(intel_drifted, monkeypatch) -> None:
+    """A first calibration that took an alias (−2°/m for 0.8, as the drifted Infinite
+    Corridor's −2.81°/m) is overruled by the walls' spectrum: calibrated again within the
+    compass's reach of the walls' bias, the run gets its heading back."""
+    from pipeline.refine.refine import refine_track
+
+    track, echoes, (x, y) = intel_drifted
+    calls = _first_calibration_replaced(monkeypatch, -2.0)
+    r = refine_track(track, echoes, PoseRefinementConfig(enabled=True))  # type: ignore[arg-type]
+    spectrum = r.metrics["wall_spectrum"]
+    assert spectrum["applied"] is True and spectrum["overruled_deg_per_m"] == pytest.approx(-2.0)
+    assert spectrum["bias_deg_per_m"] == pytest.approx(2.8, abs=0.03)
+    assert len(calls) >= 2 and calls[1][0] == pytest.approx(0.8, abs=0.03)
+    assert calls[1][1] == pytest.approx(math.radians(0.15))  # searched within the windows' reach
+    assert r.metrics["search_heading_bias_deg_per_m"] == pytest.approx(0.8, abs=0.03)
+    assert float(np.sqrt(np.mean((r.x - x) ** 2 + (r.y - y) ** 2))) < 0.2
+    assert "the walls overruled a heading bias of -2.00°/m (their lattice" in r.metrics["summary"]
+
+
+def test_the_scale_is_found_again_under_the_heading_the_walls_establish(
+        intel_drifted, monkeypatch) -> None:
+    """A first calibration 0.03°/m short of the bias: the compass takes the rest out, and
+    the calibration runs again with the heading bias given as the walls' (the scale found
+    under a heading the walls contradict leans: Acapulco's +3.7 % for 3 %, +3.1 % again)."""
+    from pipeline.refine.refine import refine_track
+
+    track, echoes, (x, y) = intel_drifted
+    calls = _first_calibration_replaced(monkeypatch, 0.77)
+    r = refine_track(track, echoes, PoseRefinementConfig(enabled=True))  # type: ignore[arg-type]
+    assert r.metrics["wall_spectrum"]["applied"] is False  # within the windows' reach
+    assert r.metrics["compass"]["applied"] is True
+    assert r.metrics["compass"]["bias_left_deg_per_m"] == pytest.approx(0.03, abs=0.005)
+    assert len(calls) == 2 and calls[1] == (pytest.approx(0.8, abs=0.005), 0.0)
+    assert r.metrics["search_heading_bias_deg_per_m"] == pytest.approx(0.8, abs=0.005)
+    assert float(np.sqrt(np.mean((r.x - x) ** 2 + (r.y - y) ** 2))) < 0.2
+
+
+def test_the_walls_bias_stands_where_the_search_near_it_passes_none(intel_drifted,
+                                                                     monkeypatch) -> None:
+    """Near the walls' bias the echo scores refine it; where none there passes their gates,
+    the walls' own is given, not 0 (which the spectrum has just refuted)."""
+    from pipeline.refine.refine import refine_track
+
+    track, echoes, (x, y) = intel_drifted
+    calls = _first_calibration_replaced(monkeypatch, -2.0, refused=True)
+    r = refine_track(track, echoes, PoseRefinementConfig(enabled=True))  # type: ignore[arg-type]
+    assert r.metrics["wall_spectrum"]["applied"] is True
+    assert calls[1][1] == pytest.approx(math.radians(0.15))
+    assert calls[2] == (pytest.approx(calls[1][0]), 0.0)  # the same bias, given
+    assert r.metrics["search_heading_bias_deg_per_m"] == pytest.approx(0.8, abs=0.03)
+    assert float(np.sqrt(np.mean((r.x - x) ** 2 + (r.y - y) ** 2))) < 0.3
