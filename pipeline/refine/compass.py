@@ -39,7 +39,10 @@ travel, frequency ``4c``) peaks where the turn is taken out (the Infinite Corrid
 the calibration's bias, 0.93 turned by +3.62°/m, which lands at 0.78°/m per reported metre
 for a truth of 0.8 / 1.03). A turn beyond ``max_bias`` is taken as established where the
 turned lattice passes the Rayleigh test (``n·R² ≥ ln(candidates / SPECTRUM_ALPHA)``, no
-lattice at all being the null) and the track's own is at most ``SPECTRUM_MAX_RATIO`` of it;
+lattice at all being the null), the track's own is at most ``SPECTRUM_MAX_RATIO`` of it,
+and the turn tightens each window's own lattice by at least half what a drift that size
+spreads a window by (:func:`window_strength`; two parts of a building 40-45° apart, visited
+one after the other, align under a drift of 0.2-0.33°/m that spreads every window instead);
 :func:`pipeline.refine.refine.refine_track` then calibrates again within ``max_bias`` of
 the walls' bias, so that the scale is found under the right heading. On the eight other
 buildings' drifted, true and real-odometry tracks the peak lies within 0.02°/m of the
@@ -165,6 +168,9 @@ class Turn:
     strength_at_zero: float
     chords: float
     candidates: int
+    windows_at_zero: float = math.nan  # window_strength without the turn, and with it
+    windows: float = math.nan
+    window_m: float = math.nan
 
     @property
     def rayleigh(self) -> float:
@@ -172,12 +178,23 @@ class Turn:
         with no lattice."""
         return self.chords * self.strength**2
 
+    @property
+    def windows_gain_needed(self) -> float:
+        """Half what taking out a drift ``c`` tightens a window of ``window_m`` whose
+        chords it spreads evenly: its strength times ``1 − sinc(2c·window_m)``."""
+        half_turn = abs(self.bias) * self.window_m * 2.0  # the 4θ spread, halved
+        return 0.5 * self.windows * (1.0 - math.sin(half_turn) / half_turn) if half_turn else 0.0
+
     def decisive(self) -> bool:
         """Whether the turn is established (module docstring, *the wall spectrum*): the
         turned lattice passes the Rayleigh test at ``SPECTRUM_ALPHA`` over every candidate
-        searched, and the track's own is at most ``SPECTRUM_MAX_RATIO`` of it."""
+        searched, the track's own is at most ``SPECTRUM_MAX_RATIO`` of it, and the turn
+        tightens the windows' own lattices as a drift would (:attr:`windows_gain_needed`):
+        parts of the building on two lattices 40-45° apart, visited one after the other,
+        align under a drift that spreads each window instead."""
         return (self.rayleigh >= math.log(self.candidates / SPECTRUM_ALPHA)
-                and self.strength_at_zero <= SPECTRUM_MAX_RATIO * self.strength)
+                and self.strength_at_zero <= SPECTRUM_MAX_RATIO * self.strength
+                and self.windows - self.windows_at_zero >= self.windows_gain_needed)
 
 
 def lattice_strength(chords: Chords, bias: F64) -> F64:
@@ -193,7 +210,20 @@ def lattice_strength(chords: Chords, bias: F64) -> F64:
     return out / max(float(w.sum()), 1e-300)
 
 
-def wall_spectrum(chords: Chords, reach: float) -> Turn | None:
+def window_strength(chords: Chords, window_m: float, bias: float = 0.0) -> float:
+    """How well each window of ``window_m`` of travel shares a lattice of its own with the
+    drift ``bias`` (rad/m) taken out: ``Σ_windows |Σ w·e^{4i(θ − c·s)}| / Σ w`` (1: every
+    window's chords on one lattice, whatever the others')."""
+    if chords.angle.size == 0:
+        return 0.0
+    w = chords.length**2
+    phasor = w * np.exp(4j * (chords.angle - bias * chords.travel))
+    _, win = np.unique(np.floor(chords.travel / window_m), return_inverse=True)
+    per = np.bincount(win, phasor.real) + 1j * np.bincount(win, phasor.imag)
+    return float(np.abs(per).sum() / w.sum())
+
+
+def wall_spectrum(chords: Chords, reach: float, window_m: float = 20.0) -> Turn | None:
     """The drift ``|c| ≤ reach`` (rad/m) under which the whole run's chords share one lattice
     best: the strength over travel binned by ``SPECTRUM_BIN_M`` and Fourier transformed
     (frequency ``4c``), then the best candidate refined on the chords themselves; None
@@ -219,7 +249,9 @@ def wall_spectrum(chords: Chords, reach: float) -> Turn | None:
     i = int(np.argmax(strength))
     zero = float(lattice_strength(chords, np.zeros(1))[0])
     return Turn(float(fine[i]), float(strength[i]), zero,
-                float(w.sum() ** 2 / (w**2).sum()), int(inside.sum()))
+                float(w.sum() ** 2 / (w**2).sum()), int(inside.sum()),
+                window_strength(chords, window_m), window_strength(chords, window_m, float(fine[i])),
+                window_m)
 
 
 def wall_chords(echoes: Echoes, t_ns: I64, x: F64, y: F64, yaw: F64) -> Chords:
@@ -376,15 +408,17 @@ def spectrum_metrics(turn: Turn, applied: bool) -> dict[str, Any]:
     """What the wall spectrum measured, for ``metrics.json``."""
     return {"bias_deg_per_m": math.degrees(turn.bias), "strength": turn.strength,
             "strength_at_zero": turn.strength_at_zero, "rayleigh": turn.rayleigh,
-            "rayleigh_needed": math.log(turn.candidates / SPECTRUM_ALPHA), "applied": applied}
+            "rayleigh_needed": math.log(turn.candidates / SPECTRUM_ALPHA),
+            "windows_at_zero": turn.windows_at_zero, "windows": turn.windows,
+            "windows_gain_needed": turn.windows_gain_needed, "applied": applied}
 
 
 def spectrum_turn(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *, max_bias: float,
-                  reach: float) -> tuple[Turn | None, dict[str, Any]]:
+                  reach: float, window_m: float) -> tuple[Turn | None, dict[str, Any]]:
     """The wall spectrum's turn of the track ``(x, y, yaw)`` where it is established and
     beyond ``max_bias`` (the windows' reach; searched up to ``reach``, rad/m), else None;
     and what was measured, for ``metrics.json``."""
-    turn = wall_spectrum(wall_chords(echoes, t_ns, x, y, yaw), reach)
+    turn = wall_spectrum(wall_chords(echoes, t_ns, x, y, yaw), reach, window_m)
     if turn is None:
         return None, {"applied": False, "note": "no wall chords"}
     applied = abs(turn.bias) > max_bias and turn.decisive()

@@ -184,7 +184,8 @@ def _under_the_walls(t_ns: I64, x: F64, y: F64, yaw: F64, all_echoes: Echoes, ec
     track = cal.correct(x, y, yaw)
     turn, metrics["wall_spectrum"] = spectrum_turn(
         t_ns, *track, echoes, max_bias=max_bias,
-        reach=2.0 * math.radians(cfg.calibration_max_bias_deg_per_m))
+        reach=2.0 * math.radians(cfg.calibration_max_bias_deg_per_m),
+        window_m=cfg.compass_window_m)
     if turn is not None:
         metrics["wall_spectrum"]["overruled_deg_per_m"] = math.degrees(cal.heading_bias)
         cal = again(turn.bias, max_bias)  # the echoes resolve it within the lobe

@@ -199,7 +199,8 @@ def test_a_round_hall_is_no_compass(tmp_path):
     assert out.metrics["wall_sigma_deg"] > compass.MAX_WALL_SIGMA_DEG
     assert out.metrics["note"].startswith("not applied: the windows share no lattice")
     turn, m = compass.spectrum_turn(t, dx, dy, dyaw, echoes.on_track(t, dx, dy, dyaw),
-                                    max_bias=math.radians(0.15), reach=math.radians(6.0))
+                                    max_bias=math.radians(0.15), reach=math.radians(6.0),
+                                    window_m=20.0)
     assert turn is None and m["applied"] is False  # nor does the spectrum find a lattice
 
 
@@ -246,17 +247,50 @@ def test_a_wall_spectrum_without_a_lattice_is_not_decisive():
         assert turn.rayleigh < math.log(turn.candidates / compass.SPECTRUM_ALPHA)
 
 
+@pytest.mark.parametrize(("wing_deg", "first_m"), [(45.0, 100.0), (45.0, 200.0), (40.0, 150.0)])
+def test_two_lattices_visited_one_after_the_other_are_no_drift(wing_deg, first_m):
+    """A building whose second part stands 40-45° off the first's lattice, visited after
+    it: a drift that turns one onto the other aligns the whole run (the spectrum's
+    strength 0.01-0.2 → 0.7) but spreads every window's own lattice, which a drift the
+    odometry had would have tightened: not decisive."""
+    rng = np.random.default_rng(0)
+    s = np.sort(rng.uniform(0.0, 2 * first_m, 800))
+    lattice = np.where(s < first_m, 0.0, math.radians(wing_deg))
+    angle = (lattice + rng.integers(0, 4, s.size) * math.pi / 2
+             + rng.normal(0.0, math.radians(1.5), s.size))
+    chords = compass.Chords(angle, rng.uniform(0.5, 2.0, s.size), s)
+    turn = compass.wall_spectrum(chords, math.radians(6.0), 20.0)
+    assert turn is not None and abs(math.degrees(turn.bias)) > 0.15
+    assert turn.strength > 2 * turn.strength_at_zero  # the whole run aligns ...
+    assert turn.windows - turn.windows_at_zero < turn.windows_gain_needed  # ... its windows not
+    assert not turn.decisive()
+
+
+@pytest.mark.parametrize("drift_deg_per_m", [0.2, 0.5, 3.6])
+def test_a_drift_tightens_the_windows_as_well(drift_deg_per_m):
+    rng = np.random.default_rng(1)
+    s = np.sort(rng.uniform(0.0, 300.0, 800))
+    angle = (rng.integers(0, 4, s.size) * math.pi / 2 + math.radians(drift_deg_per_m) * s
+             + rng.normal(0.0, math.radians(1.5), s.size))
+    turn = compass.wall_spectrum(compass.Chords(angle, rng.uniform(0.5, 2.0, s.size), s),
+                                 math.radians(6.0), 20.0)
+    assert turn is not None and turn.decisive()
+    assert math.degrees(turn.bias) == pytest.approx(drift_deg_per_m, abs=0.005)
+    assert turn.windows - turn.windows_at_zero > 1.5 * turn.windows_gain_needed
+
+
 def test_the_spectrum_finds_a_heading_the_windows_cannot_reach(intel):
     """The Intel lab's true poses turned by 1.5°/m (30° per 20 m window, beyond the
     windows' fit): the spectrum finds the turn; on the true poses it finds none to make."""
     (t, x, y, yaw), echoes = intel
     dx, dy, dyaw = apply_drift(x, y, yaw, DriftModel(heading_bias_deg_per_m=1.5))
     turn, m = compass.spectrum_turn(t, dx, dy, dyaw, echoes.on_track(t, dx, dy, dyaw),
-                                    max_bias=math.radians(0.15), reach=math.radians(6.0))
+                                    max_bias=math.radians(0.15), reach=math.radians(6.0),
+                                    window_m=20.0)
     assert turn is not None and m["applied"] is True
     assert m["bias_deg_per_m"] == pytest.approx(1.5, abs=0.02)
     assert m["strength"] > 2 * m["strength_at_zero"] and m["rayleigh"] > m["rayleigh_needed"]
     none, m0 = compass.spectrum_turn(t, x, y, yaw, echoes, max_bias=math.radians(0.15),
-                                     reach=math.radians(6.0))
+                                     reach=math.radians(6.0), window_m=20.0)
     assert none is None and m0["applied"] is False
     assert abs(m0["bias_deg_per_m"]) < 0.15  # the peak is where the walls already are
