@@ -39,12 +39,16 @@ travel, frequency ``4c``) peaks where the turn is taken out (the Infinite Corrid
 the calibration's bias, 0.93 turned by +3.62°/m, which lands at 0.78°/m per reported metre
 for a truth of 0.8 / 1.03). A turn beyond ``max_bias`` is taken as established where the
 turned lattice passes the Rayleigh test (``n·R² ≥ ln(candidates / SPECTRUM_ALPHA)``, no
-lattice at all being the null), the track's own is at most ``SPECTRUM_MAX_RATIO`` of it,
+lattice at all being the null) and holds at least ``SPECTRUM_MIN_STRENGTH`` of the chords'
+weight (a Manhattan building, not merely directions that are not uniform), the track's own
+is at most ``SPECTRUM_MAX_RATIO`` of it,
 and the turn tightens each window's own lattice by at least half what a drift that size
 spreads a window by (:func:`window_strength`; two parts of a building 40-45° apart, visited
 one after the other, align under a drift of 0.2-0.33°/m that spreads every window instead);
 :func:`pipeline.refine.refine.refine_track` then calibrates again within ``max_bias`` of
-the walls' bias, so that the scale is found under the right heading. On the eight other
+the walls' bias, so that the scale is found under the right heading, and keeps the first
+calibration where no bias there passes the echo scores' gates (the walls propose, the
+echoes must accept). On the eight other
 buildings' drifted, true and real-odometry tracks the peak lies within 0.02°/m of the
 calibration's (``R`` level to 1 %), Acapulco's at its −0.074°/m.
 
@@ -112,6 +116,10 @@ SPECTRUM_BIN_M = 0.25  # the wall spectrum's travel bins (phase error under 2·c
 SPECTRUM_PAD = 4  # its FFT padded to this many times the run: candidates a quarter lobe apart
 SPECTRUM_MAX_RATIO = 0.5  # the track's own lattice at most half as strong as the turned one's
 SPECTRUM_ALPHA = 1e-6  # the turned lattice's Rayleigh test over all candidates (Bonferroni)
+# ... and the turned lattice holds most of the chords' weight (real buildings at their right
+# heading: 0.65-0.97; a ring corridor 50 m across driven three times, turned onto a spiral
+# the Rayleigh test still passes at 22,000 echoes: 0.18)
+SPECTRUM_MIN_STRENGTH = 0.5
 
 
 @dataclass(frozen=True)
@@ -188,11 +196,13 @@ class Turn:
     def decisive(self) -> bool:
         """Whether the turn is established (module docstring, *the wall spectrum*): the
         turned lattice passes the Rayleigh test at ``SPECTRUM_ALPHA`` over every candidate
-        searched, the track's own is at most ``SPECTRUM_MAX_RATIO`` of it, and the turn
+        searched and holds ``SPECTRUM_MIN_STRENGTH`` of the chords' weight, the track's own
+        lattice is at most ``SPECTRUM_MAX_RATIO`` of it, and the turn
         tightens the windows' own lattices as a drift would (:attr:`windows_gain_needed`):
         parts of the building on two lattices 40-45° apart, visited one after the other,
         align under a drift that spreads each window instead."""
         return (self.rayleigh >= math.log(self.candidates / SPECTRUM_ALPHA)
+                and self.strength >= SPECTRUM_MIN_STRENGTH
                 and self.strength_at_zero <= SPECTRUM_MAX_RATIO * self.strength
                 and self.windows - self.windows_at_zero >= self.windows_gain_needed)
 

@@ -166,30 +166,36 @@ def _under_the_walls(t_ns: I64, x: F64, y: F64, yaw: F64, all_echoes: Echoes, ec
     walls' heading: near the spectrum's bias, searched within the windows' reach (the
     spectrum resolves the alias, the echoes the bias within its peak: the drifted Infinite
     Corridor's scale +3.1 % so, +2.7 % with the spectrum's bias given, F1 0.55 against 0.34
-    of true poses' 0.83); at the windows' bias, given (they measure it to ±0.003°/m on
-    Acapulco, where the echo scores are 0.07°/m off)."""
+    of true poses' 0.83), and applied only where a bias there passes the echo scores'
+    gates (the walls propose, the echoes accept); at the windows' bias, given (they measure
+    it to ±0.003°/m on Acapulco, where the echo scores are 0.07°/m off)."""
     max_bias = math.radians(cfg.compass_max_bias_deg_per_m)
 
     def again(turned_by: float, within: float) -> Calibration:
         """The calibration again with the heading bias ``cal``'s turned by ``turned_by``
         (rad per metre of the track ``cal`` corrects), searched within ``within`` of it
-        (0: given; also where no bias there passes the search's gates: the walls' stands)."""
-        walls = (cal.heading_bias + turned_by) / (1.0 + cal.scale_error)
-        found = configured_calibration(t_ns, x, y, yaw, all_echoes, cfg, max_bias=within,
-                                       bias_centre=walls)
-        if within > 0 and found.heading_bias == 0.0 and walls != 0.0:
-            return again(turned_by, 0.0)
-        return found
+        (0: given)."""
+        return configured_calibration(t_ns, x, y, yaw, all_echoes, cfg, max_bias=within,
+                                      bias_centre=(cal.heading_bias + turned_by)
+                                      / (1.0 + cal.scale_error))
 
     track = cal.correct(x, y, yaw)
-    turn, metrics["wall_spectrum"] = spectrum_turn(
+    turn, spectrum = spectrum_turn(
         t_ns, *track, echoes, max_bias=max_bias,
         reach=2.0 * math.radians(cfg.calibration_max_bias_deg_per_m),
         window_m=cfg.compass_window_m)
+    metrics["wall_spectrum"] = spectrum
     if turn is not None:
-        metrics["wall_spectrum"]["overruled_deg_per_m"] = math.degrees(cal.heading_bias)
-        cal = again(turn.bias, max_bias)  # the echoes resolve it within the lobe
-        track = cal.correct(x, y, yaw)
+        proposal = again(turn.bias, max_bias)  # the echoes resolve it within the peak
+        walls = (cal.heading_bias + turn.bias) / (1.0 + cal.scale_error)
+        if proposal.heading_bias != 0.0 or abs(walls) <= max_bias:
+            spectrum["overruled_deg_per_m"] = math.degrees(cal.heading_bias)
+            cal = proposal
+            track = cal.correct(x, y, yaw)
+        else:  # no bias near the walls' passes the echo scores' gates: the first stands
+            spectrum["applied"] = False
+            spectrum["note"] = ("not applied: no heading bias within the windows' reach of "
+                                "the walls' passes the calibration's gates")
     turned = compass_correction(t_ns, *track, echoes, window_m=cfg.compass_window_m,
                                 max_bias=max_bias, min_z=cfg.compass_min_z)
     metrics["compass"] = turned.metrics

@@ -294,3 +294,19 @@ def test_the_spectrum_finds_a_heading_the_windows_cannot_reach(intel):
                                      reach=math.radians(6.0), window_m=20.0)
     assert none is None and m0["applied"] is False
     assert abs(m0["bias_deg_per_m"]) < 0.15  # the peak is where the walls already are
+
+
+def test_a_weak_lattice_is_not_a_building_however_many_chords_show_it():
+    """A fifth of 20,000 chords on a turning lattice, the rest in every direction: the
+    Rayleigh test passes (the directions are not uniform), but a lattice holding 0.2 of
+    their weight is not a Manhattan building's (0.65-0.97 measured)."""
+    rng = np.random.default_rng(2)
+    s = np.sort(rng.uniform(0.0, 400.0, 20_000))
+    on = rng.random(s.size) < 0.2
+    angle = np.where(on, rng.integers(0, 4, s.size) * math.pi / 2 + math.radians(1.0) * s,
+                     rng.uniform(-math.pi, math.pi, s.size))
+    turn = compass.wall_spectrum(compass.Chords(angle, np.ones(s.size), s), math.radians(6.0),
+                                 20.0)
+    assert turn is not None and math.degrees(turn.bias) == pytest.approx(1.0, abs=0.01)
+    assert turn.rayleigh > 10 * math.log(turn.candidates / compass.SPECTRUM_ALPHA)
+    assert turn.strength < compass.SPECTRUM_MIN_STRENGTH and not turn.decisive()

@@ -351,17 +351,20 @@ def test_the_scale_is_found_again_under_the_heading_the_walls_establish(
     assert float(np.sqrt(np.mean((r.x - x) ** 2 + (r.y - y) ** 2))) < 0.2
 
 
-def test_the_walls_bias_stands_where_the_search_near_it_passes_none(intel_drifted,
-                                                                     monkeypatch) -> None:
-    """Near the walls' bias the echo scores refine it; where none there passes their gates,
-    the walls' own is given, not 0 (which the spectrum has just refuted)."""
+def test_the_first_calibration_stands_where_the_echoes_refuse_the_walls_bias(
+        intel_drifted, monkeypatch) -> None:
+    """The walls propose, the echoes accept: where no bias near the walls' passes the echo
+    scores' gates (a round hall straightened is also a lattice), the first calibration
+    stands, and metrics.json says why."""
     from pipeline.refine.refine import refine_track
 
-    track, echoes, (x, y) = intel_drifted
+    track, echoes, _ = intel_drifted
     calls = _first_calibration_replaced(monkeypatch, -2.0, refused=True)
     r = refine_track(track, echoes, PoseRefinementConfig(enabled=True))  # type: ignore[arg-type]
-    assert r.metrics["wall_spectrum"]["applied"] is True
-    assert calls[1][1] == pytest.approx(math.radians(0.15))
-    assert calls[2] == (pytest.approx(calls[1][0]), 0.0)  # the same bias, given
-    assert r.metrics["search_heading_bias_deg_per_m"] == pytest.approx(0.8, abs=0.03)
-    assert float(np.sqrt(np.mean((r.x - x) ** 2 + (r.y - y) ** 2))) < 0.3
+    spectrum = r.metrics["wall_spectrum"]
+    assert spectrum["applied"] is False and "overruled_deg_per_m" not in spectrum
+    assert spectrum["note"] == ("not applied: no heading bias within the windows' reach of the "
+                                "walls' passes the calibration's gates")
+    assert len(calls) == 2 and calls[1][1] == pytest.approx(math.radians(0.15))
+    assert r.metrics["search_heading_bias_deg_per_m"] == pytest.approx(-2.0)
+    assert "walls" not in r.metrics["summary"]
