@@ -41,16 +41,16 @@ for a truth of 0.8 / 1.03). A turn beyond ``max_bias`` is taken as established w
 turned lattice passes the Rayleigh test (``n·R² ≥ ln(candidates / SPECTRUM_ALPHA)``, no
 lattice at all being the null) and holds at least ``SPECTRUM_MIN_STRENGTH`` of the chords'
 weight (a Manhattan building, not merely directions that are not uniform), the track's own
-is at most ``SPECTRUM_MAX_RATIO`` of it,
-and the turn tightens each window's own lattice by at least half what a drift that size
-spreads a window by (:func:`window_strength`; two parts of a building 40-45° apart, visited
-one after the other, align under a drift of 0.2-0.33°/m that spreads every window instead);
+lattice is at most ``SPECTRUM_MAX_RATIO`` of it, and the turn tightens each window's own
+lattice by at least half what a drift that size spreads a window by
+(:func:`window_strength`; two parts of a building 40-45° apart, visited one after the
+other, align under a drift of 0.2-0.33°/m that spreads every window instead).
 :func:`pipeline.refine.refine.refine_track` then calibrates again within ``max_bias`` of
 the walls' bias, so that the scale is found under the right heading, and keeps the first
 calibration where no bias there passes the echo scores' gates (the walls propose, the
-echoes must accept). On the eight other
-buildings' drifted, true and real-odometry tracks the peak lies within 0.02°/m of the
-calibration's (``R`` level to 1 %), Acapulco's at its −0.074°/m.
+echoes accept). On the eight other buildings' drifted, true and real-odometry tracks the
+peak lies within 0.02°/m of the calibration's (``R`` level to 1 %), Acapulco's at its
+−0.074°/m.
 
 **Gate.** The correction is applied where the windows share a lattice (their robust
 scatter about it under ``MAX_WALL_SIGMA_DEG``, half of the 26° that directions with none
@@ -116,9 +116,9 @@ SPECTRUM_BIN_M = 0.25  # the wall spectrum's travel bins (phase error under 2·c
 SPECTRUM_PAD = 4  # its FFT padded to this many times the run: candidates a quarter lobe apart
 SPECTRUM_MAX_RATIO = 0.5  # the track's own lattice at most half as strong as the turned one's
 SPECTRUM_ALPHA = 1e-6  # the turned lattice's Rayleigh test over all candidates (Bonferroni)
-# ... and the turned lattice holds most of the chords' weight (real buildings at their right
-# heading: 0.65-0.97; a ring corridor 50 m across driven three times, turned onto a spiral
-# the Rayleigh test still passes at 22,000 echoes: 0.18)
+# ... and the turned lattice holds half the chords' weight (real buildings at their right
+# heading: 0.65-0.97; a ring corridor 30 m across driven three times, turned onto a
+# "lattice" the Rayleigh test still passes at 40,000 echoes: 0.18)
 SPECTRUM_MIN_STRENGTH = 0.5
 
 
@@ -169,16 +169,17 @@ class BiasFit:
 @dataclass(frozen=True)
 class Turn:
     """The wall spectrum's strongest drift: ``c`` (rad/m), the lattice's strength ``R`` there
-    and at no drift (0 … 1), the chords' effective number, the candidates searched."""
+    and at no drift (0 … 1), the chords' effective number, the candidates searched, and
+    the windows' own strength (:func:`window_strength`) without and with the turn."""
 
     bias: float
     strength: float
     strength_at_zero: float
     chords: float
     candidates: int
-    windows_at_zero: float = math.nan  # window_strength without the turn, and with it
-    windows: float = math.nan
-    window_m: float = math.nan
+    windows_at_zero: float  # window_strength without the turn, and with it
+    windows: float
+    window_m: float
 
     @property
     def rayleigh(self) -> float:
@@ -197,10 +198,10 @@ class Turn:
         """Whether the turn is established (module docstring, *the wall spectrum*): the
         turned lattice passes the Rayleigh test at ``SPECTRUM_ALPHA`` over every candidate
         searched and holds ``SPECTRUM_MIN_STRENGTH`` of the chords' weight, the track's own
-        lattice is at most ``SPECTRUM_MAX_RATIO`` of it, and the turn
-        tightens the windows' own lattices as a drift would (:attr:`windows_gain_needed`):
-        parts of the building on two lattices 40-45° apart, visited one after the other,
-        align under a drift that spreads each window instead."""
+        lattice is at most ``SPECTRUM_MAX_RATIO`` of it, and the turn tightens the windows'
+        own lattices as a drift would (:attr:`windows_gain_needed`): parts of a building on
+        two lattices 40-45° apart, visited one after the other, align under a drift that
+        spreads each window instead."""
         return (self.rayleigh >= math.log(self.candidates / SPECTRUM_ALPHA)
                 and self.strength >= SPECTRUM_MIN_STRENGTH
                 and self.strength_at_zero <= SPECTRUM_MAX_RATIO * self.strength
@@ -249,9 +250,7 @@ def wall_spectrum(chords: Chords, reach: float, window_m: float = 20.0) -> Turn 
     spectrum = np.abs(np.fft.fft(binned, n))  # Σ Z_b e^{−iωs_b}, ω = 2πk / (n·bin)
     omega = 2.0 * math.pi * np.fft.fftfreq(n, SPECTRUM_BIN_M)
     c = omega / 4.0
-    inside = np.abs(c) <= reach
-    if not inside.any():
-        return None
+    inside = np.abs(c) <= reach  # 0 among them
     step = float(2.0 * math.pi / (n * SPECTRUM_BIN_M) / 4.0)
     best = float(c[inside][int(np.argmax(spectrum[inside]))])
     fine = np.clip(best + step * np.linspace(-1.0, 1.0, 41), -reach, reach)
@@ -440,12 +439,6 @@ def compass_correction(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
     """The track ``(x, y, yaw)`` at ``t_ns`` with the heading bias its walls establish
     taken out, or as given (module docstring)."""
     lattice = window_lattice(wall_chords(echoes, t_ns, x, y, yaw), window_m)
-    return _windows_correction(x, y, yaw, lattice, max_bias, min_z)
-
-
-def _windows_correction(x: F64, y: F64, yaw: F64, lattice: Lattice, max_bias: float,
-                        min_z: float) -> Corrected:
-    """The track with the drift the windows' ``lattice`` establishes taken out, or as given."""
     fit = fit_bias(lattice, max_bias)
     metrics = metrics_of(fit, lattice)
     metrics["applied"] = False

@@ -160,6 +160,10 @@ def test_a_run_too_short_for_three_windows_is_left_alone(sample_echoes):
     assert out.x is x
     none = compass.compass_correction(t, x, y, yaw, echoes.take(np.arange(0)), **KW)
     assert none.metrics["windows"] == 0 and none.metrics["applied"] is False
+    turn, m = compass.spectrum_turn(t, x, y, yaw, echoes.take(np.arange(0)),
+                                    max_bias=math.radians(0.15), reach=math.radians(6.0),
+                                    window_m=20.0)
+    assert turn is None and m == {"applied": False, "note": "no wall chords"}
 
 
 def test_chords_follow_the_walls_of_the_simulated_corridor(sample_echoes):
