@@ -422,23 +422,23 @@ def spectrum_metrics(turn: Turn, applied: bool) -> dict[str, Any]:
             "windows_gain_needed": turn.windows_gain_needed, "applied": applied}
 
 
-def spectrum_turn(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *, max_bias: float,
-                  reach: float, window_m: float) -> tuple[Turn | None, dict[str, Any]]:
-    """The wall spectrum's turn of the track ``(x, y, yaw)`` where it is established and
-    beyond ``max_bias`` (the windows' reach; searched up to ``reach``, rad/m), else None;
-    and what was measured, for ``metrics.json``."""
-    turn = wall_spectrum(wall_chords(echoes, t_ns, x, y, yaw), reach, window_m)
+def spectrum_turn(chords: Chords, *, max_bias: float, reach: float, window_m: float
+                  ) -> tuple[Turn | None, dict[str, Any]]:
+    """The wall spectrum's turn of the track whose ``chords`` (:func:`wall_chords`) are
+    given, where it is established and beyond ``max_bias`` (the windows' reach; searched up
+    to ``reach``, rad/m), else None; and what was measured, for ``metrics.json``."""
+    turn = wall_spectrum(chords, reach, window_m)
     if turn is None:
         return None, {"applied": False, "note": "no wall chords"}
     applied = abs(turn.bias) > max_bias and turn.decisive()
     return (turn if applied else None), spectrum_metrics(turn, applied)
 
 
-def compass_correction(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
-                       window_m: float, max_bias: float, min_z: float) -> Corrected:
-    """The track ``(x, y, yaw)`` at ``t_ns`` with the heading bias its walls establish
-    taken out, or as given (module docstring)."""
-    lattice = window_lattice(wall_chords(echoes, t_ns, x, y, yaw), window_m)
+def compass_correction(x: F64, y: F64, yaw: F64, lattice: Lattice, *, max_bias: float,
+                       min_z: float) -> Corrected:
+    """The track ``(x, y, yaw)`` with the heading bias its walls establish taken out, or as
+    given (module docstring); ``lattice``: its windows' (:func:`window_lattice` of its
+    :func:`wall_chords`)."""
     fit = fit_bias(lattice, max_bias)
     metrics = metrics_of(fit, lattice)
     metrics["applied"] = False

@@ -53,7 +53,12 @@ from pipeline.refine.calibration import (
     consistency_change,
     gate_digits,
 )
-from pipeline.refine.compass import compass_correction, spectrum_turn
+from pipeline.refine.compass import (
+    compass_correction,
+    spectrum_turn,
+    wall_chords,
+    window_lattice,
+)
 from pipeline.refine.echoes import Echoes
 from pipeline.refine.graph import (
     GraphOptions,
@@ -155,6 +160,12 @@ def configured_calibration(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes,
     )
 
 
+def _turned(cal: Calibration, by: float) -> float:
+    """``cal``'s heading bias turned by ``by`` (rad per metre of the track it corrects), per
+    reported metre: the bias a calibration of scale 0 would apply."""
+    return (cal.heading_bias + by) / (1.0 + cal.scale_error)
+
+
 def _under_the_walls(t_ns: I64, x: F64, y: F64, yaw: F64, all_echoes: Echoes, echoes: Echoes,
                      cfg: PoseRefinementConfig, cal: Calibration, metrics: dict[str, Any]
                      ) -> tuple[Calibration, tuple[F64, F64, F64]]:
@@ -172,31 +183,29 @@ def _under_the_walls(t_ns: I64, x: F64, y: F64, yaw: F64, all_echoes: Echoes, ec
     max_bias = math.radians(cfg.compass_max_bias_deg_per_m)
 
     def again(turned_by: float, within: float) -> Calibration:
-        """The calibration again with the heading bias ``cal``'s turned by ``turned_by``
-        (rad per metre of the track ``cal`` corrects), searched within ``within`` of it
-        (0: given)."""
+        """The calibration again, its heading bias searched within ``within`` (0: given)
+        of ``cal``'s turned by ``turned_by`` (rad per metre of the track ``cal`` corrects)."""
         return configured_calibration(t_ns, x, y, yaw, all_echoes, cfg, max_bias=within,
-                                      bias_centre=(cal.heading_bias + turned_by)
-                                      / (1.0 + cal.scale_error))
+                                      bias_centre=_turned(cal, turned_by))
 
     track = cal.correct(x, y, yaw)
+    chords = wall_chords(echoes, t_ns, *track)
     turn, spectrum = spectrum_turn(
-        t_ns, *track, echoes, max_bias=max_bias,
-        reach=2.0 * math.radians(cfg.calibration_max_bias_deg_per_m),
+        chords, max_bias=max_bias, reach=2.0 * math.radians(cfg.calibration_max_bias_deg_per_m),
         window_m=cfg.compass_window_m)
     metrics["wall_spectrum"] = spectrum
     if turn is not None:
         proposal = again(turn.bias, max_bias)  # the echoes resolve it within the peak
-        walls = (cal.heading_bias + turn.bias) / (1.0 + cal.scale_error)
-        if proposal.heading_bias != 0.0 or abs(walls) <= max_bias:
+        if proposal.heading_bias != 0.0 or abs(_turned(cal, turn.bias)) <= max_bias:
             spectrum["overruled_deg_per_m"] = math.degrees(cal.heading_bias)
             cal = proposal
             track = cal.correct(x, y, yaw)
+            chords = wall_chords(echoes, t_ns, *track)
         else:  # no bias near the walls' passes the echo scores' gates: the first stands
             spectrum["applied"] = False
             spectrum["note"] = ("not applied: no heading bias within the windows' reach of "
                                 "the walls' passes the calibration's gates")
-    turned = compass_correction(t_ns, *track, echoes, window_m=cfg.compass_window_m,
+    turned = compass_correction(*track, window_lattice(chords, cfg.compass_window_m),
                                 max_bias=max_bias, min_z=cfg.compass_min_z)
     metrics["compass"] = turned.metrics
     if turned.metrics["applied"]:

@@ -18,6 +18,17 @@ from pipeline.refine.compass import Lattice, fit_bias, lattice_angle, window_lat
 KW = dict(window_m=20.0, max_bias=math.radians(0.3), min_z=4.0)
 
 
+def _correction(t, x, y, yaw, echoes, *, window_m, max_bias, min_z):
+    """The compass on a track with its echoes, as refinement runs it."""
+    lattice = window_lattice(compass.wall_chords(echoes, t, x, y, yaw), window_m)
+    return compass.compass_correction(x, y, yaw, lattice, max_bias=max_bias, min_z=min_z)
+
+
+def _spectrum(t, x, y, yaw, echoes, **kw):
+    """The wall spectrum's turn of a track with its echoes, as refinement asks it."""
+    return compass.spectrum_turn(compass.wall_chords(echoes, t, x, y, yaw), **kw)
+
+
 def test_the_lattice_angle_of_turned_walls_among_clutter():
     rng = np.random.default_rng(3)
     walls = math.radians(25.0) + rng.integers(0, 4, 40) * math.pi / 2
@@ -108,7 +119,7 @@ def test_windows_without_a_lattice_are_not_a_compass(intel, monkeypatch):
     scattered = compass.Chords(rng.uniform(-math.pi, math.pi, real.angle.size), real.length,
                                real.travel)
     monkeypatch.setattr(compass, "wall_chords", lambda *args: scattered)
-    out = compass.compass_correction(t, x, y, yaw, echoes, **KW)
+    out = _correction(t, x, y, yaw, echoes, **KW)
     assert out.metrics["applied"] is False and out.x is x
     assert out.metrics["wall_sigma_deg"] > compass.MAX_WALL_SIGMA_DEG == pytest.approx(12.99,
                                                                                       abs=0.01)
@@ -132,7 +143,7 @@ def intel():
 def test_a_heading_bias_left_on_the_intel_lab_is_taken_out(intel):
     (t, x, y, yaw), echoes = intel
     dx, dy, dyaw = apply_drift(x, y, yaw, DriftModel(heading_bias_deg_per_m=0.03))
-    out = compass.compass_correction(t, dx, dy, dyaw, echoes.on_track(t, dx, dy, dyaw), **KW)
+    out = _correction(t, dx, dy, dyaw, echoes.on_track(t, dx, dy, dyaw), **KW)
     m = out.metrics
     assert m["applied"] is True
     assert m["bias_left_deg_per_m"] == pytest.approx(0.03, abs=0.005)
@@ -145,7 +156,7 @@ def test_a_heading_bias_left_on_the_intel_lab_is_taken_out(intel):
 
 def test_true_poses_are_left_exactly_as_they_are(intel):
     (t, x, y, yaw), echoes = intel
-    out = compass.compass_correction(t, x, y, yaw, echoes, **KW)
+    out = _correction(t, x, y, yaw, echoes, **KW)
     assert out.metrics["applied"] is False
     assert "not established" in out.metrics["note"] and out.metrics["z"] < 2
     assert out.x is x and out.y is y and out.yaw is yaw
@@ -153,14 +164,14 @@ def test_true_poses_are_left_exactly_as_they_are(intel):
 
 def test_a_run_too_short_for_three_windows_is_left_alone(sample_echoes):
     (t, x, y, yaw), echoes = sample_echoes("corridor", 3.0)
-    out = compass.compass_correction(t, x, y, yaw, echoes, **KW)  # 26 m: two windows
+    out = _correction(t, x, y, yaw, echoes, **KW)  # 26 m: two windows
     assert out.metrics == {"windows": 2, "applied": False,
                            "note": "not applied: fewer than 3 windows of travel show a wall "
                                    "lattice"}
     assert out.x is x
-    none = compass.compass_correction(t, x, y, yaw, echoes.take(np.arange(0)), **KW)
+    none = _correction(t, x, y, yaw, echoes.take(np.arange(0)), **KW)
     assert none.metrics["windows"] == 0 and none.metrics["applied"] is False
-    turn, m = compass.spectrum_turn(t, x, y, yaw, echoes.take(np.arange(0)),
+    turn, m = _spectrum(t, x, y, yaw, echoes.take(np.arange(0)),
                                     max_bias=math.radians(0.15), reach=math.radians(6.0),
                                     window_m=20.0)
     assert turn is None and m == {"applied": False, "note": "no wall chords"}
@@ -196,13 +207,13 @@ def test_a_round_hall_is_no_compass(tmp_path):
                               SimOptions(seed=3, speed=0.5, ring_rate_hz=5.0)), log, "mcap")
     (t, x, y, yaw), echoes = log_echoes(log, 3.0)
     dx, dy, dyaw = apply_drift(x, y, yaw, DriftModel(heading_bias_deg_per_m=0.05))
-    out = compass.compass_correction(t, dx, dy, dyaw, echoes.on_track(t, dx, dy, dyaw),
+    out = _correction(t, dx, dy, dyaw, echoes.on_track(t, dx, dy, dyaw),
                                      **{**KW, "max_bias": math.radians(0.15)})
     assert out.metrics["windows"] >= 8 and out.metrics["applied"] is False
     assert out.x is dx
     assert out.metrics["wall_sigma_deg"] > compass.MAX_WALL_SIGMA_DEG
     assert out.metrics["note"].startswith("not applied: the windows share no lattice")
-    turn, m = compass.spectrum_turn(t, dx, dy, dyaw, echoes.on_track(t, dx, dy, dyaw),
+    turn, m = _spectrum(t, dx, dy, dyaw, echoes.on_track(t, dx, dy, dyaw),
                                     max_bias=math.radians(0.15), reach=math.radians(6.0),
                                     window_m=20.0)
     assert turn is None and m["applied"] is False  # nor does the spectrum find a lattice
@@ -213,7 +224,7 @@ def test_a_drift_beyond_the_range_searched_is_not_applied(intel):
     the walls show is more likely the building's (a round one) than the odometry's."""
     (t, x, y, yaw), echoes = intel
     dx, dy, dyaw = apply_drift(x, y, yaw, DriftModel(heading_bias_deg_per_m=0.2))
-    out = compass.compass_correction(t, dx, dy, dyaw, echoes.on_track(t, dx, dy, dyaw),
+    out = _correction(t, dx, dy, dyaw, echoes.on_track(t, dx, dy, dyaw),
                                      **{**KW, "max_bias": math.radians(0.15)})
     assert out.metrics["applied"] is False and out.x is dx
     assert out.metrics["bias_left_deg_per_m"] == pytest.approx(0.2, abs=0.01)
@@ -288,13 +299,13 @@ def test_the_spectrum_finds_a_heading_the_windows_cannot_reach(intel):
     windows' fit): the spectrum finds the turn; on the true poses it finds none to make."""
     (t, x, y, yaw), echoes = intel
     dx, dy, dyaw = apply_drift(x, y, yaw, DriftModel(heading_bias_deg_per_m=1.5))
-    turn, m = compass.spectrum_turn(t, dx, dy, dyaw, echoes.on_track(t, dx, dy, dyaw),
+    turn, m = _spectrum(t, dx, dy, dyaw, echoes.on_track(t, dx, dy, dyaw),
                                     max_bias=math.radians(0.15), reach=math.radians(6.0),
                                     window_m=20.0)
     assert turn is not None and m["applied"] is True
     assert m["bias_deg_per_m"] == pytest.approx(1.5, abs=0.02)
     assert m["strength"] > 2 * m["strength_at_zero"] and m["rayleigh"] > m["rayleigh_needed"]
-    none, m0 = compass.spectrum_turn(t, x, y, yaw, echoes, max_bias=math.radians(0.15),
+    none, m0 = _spectrum(t, x, y, yaw, echoes, max_bias=math.radians(0.15),
                                      reach=math.radians(6.0), window_m=20.0)
     assert none is None and m0["applied"] is False
     assert abs(m0["bias_deg_per_m"]) < 0.15  # the peak is where the walls already are
