@@ -2,8 +2,10 @@
 left after the calibration, measured against the directions the walls run in.
 
 The calibration finds the heading bias from how well the echoes agree, and that is
-precise where the robot revisits places. A long tour that rarely does (Acapulco's
-convention centre, 837 m) leaves it 0.07°/m off, and the end of the run 60° turned. But
+precise where the robot revisits places. A long tour that rarely does can leave it off
+(Acapulco's convention centre, 837 m: 0.07°/m while the calibration's bias grid was capped
+at 401 steps, the end of the run 60° turned; uncapped, its grid finds 0.80°/m and the
+compass nothing left). But
 indoor walls mostly run along two perpendicular directions (a Manhattan world), and a
 sonar passing a wall draws it: where the track's heading is wrong by ``e`` at travel
 ``s``, every wall drawn from there is turned by ``e``. The walls are a reference the
@@ -63,11 +65,12 @@ errors would with the error known: Student's t over the windows the robust weigh
 windows need 17, twenty 5.2). The odometry is then re-integrated with its heading turned by
 ``−c`` per metre (:func:`pipeline.drift.apply_drift`'s heading bias; the start pose, the
 frame, is kept). Where it is applied, the calibration's scale is found again under the
-heading the walls establish (given, not searched: Acapulco's +3.7 % under the calibration's
-own 0.88°/m, +3.1 % under the walls' 0.80°/m, for a drift of 3 % and 0.8°/m).
+heading the walls establish (given, not searched: Acapulco's +3.7 % under the capped
+grid's 0.88°/m, +3.1 % under the walls' 0.80°/m, for a drift of 3 % and 0.8°/m).
 
 Measured (``python -m benchmarks.buildings``, benchmarks/RESULTS.md, twenty-seventh
-session): Acapulco drifted by 3 % and 0.8°/m, calibrated to 0.88°/m, gives ``c`` =
+session, the calibration's bias grid capped): Acapulco drifted by 3 % and 0.8°/m,
+calibrated to 0.88°/m, gives ``c`` =
 −0.074 ± 0.003°/m (z 24): refined F1 0.18 → 0.49 of true poses, ATE 8.35 → 0.33 m; the
 Freiburg campus 0.06 → 0.16. On the true poses and real odometry of nine buildings and on
 every true-pose run of ``drift_variety``, ``held_out`` and ``make compare``, z ≤ 1.9
