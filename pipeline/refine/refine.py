@@ -167,10 +167,11 @@ def _turned(cal: Calibration, by: float) -> float:
 
 
 def _under_the_walls(t_ns: I64, x: F64, y: F64, yaw: F64, all_echoes: Echoes, echoes: Echoes,
-                     cfg: PoseRefinementConfig, cal: Calibration, metrics: dict[str, Any]
+                     cfg: PoseRefinementConfig, cal: Calibration,
+                     track: tuple[F64, F64, F64], metrics: dict[str, Any]
                      ) -> tuple[Calibration, tuple[F64, F64, F64]]:
     """The calibration ``cal`` checked against the walls (:mod:`pipeline.refine.compass`),
-    and the odometry it corrects: where the walls' spectrum establishes a turn beyond the
+    and the odometry it corrects (``track``: as ``cal`` corrects it): where the walls' spectrum establishes a turn beyond the
     compass's windows (an alias of the bias: the bias found and the odometry's both lie
     within ±``calibration_max_bias_deg_per_m``, their difference within twice it), or the
     windows a drift left, the calibration runs again, so that the scale is found under the
@@ -188,7 +189,6 @@ def _under_the_walls(t_ns: I64, x: F64, y: F64, yaw: F64, all_echoes: Echoes, ec
         return configured_calibration(t_ns, x, y, yaw, all_echoes, cfg, max_bias=within,
                                       bias_centre=_turned(cal, turned_by))
 
-    track = cal.correct(x, y, yaw)
     chords = wall_chords(echoes, t_ns, *track)
     turn, spectrum = spectrum_turn(
         chords, max_bias=max_bias, reach=2.0 * math.radians(cfg.calibration_max_bias_deg_per_m),
@@ -226,7 +226,7 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
         ox, oy, oyaw = cal0.correct(tx, ty, tyaw)
         if cfg.compass:
             cal0, (ox, oy, oyaw) = _under_the_walls(tt, tx, ty, tyaw, all_echoes, echoes, cfg,
-                                                    cal0, metrics)
+                                                    cal0, (ox, oy, oyaw), metrics)
         if cfg.local_corrections:
             local = correct_stretches(
                 tt, ox, oy, oyaw, echoes, stretch_m=cfg.local_stretch_m,
