@@ -178,10 +178,11 @@ class BinnedSharpness(CompiledScore):
         self.reference = reference
 
     def _compiled(self, pose: F64) -> float:
-        from pipeline.refine.kernels import binned_sharpness
+        from pipeline.refine.kernels import binned_sharpness_placed
 
-        wx, wy = self.arcs(pose)
-        return float(binned_sharpness(wx.ravel(), wy.ravel(), self.bin))
+        return float(binned_sharpness_placed(
+            np.ascontiguousarray(pose[:, 0]), np.ascontiguousarray(pose[:, 1]),
+            np.cos(pose[:, 2]), np.sin(pose[:, 2]), self.bx, self.by, self.bin))
 
     def __call__(self, k: float, b: float) -> float:
         pose = self.poses(k, b)

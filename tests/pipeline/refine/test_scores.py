@@ -141,6 +141,11 @@ def test_the_compiled_binned_sharpness_counts_points_per_bin() -> None:
     y = np.array([0.05, 0.05, 0.05, 1.05, 0.05])
     assert binned_sharpness(x, y, 0.2) == pytest.approx((11 / 25 + 17 / 25) / 2, abs=1e-15)
     assert binned_sharpness(x[:0], y[:0], 0.2) == 0.0
+    # One point 1 km off: the box holds far more bins than 16 per point, so the bins are
+    # hashed instead of counted in an array — the same counts, 3, 1, 1, 1 and 4, 1, 1.
+    far_x, far_y = np.append(x, 1000.05), np.append(y, 1000.05)
+    assert binned_sharpness(far_x, far_y, 0.2) == pytest.approx((12 / 36 + 18 / 36) / 2,
+                                                                 abs=1e-15)
 
 
 @pytest.mark.parametrize("b_deg", [0.0, 0.8, -2.5])
