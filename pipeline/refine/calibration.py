@@ -216,9 +216,9 @@ def _consistent_bias(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes,
     """The heading bias by echo consistency alone: the most consistent over the whole
     range, coarsely (every other step of ``bs``, its peaks by :func:`_peaks_scan`,
     :data:`MAX_ECHOES_CONSISTENCY_SCAN` echoes, cells and blur twice the score's, on
-    parallel threads: the peak spans ±1.5 steps on the Intel lab), applied when the full score (``consistent``) confirms it by
-    ``min_gain``, its value then refined there (:func:`_most_consistent`, ±8 steps);
-    else 0.
+    parallel threads: the peak spans ±1.5 steps on the Intel lab), applied when the full
+    score (``consistent``) confirms it by ``min_gain``, its value then refined there
+    (:func:`_most_consistent`, ±8 steps); else 0.
 
     Where rows of shelves or pillars repeat, a wrong bias folds the rows onto each other
     and the *right* one is less sharp than none (simulated, 3 % and 0.8°/m of drift: a
