@@ -71,7 +71,6 @@ FAR_TEST_Z = 2.0  # _far_agrees: the far echoes' scale within 2 errors of the di
 MODELS_TEST_Z = 2.0  # _patch_models_agree: the two patch models' scales within 2 errors
 SCALE_STEP = 0.01  # coarse step of the scale search (fraction)
 CONSISTENT_SPAN = 8  # the bias's value by consistency within ± this many coarse steps
-SCAN_PEAKS = 5  # _peaks_scan: the candidates beside this many local maxima evaluated too
 
 
 @dataclass(frozen=True)
@@ -184,41 +183,15 @@ def _most_consistent(consistent: Consistency, k: float, b0: float, db: float) ->
     return best[2]
 
 
-def _peaks_scan(score: Callable[[F64], list[float]], bs: F64,
-                start: tuple[float, float, float]) -> tuple[float, float, float]:
-    """The best (value, 0, b) of ``start`` and ``score`` (of an array of biases) over the
-    candidates ``bs`` (0 in the middle), in two levels: every other candidate (0 among
-    them), then the ones beside its :data:`SCAN_PEAKS` highest local maxima — a peak
-    at least two candidates wide is found at half the evaluations (measured on 34 true,
-    drifted and real-odometry logs against every candidate: the same bias on 33, and on
-    Belgioioso drifted an alias 2 % more consistent for another, the final track the same;
-    the Intel lab's scan 0.50 → 0.27 s on one core)."""
-    n = bs.shape[0]
-    first = np.arange((n // 2) % 2, n, 2)  # 0 (the middle) among them
-    values = np.full(n, -np.inf)
-    values[first] = score(bs[first])
-    v = values[first]
-    rising = np.r_[True, v[1:] >= v[:-1]]
-    falling = np.r_[v[:-1] >= v[1:], True]
-    peaks = first[np.flatnonzero(rising & falling)]
-    top = peaks[np.argsort(-values[peaks], kind="stable")[:SCAN_PEAKS]]
-    beside = np.unique(np.concatenate([top - 1, top + 1]))
-    beside = beside[(beside >= 0) & (beside < n)]
-    if beside.size:
-        values[beside] = score(bs[beside])
-    done = np.sort(np.concatenate([first, beside]))
-    return _best_of([(0.0, b) for b in bs[done].tolist()], values[done].tolist(), start)
-
-
 def _consistent_bias(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes,
                      consistent: Consistency, bs: F64, *, res: float, sigma: float,
                      min_gain: float, sharp: Sharpness, strong_gain: float) -> float:
     """The heading bias by echo consistency alone: the most consistent over the whole
-    range, coarsely (every other step of ``bs``, its peaks by :func:`_peaks_scan`,
-    :data:`MAX_ECHOES_CONSISTENCY_SCAN` echoes, cells and blur twice the score's, on
-    parallel threads: the peak spans ±1.5 steps on the Intel lab), applied when the full
-    score (``consistent``) confirms it by ``min_gain``, its value then refined there
-    (:func:`_most_consistent`, ±8 steps); else 0.
+    range, coarsely (every other step of ``bs``, :data:`MAX_ECHOES_CONSISTENCY_SCAN`
+    echoes, cells and blur twice the score's, on parallel threads: the peak spans ±1.5
+    steps on the Intel lab), applied when the full score (``consistent``) confirms it by
+    ``min_gain``, its value then refined there (:func:`_most_consistent`, ±8 steps);
+    else 0.
 
     Where rows of shelves or pillars repeat, a wrong bias folds the rows onto each other
     and the *right* one is less sharp than none (simulated, 3 % and 0.8°/m of drift: a
@@ -238,7 +211,8 @@ def _consistent_bias(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes,
     scan = Consistency(t_ns, x, y, yaw, echoes, res=4 * res, sigma=2 * sigma,
                        at_most=MAX_ECHOES_CONSISTENCY_SCAN)
     coarse = bs[(len(bs) // 2) % 2::2]  # every other step, 0 among them
-    found = _peaks_scan(lambda b: scan.scan(0.0, b), coarse, (scan(0.0, 0.0), 0.0, 0.0))
+    found = _best_of([(0.0, b) for b in coarse.tolist()], scan.scan(0.0, coarse),
+                     (scan(0.0, 0.0), 0.0, 0.0))
     if found[2] == 0.0 or _consistency_gain(consistent, 0.0, found[2]) < min_gain:
         return 0.0
     b = _most_consistent(consistent, 0.0, found[2], float(bs[1] - bs[0]))

@@ -487,39 +487,3 @@ def test_the_configured_calibration_takes_the_near_and_far_echoes_the_config_nam
     # a far range no longer than the near one: the near echoes alone
     short = dataclasses.replace(cfg, calibration_far_range_m=cfg.max_echo_range_m)
     assert configured_calibration(*track, echoes, short) == calibrate(*track, near, **kwargs)
-
-
-def test_the_consistency_scan_finds_a_peak_between_its_first_candidates() -> None:
-    """The two-level scan (``_peaks_scan``): every other candidate first, then those beside
-    the highest local maxima; a peak two candidates wide is found wherever it sits, each
-    candidate is scored at most once, and the first of equals wins as over all of them."""
-    from pipeline.refine.calibration import SCAN_PEAKS, _peaks_scan
-
-    bs = np.linspace(-1.0, 1.0, 41)  # 0 at index 20
-    asked: list[float] = []
-
-    def score_of(values: np.ndarray) -> Callable[[np.ndarray], list[float]]:
-        def score(b: np.ndarray) -> list[float]:
-            asked.extend(b.tolist())
-            return [float(values[int(np.argmin(np.abs(bs - v)))]) for v in b]
-        return score
-
-    for peak in (7, 8, 33):  # odd (between the first level's candidates) and even
-        values = -np.abs(np.arange(41) - peak) * 0.01
-        values[peak] = 0.5
-        values[peak + 1] = 0.45  # two candidates wide
-        for decoy in range(0, 41, 6):  # lower local maxima elsewhere
-            if abs(decoy - peak) > 2:
-                values[decoy] += 0.03
-        asked.clear()
-        best = _peaks_scan(score_of(values), bs, (-1.0, 0.0, 0.0))
-        assert best == (0.5, 0.0, float(bs[peak]))
-        assert len(asked) == len(set(asked)) <= 21 + 2 * SCAN_PEAKS
-        assert 0.0 in asked
-    # a spike one candidate wide between two low first-level neighbours is not looked for
-    values = np.zeros(41)
-    values[0::2] = np.linspace(0.0, 0.2, 21)  # rising to the end: one local maximum
-    values[9] = 1.0
-    assert _peaks_scan(score_of(values), bs, (-1.0, 0.0, 0.0))[2] == bs[40]
-    # equal values: the first candidate wins, as over all of them
-    assert _peaks_scan(score_of(np.ones(41)), bs, (-1.0, 0.0, 0.0)) == (1.0, 0.0, -1.0)
