@@ -167,9 +167,9 @@ class Sharpness(Placed):
 class BinnedSharpness(CompiledScore):
     """The sharpness's coarse stand-in for the wide scan: ``Σ n² / (Σ n)²`` of the points'
     counts ``n`` in square bins of ``2σ``, averaged over two grids offset by half a bin
-    (no dense grid, no blur: a wrong bias spreads the points over a large area). Compiled
-    (:func:`pipeline.refine.kernels.binned_sharpness`, bit for bit the numpy version below,
-    ``reference=True``)."""
+    (no blur, and no grid over a box a wrong bias can spread the points across). Compiled
+    (:func:`pipeline.refine.kernels.binned_sharpness_placed`, bit for bit the numpy version
+    below, ``reference=True``)."""
 
     def __init__(self, t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *, sigma: float,
                  reference: bool = False):

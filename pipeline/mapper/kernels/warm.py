@@ -35,7 +35,6 @@ def warm() -> float:
 def _warm_refinement() -> None:
     """The kernels of ``--refine-poses`` (numba compiles per argument types)."""
     from pipeline.refine.kernels import (
-        binned_sharpness,
         binned_sharpness_placed,
         consistency_score,
         free_samples,
@@ -45,7 +44,6 @@ def _warm_refinement() -> None:
     )
 
     none2, none1, cells = np.empty((0, 3)), np.empty(0), np.zeros(1, np.int64)
-    binned_sharpness(none1, none1, 0.1)
     binned_sharpness_placed(none1, none1, none1, none1, none2, none2, 0.1)
     consistency_score(none2, none2, none1, none1, np.linspace(0.0, 1.0, 3), 0.2, 0.1, 0.4,
                       1.0, 4, 1.0)
