@@ -45,7 +45,6 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from formats.angles import wrap_angle
 from formats.arrays import F64, I64
 from pipeline.drift import DriftModel, Steps, systematic_factors
 from pipeline.refine.echoes import Echoes
@@ -106,7 +105,6 @@ class Placed:
         if self._segments is None:  # the steps' segments: the same for every calibration
             self._segments = step_segments(float(m.yaw[0]), m.lx, m.ly, m.dyaw, m.ds, i)
         out = poses_at(float(m.x[0]), float(m.y[0]), *self._segments, scale, bias)
-        out[..., 2] = wrap_angle(out[..., 2])
         out[same] = given  # as drifted_many
         return np.asarray(out)
 
@@ -217,14 +215,13 @@ class Consistency(CompiledScore):
         self.steps = np.arange(1, int(reach / res) + 1) * res  # along each ray, m
 
     def _compiled(self, pose: F64) -> float:
-        from pipeline.refine.kernels import consistency_score
+        from pipeline.refine.kernels import consistency_placed
 
-        wx, wy = self.arcs(pose)
-        ox, oy = transform_points(pose, self.sx, self.sy)  # each sonar's position
-        return float(consistency_score(
-            np.ascontiguousarray(wx), np.ascontiguousarray(wy), ox, oy, self.steps,
-            self.band, self.res, 4 * self.sigma, self.sigma / self.res, self._radius(),
-            MIN_EVIDENCE))
+        return float(consistency_placed(
+            np.ascontiguousarray(pose[:, 0]), np.ascontiguousarray(pose[:, 1]),
+            np.cos(pose[:, 2]), np.sin(pose[:, 2]), self.bx, self.by, self.sx, self.sy,
+            self.steps, self.band, self.res, 4 * self.sigma, self.sigma / self.res,
+            self._radius(), MIN_EVIDENCE))
 
     def _radius(self) -> int:
         """The blur read over ± this many cells (4σ)."""

@@ -36,7 +36,7 @@ def _warm_refinement() -> None:
     """The kernels of ``--refine-poses`` (numba compiles per argument types)."""
     from pipeline.refine.kernels import (
         binned_sharpness_placed,
-        consistency_score,
+        consistency_placed,
         free_samples,
         poses_at,
         step_segments,
@@ -45,8 +45,8 @@ def _warm_refinement() -> None:
 
     none2, none1, cells = np.empty((0, 3)), np.empty(0), np.zeros(1, np.int64)
     binned_sharpness_placed(none1, none1, none1, none1, none2, none2, 0.1)
-    consistency_score(none2, none2, none1, none1, np.linspace(0.0, 1.0, 3), 0.2, 0.1, 0.4,
-                      1.0, 4, 1.0)
+    consistency_placed(none1, none1, none1, none1, none2, none2, none1, none1,
+                       np.linspace(0.0, 1.0, 3), 0.2, 0.1, 0.4, 1.0, 4, 1.0)
     poses_at(0.0, 0.0, *step_segments(0.0, none1, none1, none1, none1, cells), np.ones(1),
              np.zeros(1))
     structure_tensor_at(np.zeros((3, 3)), np.zeros((3, 3)), cells, cells, np.ones(3) / 3)

@@ -155,3 +155,62 @@ def test_a_segment_sum_stops_where_its_taylor_series_would_not_hold() -> None:
         assert np.abs(out[j, :, 0] - px[at]).max() < 1e-12
         assert np.abs(out[j, :, 1] - py[at]).max() < 1e-12
         assert np.abs(out[j, :, 2] - heading[at]).max() < 1e-12
+
+
+def test_the_headings_are_wrapped_as_numpy_wraps_them_bit_for_bit() -> None:
+    from formats.angles import wrap_angle
+    from pipeline.refine.kernels import poses_at, step_segments
+
+    # three and a half turns on a 2 m circle: headings far beyond ±π before wrapping
+    n = 700
+    lx, ly = np.full(n, 0.04), np.zeros(n)
+    dyaw, ds = np.full(n, 7 * math.pi / n), np.full(n, 0.04)
+    at = np.arange(0, n + 1, 7)
+    seg = step_segments(0.3, lx, ly, dyaw, ds, at)
+    bias = np.array([0.0, 0.02, -0.5])
+    out = poses_at(0.0, 0.0, *seg, np.ones(3), bias)
+    unwrapped = seg[7][None, :] + bias[:, None] * seg[8][None, :]  # Φ + b·S at each pose
+    assert np.abs(unwrapped).max() > 6 * math.pi
+    assert (out[..., 2] >= -math.pi).all() and (out[..., 2] < math.pi).all()
+    assert np.array_equal(out[..., 2], wrap_angle(unwrapped))
+
+
+def test_the_blurred_pair_sums_rows_then_columns_in_order_bit_for_bit() -> None:
+    from pipeline.refine.kernels import blurred_pair
+
+    rng = np.random.default_rng(11)
+    hits, frees = rng.random((20, 24)) * 3, rng.random((20, 24)) * 5
+    wu, wv = rng.random(10), rng.random(10)
+    for r0, c0 in ((0, 0), (3, 7), (10, 14)):
+        hh = ff = 0.0
+        for m in range(10):  # each row's sum over q in order, then the rows' in order
+            sh = sf = 0.0
+            for q in range(10):
+                sh += wu[q] * hits[r0 + m, c0 + q]
+                sf += wu[q] * frees[r0 + m, c0 + q]
+            hh += wv[m] * sh
+            ff += wv[m] * sf
+        assert blurred_pair(hits, frees, wu, wv, r0, c0) == (hh, ff)
+
+
+def test_the_placed_consistency_places_as_transform_points_bit_for_bit() -> None:
+    from pipeline.refine.kernels import consistency_placed, consistency_score
+    from pipeline.se2 import transform_points
+
+    rng = np.random.default_rng(12)
+    n = 400
+    pose = np.column_stack([rng.uniform(-2, 2, n), rng.uniform(-2, 2, n),
+                            rng.uniform(-math.pi, math.pi, n)])
+    sx, sy = rng.uniform(-0.2, 0.2, n), rng.uniform(-0.2, 0.2, n)
+    reach = rng.uniform(0.5, 3.0, n)[:, None]
+    spread = np.array([-0.2, -0.1, 0.0, 0.1, 0.2])
+    bx, by = sx[:, None] + reach * np.cos(spread), sy[:, None] + reach * np.sin(spread)
+    steps = np.arange(1, 31) * 0.1
+    args = (steps, 0.2, 0.1, 0.4, 1.0, 4, 2.0)
+    wx, wy = transform_points(pose[:, None, :], bx, by)
+    ox, oy = transform_points(pose, sx, sy)
+    want = consistency_score(np.ascontiguousarray(wx), np.ascontiguousarray(wy), ox, oy, *args)
+    got = consistency_placed(np.ascontiguousarray(pose[:, 0]), np.ascontiguousarray(pose[:, 1]),
+                             np.cos(pose[:, 2]), np.sin(pose[:, 2]), bx, by, sx, sy, *args)
+    assert 0.0 < got < 1.0
+    assert got == want
