@@ -6,8 +6,8 @@ ring — logs the refinement was not developed on — two worlds of repeating st
 (a warehouse's shelving, a hall of pillars) and two floors (a loop corridor, rooms off a
 corridor), all four in ``sample_logs/worlds``, and the floors seen by the Pioneer's 8
 front sonars and by one servo-swept sonar (presets ``pioneer-p3dx-front``,
-``hc-sr04-sweep3``), and an L-shaped office (turned 25°). What refinement
-finds and what it gives.
+``hc-sr04-sweep3``), an L-shaped office (turned 25°), and the four buildings at −4 %.
+What refinement finds and what it gives.
 
     python -m benchmarks.drift_variety [--work DIR] [--cases office intel-lab ...]
         [--presets none hc-sr04-sweep3 ...] [--config TOML]
@@ -88,6 +88,10 @@ ROWS: tuple[tuple[str, str | None, tuple[str, float, float, float, float], int],
     *(("skew", preset, model, 0) for preset in (None, "pioneer-p3dx-front")
       for model in (("+3 %, +0.8°/m", 0.03, 0.8, 0.0, 0.0),
                     ("+4 %, +1.2°/m, noise 0.002 rad/√rad", 0.04, 1.2, 0.0, 0.002))),
+    # the buildings at −4 %, beyond the window the scale's line was first fitted over
+    # (surfaces.fixed_points), made after the rows above
+    *((case, None, ("-4 %, -0.5°/m", -0.04, -0.5, 0.0, 0.0), 0)
+      for case in ("intel-lab", "fhw", "freiburg-101", "orebro")),
 )
 CASES = tuple(dict.fromkeys(row[0] for row in ROWS))
 

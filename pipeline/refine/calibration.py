@@ -320,7 +320,7 @@ def calibrate(
     strong_gain: float = math.inf,
     scale_score: str = "surfaces", max_slope: float = 0.75, min_z: float = 3.0,
     systematic: float = 0.005, window_m: float = 30.0, tilt: TiltMode = "off",
-    far_echoes: Echoes | None = None, bias_centre: float = 0.0,
+    recentre: bool = False, far_echoes: Echoes | None = None, bias_centre: float = 0.0,
 ) -> Calibration:
     """The calibration the echoes agree on (see the module docstring), the heading bias
     searched within ``bias_centre ± max_bias`` (the walls' bias where their spectrum
@@ -329,7 +329,8 @@ def calibrate(
     searches the heading bias alone, else the scale too by ``scale_score`` (``max_slope``,
     ``min_z``, ``systematic``: the surfaces' gates, see :func:`_surface_calibration`;
     ``window_m``: their travel window, ``tilt``: their patches' orientation fitted,
-    :func:`_patch_models`). A
+    :func:`_patch_models`, ``recentre``: their fixed point's window of ``k₀`` moved
+    towards it, :func:`pipeline.refine.surfaces.fixed_points`). A
     heading bias that sharpens the echoes, or makes them more consistent, by less than the
     fraction ``min_gain`` is not applied (bias 0); where the two scores disagree, the one
     in its favour must gain ``strong_gain``
@@ -360,7 +361,8 @@ def calibrate(
                                         max_slope=max_slope, min_gain=min_gain,
                                         strong_gain=strong_gain, min_z=min_z,
                                         systematic=systematic, window_m=window_m,
-                                        tilt=oriented, far_echoes=far_echoes,
+                                        tilt=oriented, recentre=recentre,
+                                        far_echoes=far_echoes,
                                         associations=associations)
         return _patch_models(surfaces, tilt)
     n_k = max(1, math.ceil(max_scale / SCALE_STEP))
@@ -382,7 +384,8 @@ def _surface_calibration(
     consistent: Consistency, base: float, best: tuple[float, float, float],
     rejected: BiasRejected | None, by_consistency: bool, *, max_scale: float, bias_step: float, max_slope: float,
     min_gain: float, min_z: float, systematic: float, window_m: float, tilt: bool,
-    strong_gain: float, far_echoes: Echoes | None, associations: Associations,
+    recentre: bool, strong_gain: float, far_echoes: Echoes | None,
+    associations: Associations,
 ) -> Calibration:
     """The scale by :mod:`pipeline.refine.surfaces`; then the heading bias at that scale
     (a bias found with the scale wrong partly makes up for it: 0.58°/m of 0.8 on the office
@@ -427,7 +430,8 @@ def _surface_calibration(
     # both; where near and far disagree, the far one (the more precise) is the first.
     surfaces, fp, far_used, disputed = _surface_scale(
         t_ns, x, y, yaw, echoes, far_echoes, b, window_m=window_m, tilt=tilt,
-        systematic=systematic, min_z=min_z, max_slope=max_slope, associations=associations)
+        recentre=recentre, systematic=systematic, min_z=min_z, max_slope=max_slope,
+        associations=associations)
     used = far_echoes if far_used and far_echoes is not None else echoes
     established = disputed is None and _established(fp, fp.value, systematic, min_z, max_slope)
     first = fp if disputed is None else disputed
@@ -453,11 +457,11 @@ def _surface_calibration(
             if disputed is not None:
                 surfaces, fp, far_used, disputed = _surface_scale(
                     t_ns, x, y, yaw, echoes, far_echoes, b / (1.0 + k), window_m=window_m,
-                    tilt=tilt, systematic=systematic, min_z=min_z, max_slope=max_slope,
-                    associations=associations)
+                    tilt=tilt, recentre=recentre, systematic=systematic, min_z=min_z,
+                    max_slope=max_slope, associations=associations)
             else:
                 surfaces = SurfaceScale(t_ns, x, y, yaw, used, b / (1.0 + k), window_m, tilt,
-                                        associations)
+                                        associations, recentre)
                 fp = surfaces.fixed_point()
             established = disputed is None and _established(fp, fp.value, systematic, min_z,
                                                             max_slope)
@@ -516,16 +520,18 @@ def _patch_models_agree(offset: Calibration, oriented: Calibration) -> bool:
 
 def _surface_scale(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes,
                    far_echoes: Echoes | None, bias: float, *, window_m: float, tilt: bool,
-                   systematic: float, min_z: float, max_slope: float,
+                   recentre: bool, systematic: float, min_z: float, max_slope: float,
                    associations: Associations
                    ) -> tuple[SurfaceScale, FixedPoint, bool, FixedPoint | None]:
     """The surfaces' scale under the heading ``bias`` (per reported metre): (the patches
     used, their fixed point, whether from the far echoes, the far echoes' fixed point where
     it disputes the near one's; see :func:`_surface_calibration`)."""
-    surfaces = SurfaceScale(t_ns, x, y, yaw, echoes, bias, window_m, tilt, associations)
+    surfaces = SurfaceScale(t_ns, x, y, yaw, echoes, bias, window_m, tilt, associations,
+                            recentre)
     if far_echoes is None or len(far_echoes) <= len(echoes):
         return surfaces, surfaces.fixed_point(), False, None
-    wide = SurfaceScale(t_ns, x, y, yaw, far_echoes, bias, window_m, tilt, associations)
+    wide = SurfaceScale(t_ns, x, y, yaw, far_echoes, bias, window_m, tilt, associations,
+                        recentre)
     fp, fw = fixed_points([surfaces, wide])
     if _far_agrees(fp, fw):
         return wide, fw, True, None

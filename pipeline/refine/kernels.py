@@ -254,7 +254,6 @@ def consistency_score(wx: np.ndarray, wy: np.ndarray, ox: np.ndarray, oy: np.nda
     return total / scored if scored > 0 else 0.0
 
 
-
 @njit(cache=True, nogil=True)
 def consistency_placed(px: np.ndarray, py: np.ndarray, cos: np.ndarray, sin: np.ndarray,
                        bx: np.ndarray, by: np.ndarray, sx: np.ndarray, sy: np.ndarray,
@@ -278,6 +277,7 @@ def consistency_placed(px: np.ndarray, py: np.ndarray, cos: np.ndarray, sin: np.
         oy[i] = py[i] + s * sx[i] + c * sy[i]
     return consistency_score(wx, wy, ox, oy, steps, band, res, pad, sd_cells, rad,
                              min_evidence)
+
 
 DENSE_CELLS_PER_POINT = 16  # binned_sharpness: an array of bins up to this many per point
 
@@ -427,10 +427,11 @@ def poses_at(x0: float, y0: float, s: np.ndarray, w: np.ndarray, bounds: np.ndar
              centre: np.ndarray, half: np.ndarray, moments: np.ndarray, where: np.ndarray,
              phi_at: np.ndarray, s_at: np.ndarray, scale: np.ndarray,
              bias: np.ndarray) -> np.ndarray:
-    """(calibrations, len(at), 3): the poses (x, y, heading wrapped to [−π, π)) at the pose indices
-    ``at`` of :func:`step_segments` composed from the first pose with each step's length
-    times ``scale[j]`` and ``bias[j]`` per metre of travel added to its rotation —
-    :meth:`pipeline.drift.Steps.drifted_many`'s poses to ~1e-11 m. The heading before step
+    """(calibrations, len(at), 3): the poses (x, y, heading wrapped to [−π, π) as numpy's
+    ``np.mod`` wraps it) at the pose indices ``at`` of :func:`step_segments` composed from
+    the first pose with each step's length times ``scale[j]`` and ``bias[j]`` per metre of
+    travel added to its rotation — :meth:`pipeline.drift.Steps.drifted_many`'s poses to
+    ~1e-11 m. The heading before step
     ``i`` is ``Φ_i + b·S_i``, so the position is ``x0 + scale·Σ_{i<p} w_i·e^{ib·S_i}``: per
     segment ``e^{ib·S_c}·Σ_k (ib)^k·moment_k`` (a cosine and a sine per segment, not per
     step; the steps one by one where the bias turns a segment's by more than

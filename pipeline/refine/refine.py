@@ -156,6 +156,7 @@ def configured_calibration(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes,
         systematic=cfg.calibration_scale_systematic,
         window_m=cfg.calibration_scale_window_m,
         tilt=cfg.calibration_scale_tilt,
+        recentre=cfg.calibration_scale_recentre,
         far_echoes=far,
     )
 

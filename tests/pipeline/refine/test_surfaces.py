@@ -232,3 +232,77 @@ def test_a_long_log_is_thinned_evenly(runs: dict[str, tuple[Any, Any, Any]],
     scale = _scale(runs["drifted"], BIAS)
     assert len(scale.echoes) == 1000
     np.testing.assert_array_equal(scale.echoes.t_ns[[0, -1]], echoes.t_ns[[0, -1]])
+
+
+class _Bent:
+    """``f(k₀)`` of an association pulled towards ``k₀`` (slope ``c``) that bends away from
+    the truth further out (measured so on the Intel lab: ``f − k₀`` falls by 1.0 % per 2 %
+    near the truth, 0.7 % further): ``f = k* + c·d + bend·d·|d|``, ``d = k₀ − k*``."""
+
+    def __init__(self, truth: float, recentre: bool = True, c: float = 0.4,
+                 bend: float = 2.0):
+        self.truth, self.recentre, self.c, self.bend = truth, recentre, c, bend
+        self.asked: list[float] = []
+
+    def evaluate(self, k0: float) -> tuple[float, float]:
+        self.asked.append(k0)
+        d = k0 - self.truth
+        return self.truth + self.c * d + self.bend * d * abs(d), 0.002
+
+
+def _fixed(estimators: list[_Bent]) -> list[Any]:
+    from pipeline.refine.surfaces import fixed_points
+
+    return fixed_points(estimators)  # type: ignore[arg-type]  # duck-typed: evaluate, recentre
+
+
+def test_a_fixed_point_within_the_window_is_the_line_through_k0s() -> None:
+    from pipeline.refine.surfaces import _fixed_point
+
+    bent = _Bent(0.025)
+    (fp,) = _fixed([bent])
+    assert bent.asked == list(K0S)  # nothing more evaluated
+    assert fp == _fixed_point(np.array(K0S), [_Bent(0.025).evaluate(k) for k in K0S])
+    assert -0.04 <= fp.value <= 0.04
+
+
+def test_a_fixed_point_beyond_the_window_moves_the_window_towards_it() -> None:
+    stay, move = _Bent(-0.045, recentre=False), _Bent(-0.045)
+    kept, moved = _fixed([stay, move])
+    assert stay.asked == list(K0S)
+    assert move.asked == pytest.approx([*K0S, -0.06])  # one step: −6 … +2 % holds it
+    # the line through −4 … +4 % puts the scale beyond the window, off by the bend
+    assert kept.value == pytest.approx(-0.0508, abs=1e-4)
+    assert moved.value == pytest.approx(-0.045, abs=2e-4)
+    assert moved.standard_error == pytest.approx(0.002 / (1 - moved.slope))
+
+
+def test_the_window_moves_at_most_two_steps_either_way() -> None:
+    far, back = _Bent(0.09), _Bent(-0.07)
+    fp, fb = _fixed([far, back])
+    assert far.asked == pytest.approx([*K0S, 0.06, 0.08])  # centred at +4 % at most
+    assert back.asked == pytest.approx([*K0S, -0.06, -0.08])
+    assert fp.value == pytest.approx(0.0985, abs=1e-3)  # the last window's, beyond it
+    assert fb.value == pytest.approx(-0.0708, abs=1e-3)  # −0.0956 through −4 … +4 %
+
+
+def test_the_recentred_window_is_opt_in_and_reaches_every_patch_estimator(
+        runs: dict[str, tuple[Any, Any, Any]], monkeypatch: pytest.MonkeyPatch) -> None:
+    import pipeline.refine.calibration as calibration
+    from pipeline.config import PoseRefinementConfig
+
+    assert PoseRefinementConfig().calibration_scale_recentre is False
+    made: list[bool] = []
+
+    class Recorded(SurfaceScale):
+        def __init__(self, *args: Any, **kwargs: Any) -> None:
+            super().__init__(*args, **kwargs)
+            made.append(self.recentre)
+
+    monkeypatch.setattr(calibration, "SurfaceScale", Recorded)
+    track, echoes, _ = runs["drifted"]
+    cal = calibrate(np.asarray(track.t_ns), np.asarray(track.x), np.asarray(track.y),
+                    np.asarray(track.yaw), echoes, max_scale=0.05, max_bias=math.radians(3),
+                    res=0.1, sigma=0.1, recentre=True)
+    assert made and all(made)
+    assert cal.scale_error == pytest.approx(0.03, abs=0.01)  # within ±4 %: as before
