@@ -96,10 +96,10 @@ NORMAL_BINS = 16
 MIN_PATCH_ECHOES = 3
 MIN_TILTED_PATCH_ECHOES = 4  # a patch whose orientation is fitted too keeps 2 residuals
 TENSOR_SIGMA_CELLS = 1.5
-K0S = (-0.04, -0.02, 0.0, 0.02, 0.04)
-K0_STEP = 0.02  # the window of k₀ (K0S) moves on this grid
-K0_OFFSETS = (-2, -1, 0, 1, 2)  # ... its points about its centre, in steps (K0S at 0)
-K0_MAX_CENTRE = 2  # ... its centre at most ±4 % (the scale applied is at most ±5 %)
+K0_STEP = 0.02  # the fixed point's k₀ lie on this grid
+K0_OFFSETS = (-2, -1, 0, 1, 2)  # ... a window of them about its centre, in steps
+K0S = tuple(K0_STEP * j for j in K0_OFFSETS)  # ... the first window: −4 … +4 %
+K0_MAX_CENTRE = 2  # ... a window's centre at most ±4 % (the scale applied: at most ±5 %)
 STEP = 0.005
 # _fit: an echo that moves by less than this per unit of the parameter (m: 10 nm for 1 %
 # of scale) does not depend on it; where none does, the parameter is undetermined
