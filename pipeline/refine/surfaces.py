@@ -53,17 +53,14 @@ patches themselves. The estimate is the fixed point ``a / (1 − c)`` of the lin
 ``k₀`` = −4 … +4 % (:data:`K0S`, symmetric: a scale error has either sign; ``f`` bends
 away from the truth, and with a line through −2 … +6 % the calibration put a −3 % drift
 on the Intel at −4.0 %, with this one at −3.2 %); ``c`` near 1 means the data hardly move
-the answer. Opt-in (``recentre``, ``[pose_refinement] calibration_scale_recentre``): the
-line is not extrapolated — where its fixed point lies beyond the ``k₀`` it was fitted to,
-the window moves 2 % towards it (``f`` evaluated at the new end) and the line is fitted
-again, up to a window about ±4 % (the scale applied is at most ±5 %). The bend is what a
-line through −4 … +4 % reads wrongly there: the Intel lab with −4 % (and −0.5°/m) is found
-at −4.7 % (F1 0.89 of true poses), through −6 … +2 % at −3.9 % (0.99); FHW −4.9 → −4.7 %
-(0.80 → 0.87). Not the default: where the first scale (under the bias of ``k = 0``) lies
-beyond ±4 %, moving it moves the heading bias found under it, and on the sparse Edmonton
-(871 echoes) that bias came out 0.009°/m off instead of 0.005 (0.74 → 0.54 of true), and
-the held_out benchmark lost a row (31 → 30 of 36); a fixed point within ±4 % is found
-the same either way (benchmarks/RESULTS.md, thirtieth session).
+the answer. The scale the gates judge is not extrapolated (``recentre``,
+``[pose_refinement] calibration_scale_recentre``): where its fixed point lies beyond the
+``k₀`` the line was fitted to, the window moves 2 % towards it (``f`` evaluated at the
+new end) and the line is fitted again, up to a window about ±4 % (the scale applied is at
+most ±5 %). The bend is what a line through −4 … +4 % reads wrongly there: the Intel lab
+with −4 % (and −0.5°/m) was found at −4.7 % (F1 0.89 of true poses), through −6 … +2 % at
+−4.0 % (0.99); Freiburg 101 −4.8 → −3.9 % (0.85 → 0.96), FHW −4.9 → −4.7 % (0.80 → 0.87);
+a fixed point within ±4 % is found as before (benchmarks/RESULTS.md, thirtieth session).
 Its standard error is the cluster-robust sandwich error of ``f`` (patches as clusters)
 amplified by ``1 / (1 − c)``; the calibration applies the scale only when it stands
 ``min_z`` errors clear of 0 (:func:`pipeline.refine.calibration._surface_calibration`).

@@ -286,12 +286,12 @@ def test_the_window_moves_at_most_two_steps_either_way() -> None:
     assert fb.value == pytest.approx(-0.0708, abs=1e-3)  # −0.0956 through −4 … +4 %
 
 
-def test_the_recentred_window_is_opt_in_and_reaches_every_patch_estimator(
+def test_the_recentred_window_reaches_the_scale_the_gates_judge(
         runs: dict[str, tuple[Any, Any, Any]], monkeypatch: pytest.MonkeyPatch) -> None:
     import pipeline.refine.calibration as calibration
     from pipeline.config import PoseRefinementConfig
 
-    assert PoseRefinementConfig().calibration_scale_recentre is False
+    assert PoseRefinementConfig().calibration_scale_recentre is True
     made: list[bool] = []
 
     class Recorded(SurfaceScale):
@@ -304,5 +304,6 @@ def test_the_recentred_window_is_opt_in_and_reaches_every_patch_estimator(
     cal = calibrate(np.asarray(track.t_ns), np.asarray(track.x), np.asarray(track.y),
                     np.asarray(track.yaw), echoes, max_scale=0.05, max_bias=math.radians(3),
                     res=0.1, sigma=0.1, recentre=True)
-    assert made and all(made)
+    # the provisional scale (it steers the bias search) as before, the one judged re-centred
+    assert made[0] is False and made[-1] is True
     assert cal.scale_error == pytest.approx(0.03, abs=0.01)  # within ±4 %: as before
