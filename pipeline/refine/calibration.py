@@ -64,7 +64,14 @@ from pipeline.refine.scores import (
     Consistency,
     Sharpness,
 )
-from pipeline.refine.surfaces import K0S, Associations, FixedPoint, SurfaceScale, fixed_points
+from pipeline.refine.surfaces import (
+    K0S,
+    Associations,
+    FixedPoint,
+    SurfaceScale,
+    beyond,
+    fixed_points,
+)
 from pipeline.refine.threads import parallel_map
 
 FAR_TEST_Z = 2.0  # _far_agrees: the far echoes' scale within 2 errors of the difference
@@ -458,7 +465,7 @@ def _surface_calibration(
         b = b_new
         # else the bias stands: the first scale is the answer, asked again only where
         # ``recentre`` moves its window (its fixed point beyond it: not re-centred above)
-        if moved or (recentre and not K0S[0] <= fp.value <= K0S[-1]):
+        if moved or (recentre and beyond(fp.value, K0S[0], K0S[-1]) != 0):
             # The scale once more under the new bias (near and far asked again where they
             # disagreed); the gates judge this one.
             if disputed is not None:

@@ -261,22 +261,27 @@ def consistency_placed(px: np.ndarray, py: np.ndarray, cos: np.ndarray, sin: np.
                        sd_cells: float, rad: int, min_evidence: float) -> float:
     """:func:`consistency_score` of the arcs ``(bx, by)`` (echoes × points) and sonars
     ``(sx, sy)``, each in its echo's robot frame, placed at the poses ``(px, py)`` whose
-    yaws have ``cos``, ``sin`` — operation for operation as
-    :func:`pipeline.se2.transform_points` places them, without its arrays."""
+    yaws have ``cos``, ``sin`` (:func:`placed`)."""
+    wx, wy = placed(px, py, cos, sin, bx, by)
+    ox, oy = placed(px, py, cos, sin, sx.reshape(-1, 1), sy.reshape(-1, 1))
+    return consistency_score(wx, wy, ox.ravel(), oy.ravel(), steps, band, res, pad, sd_cells,
+                             rad, min_evidence)
+
+
+@njit(cache=True, nogil=True)
+def placed(px: np.ndarray, py: np.ndarray, cos: np.ndarray, sin: np.ndarray, bx: np.ndarray,
+           by: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The points ``(bx, by)`` (echoes × points, each row in its echo's robot frame) at the
+    poses ``(px, py)`` whose yaws have ``cos``, ``sin``: operation for operation as
+    :func:`pipeline.se2.transform_points` places them, without its numpy temporaries."""
     n, a = bx.shape
     wx = np.empty((n, a))
     wy = np.empty((n, a))
-    ox = np.empty(n)
-    oy = np.empty(n)
     for i in range(n):
-        c, s = cos[i], sin[i]
         for j in range(a):
-            wx[i, j] = px[i] + c * bx[i, j] - s * by[i, j]
-            wy[i, j] = py[i] + s * bx[i, j] + c * by[i, j]
-        ox[i] = px[i] + c * sx[i] - s * sy[i]
-        oy[i] = py[i] + s * sx[i] + c * sy[i]
-    return consistency_score(wx, wy, ox, oy, steps, band, res, pad, sd_cells, rad,
-                             min_evidence)
+            wx[i, j] = px[i] + cos[i] * bx[i, j] - sin[i] * by[i, j]
+            wy[i, j] = py[i] + sin[i] * bx[i, j] + cos[i] * by[i, j]
+    return wx, wy
 
 
 DENSE_CELLS_PER_POINT = 16  # binned_sharpness: an array of bins up to this many per point
@@ -354,17 +359,10 @@ def _hashed_sumsq(qx: np.ndarray, qy: np.ndarray, shift: float) -> int:
 def binned_sharpness_placed(px: np.ndarray, py: np.ndarray, cos: np.ndarray, sin: np.ndarray,
                             bx: np.ndarray, by: np.ndarray, size: float) -> float:
     """:func:`binned_sharpness` of the points ``(bx, by)`` (echoes × points, each row in its
-    echo's robot frame) placed at the poses ``(px, py)`` whose yaws have ``cos``, ``sin`` —
-    operation for operation as :func:`pipeline.se2.transform_points` places them, without
-    its arrays (the wide scan places 2,000 echoes' arcs per candidate)."""
-    n, a = bx.shape
-    x = np.empty(n * a)
-    y = np.empty(n * a)
-    for i in range(n):
-        for j in range(a):
-            x[i * a + j] = px[i] + cos[i] * bx[i, j] - sin[i] * by[i, j]
-            y[i * a + j] = py[i] + sin[i] * bx[i, j] + cos[i] * by[i, j]
-    return binned_sharpness(x, y, size)
+    echo's robot frame) placed at the poses ``(px, py)`` whose yaws have ``cos``, ``sin``
+    (:func:`placed`; the wide scan places 2,000 echoes' arcs per candidate)."""
+    x, y = placed(px, py, cos, sin, bx, by)
+    return binned_sharpness(x.ravel(), y.ravel(), size)
 
 
 SEGMENT_M = 1.0  # poses_at: the steps summed per segment of this much travel

@@ -336,7 +336,7 @@ def fixed_points(estimators: list[SurfaceScale]) -> list[FixedPoint]:
         for i in todo:
             steps = [centre[i] + j for j in K0_OFFSETS]
             found[i] = _fixed_point(np.array(steps) * K0_STEP, [evaluated[i][j] for j in steps])
-            towards = _beyond(found[i].value, steps[0] * K0_STEP, steps[-1] * K0_STEP)
+            towards = beyond(found[i].value, steps[0] * K0_STEP, steps[-1] * K0_STEP)
             # moved only outwards from 0 (never back), at most K0_MAX_CENTRE steps
             if (estimators[i].recentre and towards != 0 and towards * centre[i] >= 0
                     and abs(centre[i] + towards) <= K0_MAX_CENTRE):
@@ -346,7 +346,7 @@ def fixed_points(estimators: list[SurfaceScale]) -> list[FixedPoint]:
     return found
 
 
-def _beyond(value: float, low: float, high: float) -> int:
+def beyond(value: float, low: float, high: float) -> int:
     """+1 / −1 where ``value`` lies above / below ``[low, high]``, else 0 (NaN: 0)."""
     return 1 if value > high else -1 if value < low else 0
 
