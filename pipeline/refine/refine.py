@@ -235,6 +235,7 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
                 iterations=cfg.local_iterations, min_gain=cfg.local_min_gain,
                 min_consistency_gain=cfg.local_min_consistency_gain,
                 strong_gain=cfg.local_strong_gain, held_out=cfg.local_held_out,
+                noise_estimated=cfg.local_noise_estimated,
                 res=cfg.field_resolution_m,
                 sigma=cfg.field_sigma_m)
             ox, oy, oyaw = local.x, local.y, local.yaw

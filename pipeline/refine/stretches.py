@@ -1,6 +1,6 @@
 """Local corrections after the calibration (``[pose_refinement] local_corrections``): a
-rigid correction per stretch of travel, found by a robust linear least squares over the
-surface patches every visit of a place shares.
+rigid correction at knots along the run, blended between them, found by a robust linear
+least squares over the surface patches every visit of a place shares.
 
 A calibration removes what the whole run shares (scale, heading bias); odometry noise per
 step is a random walk that it cannot remove. Where the robot sees a wall again, the
@@ -8,20 +8,42 @@ echoes of every visit must agree on the wall's offset (:mod:`pipeline.refine.sur
 ``n·s − r cos γ = c`` for a plane of normal ``n``), so the visits' pose errors show as
 disagreements of that offset, and they are linear in small pose corrections:
 
-* the run is cut into stretches of ``stretch_m`` of travel; stretch ``s`` gets a
-  correction ``(t_s, θ_s)``, a translation and a rotation about its mean position
-  ``m_s`` (stretch 0 is held: the gauge);
-* an echo of patch ``p`` from stretch ``s`` gives the row
-  ``q + n·t_s + θ_s·(n·J(o − m_s) + r·n·J d) − c_p = 0`` (``q = n·o + r·n·d`` its offset
-  under the current poses, ``o`` the sonar, ``d`` the hit's ray, ``J`` the 90° turn), the
-  patches' offsets ``c_p`` unknowns too; patches are keyed over the whole run (no travel
-  window: the links between visits are the information);
-* the odometry's random walk is the prior: ``t_{s+1} − t_s ~ N(0, σ_xy² L)``,
-  ``θ_{s+1} − θ_s ~ N(0, σ_θ² L)`` (``odometry_sigma_xy``, ``odometry_sigma_yaw_deg``);
+* knots every ``stretch_m`` of travel or a little less (:class:`Knots`), from the first
+  pose to the last; knot ``k`` gets a correction ``(t_k, θ_k)``, a rotation about the
+  track's position ``m_k`` there, then a translation; knot 0 is held at zero: the gauge
+  is the first pose, where the odometry has no error yet;
+* a pose between knots ``k`` and ``k + 1`` is moved by both knots' corrections, blended
+  by its travel between them (weight ``w`` of the later one): a correction that grows
+  along the run as the random walk does;
+* an echo of patch ``p`` gives the row
+  ``q + Σ_j w_j (n·t_j + θ_j·(n·J(o − m_j) + r·n·J d)) − c_p = 0`` over its two knots
+  (``q = n·o + r·n·d`` its offset under the current poses, ``o`` the sonar, ``d`` the
+  hit's ray, ``J`` the 90° turn), the patches' offsets ``c_p`` unknowns too; patches are
+  keyed over the whole run (no travel window: the links between visits are the
+  information);
+* the odometry's random walk is the prior on each step between knots, knot ``k``'s
+  correction carried on rigidly to knot ``k + 1`` (:meth:`Knots.carried`):
+  ``t_{k+1} − (t_k + θ_k J(m_{k+1} − m_k)) ~ N(0, σ_xy² L)``,
+  ``θ_{k+1} − θ_k ~ N(0, σ_θ² L)``: a heading error turns the rest of the run about where
+  it happened and costs one step, not one per knot after it;
+* the walk's σ are found from the data (``local_noise_estimated``, the default: type-II
+  maximum likelihood by expectation-maximisation, :func:`_walk_estimated`), starting
+  from ``odometry_sigma_xy``, ``odometry_sigma_yaw_deg``: where the data show no heading
+  walk its σ shrinks and the run keeps the frame its first poses give; a heading walk
+  keeps it open;
 * solved by iteratively reweighted least squares (Cauchy weights, scale 2.385 × the
   residuals' MAD) on the sparse normal equations, the association made again under the
-  corrected poses ``iterations`` times; each pose is moved by the corrections
-  interpolated over its travel between the stretches' centres.
+  corrected poses ``iterations`` times.
+
+Measured against the earlier model (a rigid correction per stretch, the first stretch
+held, the prior on ``t`` and ``θ`` apart with the configured σ; benchmarks/RESULTS.md,
+thirty-first session): ``drift_variety`` mean refined/true 0.9092 → 0.9208 (FHW with
+0.003 rad/√rad of yaw noise 0.52 → 0.84, the Intel lab with it 0.82 → 0.94, a warehouse
+with 0.01 m/√m 0.78 → 0.94; the simulated corridor with 0.02 m/√m 0.94 → 0.88),
+``held_out`` 30 → 31 of 36 (the hospital with yaw noise 0.86 → 0.97). A single sharp
+turn of the track (the tests' lap turned 1° over 4 m) is taken out less well than by a
+held first stretch (rms 73 → 36 mm against 19 mm): only the first pose holds the frame,
+and the few echoes near it weigh it.
 
 **Gate.** The corrections are applied only when they explain the data, by two tests. The
 first: at the first solution the patches' robust loss must fall by ``min_gain`` (0.5) per
@@ -110,6 +132,8 @@ from pipeline.refine.surfaces import CAUCHY, MAD_SIGMA, Cones
 from pipeline.se2 import transform_points
 
 IRLS_STEPS = 6
+WALK_EM_STEPS = 3  # the random walk's σ estimated in this many steps per reweighting
+WALK_FLOOR = 0.01  # ... at least this fraction of the configured σ
 
 
 @dataclass(frozen=True)
@@ -126,7 +150,8 @@ def correct_stretches(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
                       stretch_m: float, sigma_xy: float, sigma_yaw: float, iterations: int,
                       min_gain: float, min_consistency_gain: float = 0.01,
                       strong_gain: float = math.inf, held_out: HeldOut = "off",
-                      res: float = 0.05, sigma: float = 0.1) -> Corrected:
+                      noise_estimated: bool = True, res: float = 0.05,
+                      sigma: float = 0.1) -> Corrected:
     """The poses ``(x, y, yaw)`` at ``t_ns`` with the stretches' corrections (module
     docstring), or as given when the gates keep them out; ``echoes``: the echoes with the
     odometry they were taken at (their poses follow the track); ``min_consistency_gain``,
@@ -134,7 +159,7 @@ def correct_stretches(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
     ``sigma``, as the calibration's); ``held_out``: the second gate judged on echoes the
     corrections were not fitted to (module docstring, *held out*)."""
     given = (x, y, yaw)
-    solve = _Solver(t_ns, stretch_m, sigma_xy, sigma_yaw, iterations)
+    solve = _Solver(t_ns, stretch_m, sigma_xy, sigma_yaw, iterations, noise_estimated)
     # only the echoes each score reads (thinned evenly, as the scores thin them) follow the
     # corrected track: a long log's hundreds of thousands are not interpolated each solve
     matched = echoes.take(thin(len(echoes), surfaces.MAX_ECHOES))
@@ -193,14 +218,15 @@ class _Fitted:
 
 @dataclass(frozen=True)
 class _Solver:
-    """``iterations`` solves (each after associating again) of a track's stretch
-    corrections from a set of echoes."""
+    """``iterations`` solves (each after associating again) of a track's corrections at
+    its knots from a set of echoes."""
 
     t_ns: I64
     stretch_m: float
     sigma_xy: float
     sigma_yaw: float
     iterations: int
+    noise_estimated: bool = True
 
     def __call__(self, x: F64, y: F64, yaw: F64, echoes: Echoes,
                  min_gain: float = -math.inf) -> _Fitted:
@@ -211,30 +237,102 @@ class _Solver:
         cones = Cones(echoes, window_m=0.0)  # the echoes' arcs, the same for every solve
         for it in range(self.iterations):
             travel = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(x), np.diff(y)))])
-            # stretches numbered 0 … n − 1 over the ones poses fall in (a jump may skip one)
-            stretch = np.unique(np.floor(travel / self.stretch_m).astype(np.int64),
-                                return_inverse=True)[1]
-            n = int(stretch.max(initial=0)) + 1
-            if n < 2 or len(echoes) == 0:
+            knots = Knots.along(travel, x, y, self.stretch_m)
+            if knots is None or len(echoes) == 0:
                 break
-            count = np.bincount(stretch, minlength=n)
-            centre = np.column_stack(
-                [np.bincount(stretch, x, n), np.bincount(stretch, y, n),
-                 np.bincount(stretch, travel, n)]) / np.maximum(count, 1)[:, None]
-            solved = _solve(t_ns, cones, echoes.on_track(t_ns, x, y, yaw).odo, stretch, centre,
-                            self.stretch_m, self.sigma_xy, self.sigma_yaw)
+            solved = _solve(t_ns, cones, echoes.on_track(t_ns, x, y, yaw).odo, travel, knots,
+                            RandomWalk(self.sigma_xy, self.sigma_yaw), self.noise_estimated)
             if solved is None:
                 break
-            corr, loss_before, loss_after, dof = solved
+            corr, loss_before, loss_after, dof, walk = solved
             if it == 0:  # the gate's solve: the optimiser's cost without and with the corrections
                 gain_per_parameter = (loss_before - loss_after) / max(dof, 1)
-                metrics.update(stretches=n, loss_before=loss_before, loss_after=loss_after,
-                               gain_per_parameter=gain_per_parameter)
+                metrics.update(stretches=knots.stretches, loss_before=loss_before,
+                               loss_after=loss_after, gain_per_parameter=gain_per_parameter)
+                if self.noise_estimated:
+                    metrics.update(noise_xy_m_per_sqrt_m=walk.xy,
+                                   noise_yaw_deg_per_sqrt_m=math.degrees(walk.yaw))
                 if gain_per_parameter < min_gain:
                     break
-            x, y, yaw = _apply(x, y, yaw, travel, centre, corr)
+            x, y, yaw = knots.apply(x, y, yaw, travel, corr)
             metrics["iterations"] = it + 1
         return _Fitted((x, y, yaw), metrics)
+
+
+@dataclass(frozen=True)
+class Knots:
+    """The corrections' knots: the first pose (held at zero: the odometry's error is nil
+    where it starts), then every ``stretch_m`` or a little less of travel to the last pose;
+    each knot's pivot is the track's position there. A pose between two knots is moved by
+    both knots' rigid corrections (a rotation about the knot's pivot, then a translation),
+    blended by its travel between them: a correction that grows along the run as the
+    odometry's error does, instead of one jump per stretch."""
+
+    at: F64  # (n + 1,) each knot's travel, m
+    pivot: F64  # (n + 1, 2) the track's position there, m
+
+    @staticmethod
+    def along(travel: F64, x: F64, y: F64, stretch_m: float) -> Knots | None:
+        """The knots of a track whose poses have ``travel``; None for a run of at most one
+        stretch (nothing to correct against)."""
+        n = math.ceil(travel[-1] / stretch_m - 1e-9)
+        if n < 2:
+            return None
+        at = np.linspace(0.0, float(travel[-1]), n + 1)
+        return Knots(at, np.column_stack([np.interp(at, travel, x), np.interp(at, travel, y)]))
+
+    @property
+    def stretches(self) -> int:
+        return int(self.at.shape[0]) - 1
+
+    @property
+    def stretch_m(self) -> float:
+        return float(self.at[-1]) / self.stretches
+
+    def between(self, travel: F64) -> tuple[I64, F64]:
+        """The knot before each ``travel`` and the weight of the one after it."""
+        k = np.clip(np.searchsorted(self.at, travel, side="right") - 1, 0, self.stretches - 1)
+        return k, np.clip((travel - self.at[k]) / (self.at[k + 1] - self.at[k]), 0.0, 1.0)
+
+    def carried(self) -> F64:
+        """(3n, 3n): the random walk's steps as rows over the free knots' corrections
+        ``(t_x, t_y, θ)``: knot ``j + 1``'s minus knot ``j``'s carried on rigidly to knot
+        ``j + 1``'s pivot (``t + θ J Δ``; knot 0 is zero): a heading error turns the rest of
+        the run about where it happened, and costs only its own step."""
+        n = self.stretches
+        steps = np.eye(3 * n)
+        for j in range(1, n):
+            ddx, ddy = self.pivot[j + 1] - self.pivot[j]
+            steps[3 * j:3 * j + 3, 3 * j - 3:3 * j] = -np.array(
+                [[1.0, 0.0, -ddy], [0.0, 1.0, ddx], [0.0, 0.0, 1.0]])
+        return steps
+
+    def apply(self, x: F64, y: F64, yaw: F64, travel: F64, corr: F64
+              ) -> tuple[F64, F64, F64]:
+        """The poses moved by the knots' corrections ``corr`` (n + 1, 3), as above."""
+        k, w = self.between(travel)
+
+        def moved(j: I64) -> tuple[F64, F64]:
+            c, s = np.cos(corr[j, 2]), np.sin(corr[j, 2])
+            mx, my = self.pivot[j, 0], self.pivot[j, 1]
+            return (mx + c * (x - mx) - s * (y - my) + corr[j, 0],
+                    my + s * (x - mx) + c * (y - my) + corr[j, 1])
+
+        (ax, ay), (bx, by) = moved(k), moved(k + 1)
+        turn = (1 - w) * corr[k, 2] + w * corr[k + 1, 2]
+        return (1 - w) * ax + w * bx, (1 - w) * ay + w * by, wrap_angle(yaw + turn)
+
+
+@dataclass(frozen=True)
+class RandomWalk:
+    """The odometry's random walk: σ per √m of travel, in position (m) and heading (rad)."""
+
+    xy: float
+    yaw: float
+
+    def step_sd(self, knots: Knots) -> F64:
+        """(3n,): each step's σ between consecutive knots."""
+        return np.tile([self.xy, self.xy, self.yaw], knots.stretches) * math.sqrt(knots.stretch_m)
 
 
 def consistency_needed(gain_per_parameter: float, min_consistency_gain: float,
@@ -262,19 +360,18 @@ def _consistency(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, res: float
                        sigma=sigma)(0.0, 0.0)
 
 
-def _solve(t_ns: I64, cones: Cones, poses: F64, stretch: I64, centre: F64,
-           stretch_m: float, sigma_xy: float, sigma_yaw: float
-           ) -> tuple[F64, float, float, int] | None:
-    """(corrections (stretches, 3), the patches' robust loss without and with them, the
-    parameters) of one linearised solve of the echoes of ``cones`` at ``poses`` (the
-    track's stamped ``t_ns``); ``stretch``: each pose's, ``centre``: each
-    stretch's mean x, y and travel. The patches' offsets are eliminated (each is the
-    weighted mean of its rows), which leaves a dense system of 3 unknowns per stretch."""
+def _solve(t_ns: I64, cones: Cones, poses: F64, travel: F64, knots: Knots, walk: RandomWalk,
+           noise_estimated: bool) -> tuple[F64, float, float, int, RandomWalk] | None:
+    """(corrections at the knots (n + 1, 3), the patches' robust loss without and with them,
+    the parameters, the random walk's σ used) of one linearised solve of the echoes of
+    ``cones`` at ``poses`` (the track's stamped ``t_ns``, with ``travel``). The patches'
+    offsets are eliminated (each is the weighted mean of its rows), which leaves a dense
+    system of 3 unknowns per knot. With ``noise_estimated`` the walk's σ are found from the
+    data (:func:`_walk_estimated`), starting from ``walk``."""
     from scipy import sparse
 
     idx, patch, nx, ny, phi = cones.associate(poses)
     n_patch = int(patch.max(initial=-1)) + 1
-    n = centre.shape[0]
     if n_patch == 0:
         return None
     e = cones.echoes
@@ -284,45 +381,53 @@ def _solve(t_ns: I64, cones: Cones, poses: F64, stretch: I64, centre: F64,
     dx, dy, r = np.cos(ray), np.sin(ray), e.range_m[idx]
     q = nx * ox + ny * oy + r * (nx * dx + ny * dy)
     before = np.clip(np.searchsorted(t_ns, e.t_ns[idx], side="right") - 1, 0, len(t_ns) - 1)
-    s = stretch[before]  # an echo belongs to the stretch of the pose before it
-    turn = nx * (centre[s, 1] - oy) + ny * (ox - centre[s, 0]) + r * (ny * dx - nx * dy)
-    design = np.column_stack([nx, ny, turn]) * (s >= 1)[:, None]  # ∂q/∂(t_x, t_y, θ)
-    col = 3 * np.maximum(s - 1, 0)[:, None] + np.arange(3)  # its stretch's unknowns
-    n_par = 3 * (n - 1)
-    # the random-walk prior between consecutive stretches (stretch 0 held at zero)
-    sd = np.tile([sigma_xy, sigma_xy, sigma_yaw], n - 1) * math.sqrt(stretch_m)
-    diff = np.eye(n_par) - np.eye(n_par, k=-3)
-    prior = diff.T @ np.diag(1.0 / sd**2) @ diff
+    k, w = knots.between(travel[before])  # an echo moves with the pose before it
 
-    def residuals(sol: F64, w: F64) -> F64:
+    def turn(j: I64) -> F64:  # ∂q/∂θ of a rotation about knot j's pivot
+        return np.asarray(nx * (knots.pivot[j, 1] - oy) + ny * (ox - knots.pivot[j, 0])
+                          + r * (ny * dx - nx * dy))
+
+    lo = (1 - w) * (k >= 1)  # knot 0 held at zero
+    design = np.column_stack([nx * lo, ny * lo, turn(k) * lo, nx * w, ny * w, turn(k + 1) * w])
+    col = np.concatenate([3 * np.maximum(k - 1, 0)[:, None] + np.arange(3),
+                          3 * k[:, None] + np.arange(3)], axis=1)  # knot j's unknowns: 3(j − 1)…
+    n_par = 3 * knots.stretches
+    steps = knots.carried()
+    floor = RandomWalk(WALK_FLOOR * walk.xy, WALK_FLOOR * walk.yaw)  # of the configured σ
+
+    def residuals(sol: F64, weights: F64) -> F64:
         moved = q + (design * sol[col]).sum(axis=1)
-        offset = np.bincount(patch, w * moved, n_patch) / np.bincount(patch, w, n_patch)
+        offset = (np.bincount(patch, weights * moved, n_patch)
+                  / np.bincount(patch, weights, n_patch))
         return np.asarray(moved - offset[patch])
 
-    sol, w = np.zeros(n_par), np.ones(idx.size)
-    res = residuals(sol, w)
+    sol, wt = np.zeros(n_par), np.ones(idx.size)
+    res = residuals(sol, wt)
     scale = 1.0
     # the systems' sparsity, the same in every step
     pairs = (col[:, :, None] * n_par + col[:, None, :]).ravel()
-    block_rows, block_cols = np.repeat(patch, 3), col.ravel()
+    block_rows, block_cols = np.repeat(patch, col.shape[1]), col.ravel()
     for _ in range(IRLS_STEPS):
         sigma = MAD_SIGMA * float(np.median(np.abs(res))) + 1e-6
         scale = CAUCHY * sigma
-        w = 1.0 / (1.0 + (res / scale) ** 2) / sigma**2
-        # normal equations with the offsets eliminated: Gᵀ W G − Bᵀ D⁻¹ B + prior
-        wg = design * w[:, None]
+        wt = 1.0 / (1.0 + (res / scale) ** 2) / sigma**2
+        # normal equations with the offsets eliminated: Gᵀ W G − Bᵀ D⁻¹ B (+ the prior)
+        wg = design * wt[:, None]
         normal = np.bincount(pairs, (wg[:, :, None] * design[:, None, :]).ravel(),
                              n_par * n_par).reshape(n_par, n_par).astype(np.float64)
         rhs = np.bincount(block_cols, (wg * q[:, None]).ravel(), n_par).astype(np.float64)
-        weight = np.bincount(patch, w, n_patch)
-        # each patch's weighted design summed (sparse: a patch is seen from a few stretches)
+        weight = np.bincount(patch, wt, n_patch)
+        # each patch's weighted design summed (sparse: a patch is seen from a few knots)
         blocks = sparse.csr_matrix((wg.ravel(), (block_rows, block_cols)),
                                    shape=(n_patch, n_par))
-        wq = np.bincount(patch, w * q, n_patch)
+        wq = np.bincount(patch, wt * q, n_patch)
         normal -= (blocks.T @ sparse.diags(1.0 / weight) @ blocks).toarray()
         rhs -= blocks.T @ (wq / weight)
-        sol = np.asarray(np.linalg.solve(normal + prior, -rhs), dtype=np.float64)
-        res = residuals(sol, w)
+        if noise_estimated:
+            sol, walk = _walk_estimated(normal, rhs, steps, knots, walk, floor)
+        else:
+            sol = _posterior(normal, rhs, steps, walk.step_sd(knots))[0]
+        res = residuals(sol, wt)
 
     def loss(v: F64) -> float:
         return float(np.log1p((v / scale) ** 2).sum())
@@ -332,18 +437,33 @@ def _solve(t_ns: I64, cones: Cones, poses: F64, stretch: I64, centre: F64,
     for _ in range(IRLS_STEPS):
         none_w = 1.0 / (1.0 + (none / scale) ** 2)
         none = residuals(np.zeros(n_par), none_w)
-    corr = np.zeros((n, 3))
-    corr[1:] = sol.reshape(n - 1, 3)
-    return corr, loss(none), loss(res), n_par
+    corr = np.zeros((knots.stretches + 1, 3))
+    corr[1:] = sol.reshape(-1, 3)
+    return corr, loss(none), loss(res), n_par, walk
 
 
-def _apply(x: F64, y: F64, yaw: F64, travel: F64, centre: F64, corr: F64
-           ) -> tuple[F64, F64, F64]:
-    """Each pose moved by the corrections interpolated over its travel between the
-    stretches' centres (a rotation about the interpolated centre, then the translation)."""
-    at = centre[:, 2]
-    tx, ty, th = (np.interp(travel, at, corr[:, k]) for k in range(3))
-    mx, my = np.interp(travel, at, centre[:, 0]), np.interp(travel, at, centre[:, 1])
-    c, s = np.cos(th), np.sin(th)
-    return (mx + c * (x - mx) - s * (y - my) + tx, my + s * (x - mx) + c * (y - my) + ty,
-            wrap_angle(yaw + th))
+def _posterior(normal: F64, rhs: F64, steps: F64, sd: F64) -> tuple[F64, F64]:
+    """The corrections' posterior mean and information under the random-walk prior (the
+    ``steps`` of σ ``sd``)."""
+    information = normal + steps.T @ (steps / sd[:, None] ** 2)
+    return np.asarray(np.linalg.solve(information, -rhs), dtype=np.float64), information
+
+
+def _walk_estimated(normal: F64, rhs: F64, steps: F64, knots: Knots, walk: RandomWalk,
+                    floor: RandomWalk) -> tuple[F64, RandomWalk]:
+    """The corrections and the random walk's σ that the data support (type-II maximum
+    likelihood by expectation-maximisation, :data:`WALK_EM_STEPS` steps from ``walk``):
+    each σ² the mean over the steps of ``E[step²]`` under the posterior (the estimate's
+    square and its variance) per metre, position's x and y together; at least ``floor``
+    (:data:`WALK_FLOOR` of the configured σ). Where the data show no heading walk (noise in
+    position alone) the heading steps' σ shrinks and the run's frame stays where its first
+    poses put it; a heading walk keeps it open."""
+    stretch_m = knots.stretch_m
+    for _ in range(WALK_EM_STEPS):
+        sol, information = _posterior(normal, rhs, steps, walk.step_sd(knots))
+        cov = np.linalg.inv(information)
+        mean_sq = ((steps @ sol) ** 2 + np.einsum("ij,jk,ik->i", steps, cov, steps)).reshape(-1, 3)
+        walk = RandomWalk(
+            max(math.sqrt(float(mean_sq[:, :2].mean()) / stretch_m), floor.xy),
+            max(math.sqrt(float(mean_sq[:, 2].mean()) / stretch_m), floor.yaw))
+    return _posterior(normal, rhs, steps, walk.step_sd(knots))[0], walk
