@@ -462,7 +462,7 @@ def _walk_estimated(normal: F64, rhs: F64, steps: F64, knots: Knots, walk: Rando
     for _ in range(WALK_EM_STEPS):
         sol, information = _posterior(normal, rhs, steps, walk.step_sd(knots))
         cov = np.linalg.inv(information)
-        mean_sq = ((steps @ sol) ** 2 + np.einsum("ij,jk,ik->i", steps, cov, steps)).reshape(-1, 3)
+        mean_sq = ((steps @ sol) ** 2 + ((steps @ cov) * steps).sum(axis=1)).reshape(-1, 3)
         walk = RandomWalk(
             max(math.sqrt(float(mean_sq[:, :2].mean()) / stretch_m), floor.xy),
             max(math.sqrt(float(mean_sq[:, 2].mean()) / stretch_m), floor.yaw))
