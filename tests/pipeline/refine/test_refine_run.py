@@ -368,3 +368,28 @@ def test_the_first_calibration_stands_where_the_echoes_refuse_the_walls_bias(
     assert len(calls) == 2 and calls[1][1] == pytest.approx(math.radians(0.15))
     assert r.metrics["search_heading_bias_deg_per_m"] == pytest.approx(-2.0)
     assert "walls" not in r.metrics["summary"]
+
+
+@pytest.mark.parametrize("estimated", [True, False])
+def test_the_local_corrections_find_the_walks_sigma_as_configured(intel_drifted, monkeypatch,
+                                                                  estimated: bool) -> None:
+    """``[pose_refinement] local_noise_estimated`` reaches the local corrections, and
+    metrics.json's ``local`` reports the walk's σ the data gave only where it was asked."""
+    import pipeline.refine.refine as refine
+
+    real, asked = refine.correct_stretches, []
+
+    def spied(*args: object, **kwargs: object) -> object:
+        asked.append(kwargs["noise_estimated"])
+        return real(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(refine, "correct_stretches", spied)
+    track, echoes, _ = intel_drifted
+    r = refine.refine_track(track, echoes,  # type: ignore[arg-type]
+                            PoseRefinementConfig(enabled=True, local_noise_estimated=estimated))
+    local = r.metrics["local"]
+    assert asked == [estimated] and local["stretches"] >= 2
+    assert ("noise_yaw_deg_per_sqrt_m" in local) is estimated
+    if estimated:  # at least the floor: 1 % of the configured 0.02 m and 0.5° per √m
+        assert local["noise_xy_m_per_sqrt_m"] >= 0.01 * 0.02
+        assert local["noise_yaw_deg_per_sqrt_m"] >= 0.01 * 0.5 * (1 - 1e-12)
