@@ -130,6 +130,7 @@ from pipeline.refine import surfaces
 from pipeline.refine.calibration import consistency_change, gate_digits
 from pipeline.refine.echoes import Echoes
 from pipeline.refine.scores import MAX_ECHOES_CONSISTENCY, Consistency, thin
+from pipeline.refine.submaps import path_length
 from pipeline.refine.surfaces import CAUCHY, MAD_SIGMA, Cones
 from pipeline.se2 import transform_points
 
@@ -238,7 +239,7 @@ class _Solver:
         metrics: dict[str, Any] = {"stretches": 0, "iterations": 0}
         cones = Cones(echoes, window_m=0.0)  # the echoes' arcs, the same for every solve
         for it in range(self.iterations):
-            travel = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(x), np.diff(y)))])
+            travel = path_length(x, y)
             knots = Knots.along(travel, x, y, self.stretch_m)
             if knots is None or len(echoes) == 0:
                 break

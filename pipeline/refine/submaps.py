@@ -34,11 +34,16 @@ class Submap:
         return int(self.px.shape[0])
 
 
+def path_length(x: F64, y: F64) -> F64:
+    """Path length (m) from the first pose to each pose of the track ``(x, y)``."""
+    return np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(x), np.diff(y)))])
+
+
 def path_length_at(track_t: I64, track_x: F64, track_y: F64, t_ns: I64) -> F64:
     """Odometry path length (m) from the first pose to each stamp (linear in between)."""
-    cum = np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(track_x), np.diff(track_y)))])
     rel = (track_t - track_t[0]).astype(np.float64)
-    return np.asarray(np.interp((t_ns - track_t[0]).astype(np.float64), rel, cum))
+    return np.asarray(np.interp((t_ns - track_t[0]).astype(np.float64), rel,
+                                path_length(track_x, track_y)))
 
 
 def build_submaps(
