@@ -35,8 +35,9 @@ class Submap:
 
 
 def path_length(x: F64, y: F64) -> F64:
-    """Path length (m) from the first pose to each pose of the track ``(x, y)``."""
-    return np.concatenate([[0.0], np.cumsum(np.hypot(np.diff(x), np.diff(y)))])
+    """Path length (m) from the first pose to each pose of the track ``(x, y)`` (none for
+    no pose)."""
+    return np.concatenate([np.zeros(min(len(x), 1)), np.cumsum(np.hypot(np.diff(x), np.diff(y)))])
 
 
 def path_length_at(track_t: I64, track_x: F64, track_y: F64, t_ns: I64) -> F64:

@@ -78,6 +78,7 @@ from formats.arrays import F64, I64
 from pipeline.refine.echoes import Echoes
 from pipeline.refine.memo import Memo
 from pipeline.refine.scores import Placed, thin
+from pipeline.refine.submaps import path_length
 from pipeline.refine.threads import parallel_map
 from pipeline.se2 import transform_points
 
@@ -151,8 +152,7 @@ class Cones:
         self.phi = echoes.arc_angles(1.0, ARC_POINTS)  # the whole cone's rays, base frame
         self.bx, self.by = echoes.arc(1.0, ARC_POINTS)
         # each echo's stretch of travel (odometry, independent of the scale tested)
-        step = np.hypot(*np.diff(echoes.odo[:, :2], axis=0).T)
-        travel = np.concatenate([np.zeros(min(len(echoes), 1)), np.cumsum(step)])
+        travel = path_length(echoes.odo[:, 0], echoes.odo[:, 1])
         self.stretch = (np.floor(travel / window_m) if window_m > 0
                         else np.zeros(len(echoes))).astype(np.int64)
 

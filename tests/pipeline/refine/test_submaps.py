@@ -16,6 +16,7 @@ def test_path_length_sums_the_steps_from_the_first_pose() -> None:
     x, y = np.array([0.0, 3.0, 1.0]), np.array([0.0, 4.0, 4.0])
     np.testing.assert_allclose(path_length(x, y), [0.0, 5.0, 7.0])
     assert path_length(np.array([2.0]), np.array([1.0])).tolist() == [0.0]
+    assert path_length(np.empty(0), np.empty(0)).shape == (0,)
 
 
 def test_path_length_at_stamps_is_linear_between_poses() -> None:
