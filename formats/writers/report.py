@@ -1,7 +1,8 @@
 """``report.html`` (self-contained) and ``report.md``: a run's answer first, then the detail.
 
 Order: the summary (log, duration, method, readings used of all with the main drop
-reasons, features, mapped area, trajectory, quality when the run was scored, warnings),
+reasons, features, mapped area, trajectory, what pose refinement did when it ran, quality
+when the run was scored, warnings),
 the map, the comparison with and without feature correction (when run with
 ``--compare-correction``: the two maps side by side and the differences named), the
 evaluation (when ``sonarmap evaluate`` scored the run: every section its result has, in
@@ -103,10 +104,17 @@ def _flat_rows(section: Mapping[str, Any], prefix: str = "") -> list[Row]:
 
 
 def _detail_sections(metrics: Mapping[str, Any]) -> list[tuple[str, list[Row]]]:
+    """The metrics' sections as tables; a section's one-line ``summary`` (pose
+    refinement's) heads its table, before the figures it sums up."""
     names = [s for s in _SECTIONS if s in metrics]
     names += sorted(k for k in metrics if k not in _SECTIONS and k not in _SKIP_SECTIONS
                     and isinstance(metrics[k], Mapping))
-    return [(label(n).capitalize(), _flat_rows(metrics[n])) for n in names]
+    sections = []
+    for n in names:
+        section = dict(metrics[n])
+        lead = {"summary": section.pop("summary")} if "summary" in section else {}
+        sections.append((label(n).capitalize(), _flat_rows({**lead, **section})))
+    return sections
 
 
 def _evaluation_parts(

@@ -229,10 +229,23 @@ def summarise(metrics: Mapping[str, Any], evaluation: Mapping[str, Any] | None =
             f"{format_number(float(traj.get('path_length_m', 0.0)), 4)} m, "
             f"{int(counts.get('poses', 0)):,} poses{frame}",
         ))
+    refined = _refinement(metrics.get("pose_refinement"))
+    if refined:
+        rows.append(("Pose refinement", refined))
     if evaluation and (q := _quality(evaluation)):
         rows.append(("Quality", q))
     warnings = [str(w) for w in metrics.get("warnings", [])]
     return Summary(title=name, rows=rows, warnings=warnings)
+
+
+def _refinement(section: Any) -> str:
+    """What pose refinement did, as its summary line says it (without the line's own
+    ``pose refinement:`` lead); empty when the run did not refine its poses."""
+    if not isinstance(section, Mapping) or not section.get("summary"):
+        return ""
+    text = str(section["summary"])
+    lead = "pose refinement: "
+    return text[len(lead):] if text.startswith(lead) else text
 
 
 def comparison_differences(with_: Mapping[str, Any], without: Mapping[str, Any]) -> list[str]:

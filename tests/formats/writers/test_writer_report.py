@@ -135,6 +135,28 @@ def test_no_features_and_nothing_dropped(tmp_path: Path) -> None:
     assert '<p class="ok">No warnings.</p>' in html_text and "\nNo warnings.\n" in md
 
 
+def test_pose_refinement_said_in_the_summary_and_first_in_its_details(
+        tmp_path: Path, features: FeatureTable) -> None:
+    line = ("pose refinement: scale error +3.1% (z 5.3); heading bias +0.80°/m; "
+            "poses moved 7.01 m mean, 24.72 m max")
+    metrics = {**METRICS, "pose_refinement": {
+        "echoes": 6484, "compass": {"z": 0.28, "applied": False},
+        "search_scale_error": 0.031, "summary": line}}
+    html_text, md = _write(tmp_path, features, metrics)
+    said = ("scale error +3.1% (z 5.3); heading bias +0.80°/m; "
+            "poses moved 7.01 m mean, 24.72 m max")
+    assert f"<tr><th>Pose refinement</th><td>{said}</td></tr>" in html_text
+    assert f"| Pose refinement | {said} |" in md
+    details = md[md.index("### Pose refinement"):]
+    rows = [r for r in details.splitlines() if r.startswith("| ") and r != "|  |  |"
+            and not r.startswith("| --- ")]
+    assert rows[0] == f"| summary | {line} |"  # the line first, then the figures it sums up
+    assert rows[1] == "| echoes | 6,484 |" and "| compass: z | 0.28 |" in rows
+    # a run without refinement says nothing of it
+    plain, plain_md = _write(tmp_path, features)
+    assert "Pose refinement" not in plain and "Pose refinement" not in plain_md
+
+
 def test_comparison_side_by_side_with_differences(tmp_path: Path, features: FeatureTable) -> None:
     other = _map(tmp_path, "map_no_correction.png")
     metrics = {**METRICS, "comparison": {
