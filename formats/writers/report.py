@@ -2,7 +2,7 @@
 
 Order: the summary (log, duration, method, readings used of all with the main drop
 reasons, features, mapped area, trajectory, what pose refinement did when it ran, quality
-when the run was scored, warnings),
+and trajectory error when the run was scored, warnings),
 the map, the comparison with and without feature correction (when run with
 ``--compare-correction``: the two maps side by side and the differences named), the
 evaluation (when ``sonarmap evaluate`` scored the run: every section its result has, in

@@ -164,6 +164,21 @@ def _quality(evaluation: Mapping[str, Any]) -> str | None:
     return f"{text} against {truth}" if truth else text
 
 
+def _trajectory_error(section: Any) -> str:
+    """``evaluate --truth-trajectory``'s answer in a line: ATE (RMSE, after the SE(2)
+    alignment) and RPE over its distance; empty when it was not asked."""
+    if not isinstance(section, Mapping) or not isinstance(section.get("ate_rmse_m"), int | float):
+        return ""
+    text = (f"ATE {format_number(float(section['ate_rmse_m']), 3)} m RMSE "
+            f"({int(section.get('poses_compared', 0)):,} poses, SE(2)-aligned)")
+    rpe, delta = section.get("rpe_trans_rmse_m"), section.get("rpe_delta")
+    if isinstance(rpe, int | float) and isinstance(delta, int | float):
+        text += (f"; RPE {format_number(float(rpe), 3)} m and "
+                 f"{format_number(float(section.get('rpe_rot_rmse_deg', 0.0)), 3)}° RMSE per "
+                 f"{format_number(float(delta))} {section.get('rpe_unit', 'm')}")
+    return text
+
+
 def _file_text(f: Mapping[str, Any]) -> str:
     """One file of a recording: ``a.bag (2023-11-14 22:13:20.000 UTC to …, 5,001 messages)``."""
     start, end = f.get("start_ns"), f.get("end_ns")
@@ -234,6 +249,8 @@ def summarise(metrics: Mapping[str, Any], evaluation: Mapping[str, Any] | None =
         rows.append(("Pose refinement", refined))
     if evaluation and (q := _quality(evaluation)):
         rows.append(("Quality", q))
+    if evaluation and (e := _trajectory_error(evaluation.get("trajectory_error"))):
+        rows.append(("Trajectory error", e))
     warnings = [str(w) for w in metrics.get("warnings", [])]
     return Summary(title=name, rows=rows, warnings=warnings)
 

@@ -205,6 +205,19 @@ def test_evaluation_sections_rendered_generically(tmp_path: Path, features: Feat
     assert "| far | 4 | 0.2 |" in md
 
 
+def test_trajectory_error_in_the_summary(tmp_path: Path, features: FeatureTable) -> None:
+    evaluation = {"truth": "t.yaml", "f1": 0.85, "trajectory_error": {
+        "poses_compared": 3095, "ate_rmse_m": 0.0238083, "rpe_delta": 1.0, "rpe_unit": "m",
+        "rpe_trans_rmse_m": 0.00806289, "rpe_rot_rmse_deg": 0.0139998}}
+    html_text, md = _write(tmp_path, features, evaluation=evaluation)
+    said = ("ATE 0.0238 m RMSE (3,095 poses, SE(2)-aligned); "
+            "RPE 0.00806 m and 0.014° RMSE per 1 m")
+    assert f"<tr><th>Trajectory error</th><td>{said}</td></tr>" in html_text
+    assert f"| Trajectory error | {said} |" in md
+    _, without = _write(tmp_path, features, evaluation={"truth": "t.yaml", "f1": 0.85})
+    assert "Trajectory error" not in without
+
+
 def test_reports_are_deterministic(tmp_path: Path, features: FeatureTable) -> None:
     (tmp_path / "a").mkdir()
     (tmp_path / "b").mkdir()
