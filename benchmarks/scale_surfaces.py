@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
+from pipeline.refine.calibration import Lean, scale_z
 from pipeline.refine.surfaces import K0S, SurfaceScale
 
 
@@ -37,7 +38,8 @@ def main(argv: list[str] | None = None) -> int:
                 *track, echoes, dataclasses.replace(pr, calibration_max_scale=0.0)).heading_bias
             fp = SurfaceScale(*track, echoes, bias, pr.calibration_scale_window_m,
                               pr.calibration_scale_tilt == "always").fixed_point()
-            z = abs(fp.value) / math.hypot(fp.standard_error, pr.calibration_scale_systematic)
+            z = scale_z(fp, Lean(pr.calibration_scale_systematic,
+                                 pr.calibration_scale_systematic_negative))
             print(f"| {name} | {which} | {len(echoes)} | {math.degrees(bias):.2f} | "
                   + " ".join(f"{v:+.4f}" for v in fp.f)
                   + f" | {fp.slope:.2f} | {fp.value:+.4f} | {fp.standard_error:.4f} "

@@ -49,6 +49,7 @@ from pipeline.drift import DriftModel, apply_drift
 from pipeline.pose_sync import POSE_OK, PoseTrack, interpolate_poses
 from pipeline.refine.calibration import (
     Calibration,
+    Lean,
     calibrate,
     consistency_change,
     gate_digits,
@@ -153,7 +154,8 @@ def configured_calibration(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes,
         min_gain=cfg.calibration_min_gain, strong_gain=cfg.calibration_strong_gain,
         scale_score=cfg.calibration_scale_score,
         max_slope=cfg.calibration_max_slope, min_z=cfg.calibration_scale_min_z,
-        systematic=cfg.calibration_scale_systematic,
+        systematic=Lean(cfg.calibration_scale_systematic,
+                        cfg.calibration_scale_systematic_negative),
         window_m=cfg.calibration_scale_window_m,
         tilt=cfg.calibration_scale_tilt,
         recentre=cfg.calibration_scale_recentre,

@@ -65,7 +65,7 @@ def _gated(estimate: float, error: float, applied: bool) -> Any:
 def test_the_oriented_patches_scale_is_the_fallback_where_the_models_agree(
         offset: tuple[float, float], oriented: tuple[float, float],
         oriented_applied: bool) -> None:
-    from pipeline.refine.calibration import _patch_models
+    from pipeline.refine.calibration import Lean, _patch_models
 
     asked: list[bool] = []
 
@@ -73,7 +73,7 @@ def test_the_oriented_patches_scale_is_the_fallback_where_the_models_agree(
         asked.append(tilt)
         return _gated(*(oriented if tilt else offset), applied=tilt)
 
-    got = _patch_models(surfaces, "fallback")
+    got = _patch_models(surfaces, "fallback", Lean(), 3.0)
     assert asked == [False, True]
     assert got.scale_oriented is oriented_applied
     if oriented_applied:
@@ -86,7 +86,7 @@ def test_the_oriented_patches_scale_is_the_fallback_where_the_models_agree(
 
 
 def test_an_established_offset_only_scale_is_not_asked_again() -> None:
-    from pipeline.refine.calibration import _patch_models
+    from pipeline.refine.calibration import Lean, _patch_models
 
     asked: list[bool] = []
 
@@ -94,14 +94,14 @@ def test_an_established_offset_only_scale_is_not_asked_again() -> None:
         asked.append(tilt)
         return _gated(0.028, 0.008, applied=True)
 
-    assert _patch_models(surfaces, "fallback").scale_error == 0.028
+    assert _patch_models(surfaces, "fallback", Lean(), 3.0).scale_error == 0.028
     assert asked == [False]
     asked.clear()
-    always = _patch_models(surfaces, "always")
+    always = _patch_models(surfaces, "always", Lean(), 3.0)
     assert always.scale_oriented and always.scale_other_model is None
     assert asked == [True]
     asked.clear()
-    assert not _patch_models(surfaces, "off").scale_oriented
+    assert not _patch_models(surfaces, "off", Lean(), 3.0).scale_oriented
     assert asked == [False]
 
 
@@ -212,17 +212,71 @@ def test_an_alias_sharpness_accepts_loses_to_the_more_consistent_bias_elsewhere(
 
 
 def test_a_scale_is_established_only_clear_of_zero_flat_and_of_the_sign_asked() -> None:
-    from pipeline.refine.calibration import _established
+    from pipeline.refine.calibration import Lean, _established
     from pipeline.refine.surfaces import FixedPoint
 
     def fp(value: float, error: float, slope: float = 0.5) -> FixedPoint:
         return FixedPoint(value, slope, (), error)
 
-    assert _established(fp(0.047, 0.0016), 0.053, 0.005, 3.0, 0.75)  # the office at +5 %
-    assert not _established(fp(0.007, 0.0042), 0.046, 0.005, 3.0, 0.75)  # z 1.1
-    assert not _established(fp(-0.047, 0.0016), 0.053, 0.005, 3.0, 0.75)  # the other sign
-    assert not _established(fp(0.047, 0.0016, slope=0.8), 0.053, 0.005, 3.0, 0.75)
-    assert not _established(fp(math.nan, math.nan), 0.05, 0.005, 3.0, 0.75)
+    lean = Lean(0.005, 0.005)
+    assert _established(fp(0.047, 0.0016), 0.053, lean, 3.0, 0.75)  # the office at +5 %
+    assert not _established(fp(0.007, 0.0042), 0.046, lean, 3.0, 0.75)  # z 1.1
+    assert not _established(fp(-0.047, 0.0016), 0.053, lean, 3.0, 0.75)  # the other sign
+    assert not _established(fp(0.047, 0.0016, slope=0.8), 0.053, lean, 3.0, 0.75)
+    assert not _established(fp(math.nan, math.nan), 0.05, lean, 3.0, 0.75)
+
+
+@pytest.mark.parametrize(("oriented", "applied"), [
+    ((-0.022, 0.0030), -0.022),  # established and agreeing: the oriented scale
+    ((-0.010, 0.0060), -0.015),  # not established: the offset-only one
+    ((+0.020, 0.0030), -0.015),  # established, disagreeing: the offset-only one
+])
+def test_a_negative_scale_only_the_lower_lean_establishes_asks_the_oriented_patches(
+        oriented: tuple[float, float], applied: float) -> None:
+    """The hospital's −2 % with 0.01 m/√m: −1.5 ± 0.4 % offset-only (z 4.3 with the lower
+    lean, 2.3 with the upper), −2.2 ± 0.3 % oriented."""
+    from pipeline.refine.calibration import Lean, _patch_models
+
+    asked: list[bool] = []
+
+    def surfaces(tilt: bool) -> Any:
+        asked.append(tilt)
+        return (_gated(*oriented, applied=abs(oriented[0]) / oriented[1] > 3) if tilt
+                else _gated(-0.015, 0.0035, applied=True))
+
+    got = _patch_models(surfaces, "fallback", Lean(), 3.0)
+    assert asked == [False, True]
+    assert got.scale_error == applied and got.scale_oriented is (applied == oriented[0])
+    asked.clear()
+    # a scale as far below 0 that the upper lean would establish too is not asked again
+    assert _patch_models(lambda tilt: asked.append(tilt) or _gated(-0.03, 0.0035, True),
+                         "fallback", Lean(), 3.0).scale_error == -0.03
+    assert asked == [False]
+
+
+def test_the_lean_is_one_sided() -> None:
+    """The estimator leans towards a shorter path (a positive scale) on right odometry, so
+    a negative estimate needs no lean term beside its error: the hospital's −2 % with
+    0.01 m/√m of noise, found at −1.2 ± 0.28 %, is established by the default lean and was
+    not by 0.5 % on both sides; a true-pose estimate of the same size above 0 is not, and
+    the most negative true-pose estimate measured (−0.32 ± 0.15 %) is not either."""
+    from pipeline.refine.calibration import Lean, _established, scale_z
+    from pipeline.refine.surfaces import FixedPoint
+
+    def fp(value: float, error: float) -> FixedPoint:
+        return FixedPoint(value, 0.5, (), error)
+
+    lean = Lean()  # the configuration's default
+    assert (lean.up, lean.down) == (Config().pose_refinement.calibration_scale_systematic,
+                                    Config().pose_refinement.calibration_scale_systematic_negative)
+    noisy = fp(-0.012, 0.0028)
+    assert scale_z(noisy, lean) == pytest.approx(0.012 / math.hypot(0.0028, 0.001))
+    assert _established(noisy, noisy.value, lean, 3.0, 0.75)
+    assert not _established(noisy, noisy.value, Lean(0.005, 0.005), 3.0, 0.75)  # z 2.1
+    leaning = fp(0.012, 0.0028)
+    assert scale_z(leaning, lean) == pytest.approx(0.012 / math.hypot(0.0028, 0.005))
+    assert not _established(leaning, leaning.value, lean, 3.0, 0.75)
+    assert not _established(fp(-0.0032, 0.0015), -1.0, lean, 3.0, 0.75)  # z 1.8
 
 
 @pytest.mark.parametrize(("far", "applied"), [

@@ -188,6 +188,7 @@ def test_a_scale_within_min_z_errors_of_zero_is_not_applied(
     ("calibration_max_slope", 0.0, "must be in (0, 1]"),
     ("calibration_scale_min_z", -1.0, "must be >= 0"),
     ("calibration_scale_systematic", -0.01, "must be >= 0"),
+    ("calibration_scale_systematic_negative", -0.01, "must be >= 0"),
     ("calibration_scale_window_m", -1.0, "must be >= 0"),
     ("calibration_far_range_m", -1.0, "must be >= 0 (0 = off)"),
     ("calibration_far_range_m", float("nan"), "must be a finite number"),
