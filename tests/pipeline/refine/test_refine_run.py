@@ -125,6 +125,26 @@ def test_refinement_on_true_poses_barely_moves_them(tmp_path: Path) -> None:
         read_trajectory(tmp_path / "run" / "odometry.csv").x, sim.poses.x, atol=1e-9)
 
 
+def test_right_odometry_at_one_hertz_keeps_its_scale(tmp_path: Path) -> None:
+    """The slow-odometry sample: true poses 0.9 s apart, interpolated through its corners,
+    one swept sonar. Its estimate leans below 0 (−0.71 ± 0.08 %, the largest lean below 0
+    measured on right odometry), and the lean's lower term keeps it out: refinement moves
+    nothing."""
+    from pipeline.config import load_config
+    from pipeline.run import run
+
+    root = Path(__file__).resolve().parents[3]
+    log = root / "sample_logs" / "slow-odometry"
+    cfg = dataclasses.replace(load_config(None), pose_refinement=PoseRefinementConfig(
+        enabled=True))
+    res = run(log, tmp_path / "run", cfg)
+    pr = res.metrics.pose_refinement
+    assert pr is not None
+    assert pr["scale_estimate"] == pytest.approx(-0.0071, abs=0.0005)
+    assert 2.0 < pr["scale_z"] < 3.0 and pr["search_scale_error"] == 0.0
+    assert pr["moved_max_m"] == 0.0
+
+
 def test_summary_says_what_was_applied_and_why_a_scale_was_not() -> None:
     from pipeline.refine.refine import summary
 
