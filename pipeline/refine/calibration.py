@@ -129,14 +129,15 @@ class Lean:
     estimate's standard error in quadrature in its z (:func:`scale_z`).
 
     Each is the smallest term that keeps every right odometry measured under z 3 on its
-    side, rounded up to a tenth of a percent. The lean is mostly upward: the odometry's random error sits in the
-    fit's regressor and favours a shorter path, and the wide cone's nearest surface leans
-    the same way. Above 0, Freiburg 079's true poses give +1.64 ± 0.24 % (needs 0.49 %);
-    below 0, the slow-odometry sample (poses at 1 Hz interpolated through its corners,
-    one swept sonar, 7 m) gives −0.71 ± 0.08 % (needs 0.23 %), and no other of the 85
-    true-pose runs of ``drift_variety`` and ``held_out`` stands over 2.1 of its own errors
-    below 0. Noise per step moves drifted estimates up by ~0.7 % (the hospital's −2 % with
-    0.01 m/√m found at −1.2 to −1.6 %), so 0.5 % on both sides kept such scales out."""
+    side, rounded up to a tenth of a percent. The lean is mostly upward: the odometry's
+    random error sits in the fit's regressor and favours a shorter path, and the wide
+    cone's nearest surface leans the same way. Above 0, Freiburg 079's true poses give
+    +1.64 ± 0.24 % (needs 0.49 %); below 0, the slow-odometry sample (poses at 1 Hz
+    interpolated through its corners, one swept sonar, 7 m) gives −0.71 ± 0.08 % (needs
+    0.23 %), and no other of the 85 true-pose runs of ``drift_variety`` and ``held_out``
+    stands over 2.1 of its own errors below 0. Noise per step moves drifted estimates up
+    by ~0.7 % (the hospital's −2 % with 0.01 m/√m found at −1.2 to −1.6 %), so 0.5 % on
+    both sides kept such scales out."""
 
     up: float = 0.005
     down: float = 0.003
@@ -444,9 +445,9 @@ def _surface_calibration(
       more than with the data (its noise amplified ``1 / (1 − slope)`` ≥ 4× at 0.75);
     * the estimate lies within ``min_z`` errors of 0, the error being its standard error
       and ``systematic`` (the estimator's own lean, measured on true poses: −0.1 to +0.7 %
-      on the dense logs, mostly upward: counted per side, :class:`Lean`) in quadrature: a scale is applied only
-      when it is distinguishable from a calibrated odometry's (wrongly applied, +0.7 %
-      costs a 40 m building 0.07 F1).
+      on the dense logs, mostly upward: counted per side, :class:`Lean`) in quadrature: a
+      scale is applied only when it is distinguishable from a calibrated odometry's
+      (wrongly applied, +0.7 % costs a 40 m building 0.07 F1).
 
     With ``far_echoes``, the first scale is also found from them, and they replace the
     near echoes for the scale when they agree (:func:`_far_agrees`).
