@@ -6,7 +6,7 @@ Input (deterministic): N single-layout CSV logs of a robot driving ``S`` pose st
 5 cm apart) up and down a 2.4 m wide corridor with pillars; an 8-sonar ring (30° beams,
 0.1-5 m) fires once per step; ranges are the nearest wall or pillar along the beam axis
 plus 1 cm noise (seeded per log). Each batch gets a fresh LocalCluster (as ``sonarmap batch
---workers N`` starts one, its workers warmed as they start: pipeline/batch_warm.py), timed
+--workers N`` starts one, its workers warmed as they start: pipeline/tools/batch_warm.py), timed
 apart from the batch; both map into fresh directories.
 Prints seconds per batch, per log and the speed-up with and without the start-up (target
 ≥ 1.8× on 2 cores).
@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.batch import WORKER_PRELOAD, run_batch
+from pipeline.tools.batch import WORKER_PRELOAD, run_batch
 
 YAWS_DEG = (-90.0, -50.0, -30.0, -10.0, 10.0, 30.0, 50.0, 90.0)
 HALF_WIDTH = 1.2  # m, corridor walls at y = ±1.2
@@ -89,7 +89,7 @@ def batch_seconds(logs: Path, out: Path, cfg: Path, workers: int) -> tuple[float
     from distributed import LocalCluster
 
     t0 = time.perf_counter()
-    # As sonarmap batch's local cluster: workers warmed as it starts (pipeline.batch_warm).
+    # As sonarmap batch's local cluster: workers warmed as it starts (pipeline.tools.batch_warm).
     with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                       host="127.0.0.1", dashboard_address=None, silence_logs=40,
                       memory_limit=0, preload=[WORKER_PRELOAD]) as cluster:

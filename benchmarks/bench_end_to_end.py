@@ -3,7 +3,7 @@
 Usage: ``python benchmarks/bench_end_to_end.py [--seconds 3600] [--fractions 0.25 0.5 1]
 [--rss-factor 10] [--repeat 3] [--smoke] [--profile FILE]``
 
-Input (deterministic, no downloads): the simulator (:mod:`pipeline.simulate`) drives the
+Input (deterministic, no downloads): the simulator (:mod:`pipeline.tools.simulate`) drives the
 Pioneer ring (16 sonars, 30° beams, 0.1-5 m, ring at 10 Hz → 160 readings/s) through the
 office world's waypoint tour and back again, in a loop, for ``--seconds`` (default one hour
 = 576k readings, poses at 20 Hz), written as MCAP (ROS 2 CDR, zstd chunks). Logs are cached
@@ -65,9 +65,9 @@ def cache_dir() -> Path:
 def simulate_log(spec: LogSpec, path: Path) -> int:
     """Simulate ``spec`` and write it as MCAP to ``path``; returns the number of readings."""
     from formats.log_writers import write_log
-    from pipeline.simulate import SimOptions, load_waypoints, load_world, simulate
-    from pipeline.simulate.simulate import SimRanges
-    from pipeline.simulate.trajectory import Trajectory
+    from pipeline.tools.simulate import SimOptions, load_waypoints, load_world, simulate
+    from pipeline.tools.simulate.simulate import SimRanges
+    from pipeline.tools.simulate.trajectory import Trajectory
 
     world = load_world(WORLDS / f"{spec.world}.toml")
     wp = load_waypoints(WORLDS / f"{spec.world}.waypoints.csv")

@@ -41,9 +41,9 @@ def make_log(path: Path, seconds: float, speed: float = 0.5) -> float:
     """Simulate the corridor route driven back and forth for about ``seconds``; write an
     MCAP (zstd) to ``path``; return the log's duration (s)."""
     from formats.log_writers import write_log
-    from pipeline.simulate.simulate import SimOptions, simulate
-    from pipeline.simulate.trajectory import load_waypoints
-    from pipeline.simulate.world import load_world
+    from pipeline.tools.simulate.simulate import SimOptions, simulate
+    from pipeline.tools.simulate.trajectory import load_waypoints
+    from pipeline.tools.simulate.world import load_world
 
     route = load_waypoints(WAYPOINTS)[:2]  # the corridor's two ends
     leg = float(np.hypot(*(route[1] - route[0]))) / speed  # s from one end to the other

@@ -44,7 +44,7 @@ def building_cases(log: Path, work: Path, odometry: bool = True
     """The cases of one CARMEN log: drifted by the issue's model and, with ``odometry``,
     its own wheel odometry; both beside the true-pose emulation under ``work``."""
     from formats.errors import InputError
-    from pipeline.emulate import EmulateOptions, run_emulation
+    from pipeline.tools.emulate import EmulateOptions, run_emulation
 
     name = building_name(log)
     clean = work / name / f"{name}.mcap"

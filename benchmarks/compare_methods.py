@@ -11,7 +11,7 @@ ALGORITHM.md §9), (2) the paper's method with feature correction, (3) the paper
 without it (the paper's ablation), (4) the classic log-odds grid, into a temporary
 directory (``--keep DIR`` keeps the runs), and (5) by OctoMap from the same readings
 (:mod:`benchmarks.octomap_baseline`; skipped without the ``bench`` extra). Every map is
-scored by the same code as ``sonarmap evaluate`` (:func:`pipeline.evaluate.evaluate_maps`)
+scored by the same code as ``sonarmap evaluate`` (:func:`pipeline.tools.evaluate.evaluate_maps`)
 against the truth map, with recall restricted to walls within sensor reach of the true
 trajectory (``<stem>.truth.csv`` beside the truth, when present). Prints one Markdown
 table per log (F1, precision, recall, mean feature variance (m²), features, readings/s)
@@ -122,7 +122,7 @@ def log_reach(log: Path, cfg: Config) -> float | None:
     """Largest sensor max range, m, in the log's readings or the configuration."""
     from formats import open_log
     from formats.presets import PRESETS
-    from pipeline.ingest import survey
+    from pipeline.stages.ingest import survey
 
     with open_log(log, cfg) as reader:
         sv = survey(reader)
@@ -137,8 +137,8 @@ def compare_log(
     log: Path, truth: Path, work: Path, args: argparse.Namespace
 ) -> tuple[list[Row], str]:
     """Map ``log`` three ways into ``work`` and evaluate each; returns rows and a caption."""
-    from pipeline.evaluate import evaluate_run
     from pipeline.run import run
+    from pipeline.tools.evaluate import evaluate_run
 
     cfg = load_config_for(log, args.config)
     stem = truth.name[: -len(".truth.yaml")]
@@ -177,7 +177,7 @@ def octomap_row(
     from benchmarks import octomap_baseline as ob
     from formats.writers.nav2_map import load_nav2_map
     from formats.writers.trajectory_csv import read_trajectory
-    from pipeline.evaluate import evaluate_maps
+    from pipeline.tools.evaluate import evaluate_maps
 
     if not ob.available():
         print(f"{log.name}: OctoMap row skipped (pip install -e '.[bench]')", file=sys.stderr)
@@ -204,7 +204,7 @@ def classes_png(cls: np.ndarray, path: Path) -> None:
     """A trinary map as a grey PNG (black occupied, white free, grey unknown; north up)."""
     from PIL import Image
 
-    from pipeline.evaluate import FREE, OCCUPIED
+    from pipeline.tools.evaluate import FREE, OCCUPIED
 
     grey = np.full(cls.shape, 205, dtype=np.uint8)
     grey[cls == FREE] = 254
@@ -299,9 +299,9 @@ def figure(results: list[tuple[list[Row], str]], path: Path, height: int = 360) 
 # ------------------------------------------------------------------ drifted odometry (issue 17)
 # Separate from the method comparison above: each drifted case is mapped with the default
 # method three ways — true poses, drifted odometry, drifted odometry + --refine-poses — and
-# scored by F1 and, against the true trajectory, ATE (pipeline.trajectory_error). F1 is
+# scored by F1 and, against the true trajectory, ATE (pipeline.tools.trajectory_error). F1 is
 # given twice: in the truth's frame, and "aligned" — after moving the map by the rigid
-# motion that lays its trajectory onto the true one (pipeline.evaluate, ``aligned``): a
+# motion that lays its trajectory onto the true one (pipeline.tools.evaluate, ``aligned``): a
 # drifted run's frame is anchored where its odometry started, and a heading error in the
 # first metres turns the whole map without changing its shape.
 # The "-odometry" cases are real drift: the building's own wheel odometry (CARMEN ODOM
@@ -365,8 +365,8 @@ def drifted_case(case: str, drifted: Path, drift: DriftModel, drift_seed: int = 
     (the Radish logs' true-pose runs are ``make compare``'s ``build/compare/<name>.mcap``,
     emulated here when missing). ``preset``: the sonars simulated or emulated as that
     preset's ring (formats/presets.py), its true-pose run beside ``drifted``."""
-    from pipeline.emulate import EmulateOptions, run_emulation
-    from pipeline.simulate import SimOptions, run_simulation
+    from pipeline.tools.emulate import EmulateOptions, run_emulation
+    from pipeline.tools.simulate import SimOptions, run_simulation
 
     real = case.endswith("-odometry")
     name = case.removesuffix("-odometry")
@@ -434,8 +434,8 @@ def score_drift_cases(cases: list[tuple[str, Path, Path, Path, Path]], work: Pat
     """Map and score ``cases`` — (name, true-pose log, drifted log, truth map, truth
     trajectory) — with true poses, drifted, refined and true poses refined, under ``work``."""
     from pipeline.config import Config
-    from pipeline.evaluate import evaluate_run
     from pipeline.run import run
+    from pipeline.tools.evaluate import evaluate_run
 
     rows = []
     chosen = load_config(config).pose_refinement if config is not None else Config().pose_refinement

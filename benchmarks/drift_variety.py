@@ -108,7 +108,7 @@ def found(pr: dict[str, Any]) -> str:
 @dataclass(frozen=True)
 class Scored:
     """One run scored against the truth: F1 in the truth's frame and after the rigid motion
-    that lays its trajectory onto the true one (``pipeline.evaluate``'s ``aligned``: a
+    that lays its trajectory onto the true one (``pipeline.tools.evaluate``'s ``aligned``: a
     heading error in the first metres turns the whole map without changing its shape), the
     ATE of its trajectory (evo's SE(2)-aligned RMSE) and its refinement's metrics."""
 
@@ -121,8 +121,8 @@ class Scored:
 def scored_run(log: Path, out: Path, cfg: Any, truth: Path, traj: Path) -> Scored:
     """``log`` run with ``cfg`` into ``out``, scored against the map ``truth`` and the
     trajectory ``traj``."""
-    from pipeline.evaluate import evaluate_run
     from pipeline.run import run
+    from pipeline.tools.evaluate import evaluate_run
 
     result = run(log, out, cfg, force=True)
     ev = evaluate_run(out, truth, trajectory=traj, truth_trajectory=traj)

@@ -89,7 +89,7 @@ def main(argv: list[str] | None = None) -> None:
     from benchmarks.drift_variety import Tally, found, refined_config, scored_run
     from formats.presets import PRESETS
     from pipeline.config import Config
-    from pipeline.simulate import SimOptions, run_simulation
+    from pipeline.tools.simulate import SimOptions, run_simulation
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--worlds", nargs="+", default=list(DEFAULT_WORLDS))

@@ -47,7 +47,7 @@ def all_mutants() -> dict[str, int | None]:
 
 
 def module_of(name: str) -> str:
-    """``pipeline.scans.x_ScanKeys__mutmut_3`` → ``pipeline.scans``."""
+    """``pipeline.stages.scans.x_ScanKeys__mutmut_3`` → ``pipeline.stages.scans``."""
     head = name.split("__mutmut_")[0]
     return ".".join(p for p in head.split(".") if not p.startswith(("x_", "xǁ")))
 

@@ -88,8 +88,8 @@ def leaves_on_grid(tree: object, grid: GridSpec) -> F64:
 
 
 def classes(prob: F64, occupied_above: float, free_below: float) -> np.ndarray:
-    """nav2 loader class codes (see :mod:`pipeline.evaluate`) from a probability grid."""
-    from pipeline.evaluate import FREE, OCCUPIED, UNKNOWN
+    """nav2 loader class codes (see :mod:`pipeline.tools.evaluate`) from a probability grid."""
+    from pipeline.tools.evaluate import FREE, OCCUPIED, UNKNOWN
 
     out = np.full(prob.shape, UNKNOWN, dtype=np.int8)
     known = ~np.isnan(prob)

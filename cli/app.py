@@ -202,7 +202,7 @@ def run(
 
 def _run_summary(result: Any) -> dict[str, Any]:
     """``run --json``: where the outputs are and what the run found, in one object."""
-    from pipeline.metrics import json_ready
+    from pipeline.stages.metrics import json_ready
 
     m = result.metrics
     outputs = {p.name: str(p) for p in sorted(Path(result.out_dir).iterdir())
@@ -318,7 +318,7 @@ def validate(
       sonarmap validate sonar.bag odom.bag
     """
     from formats import open_log
-    from pipeline.validate import validate_log
+    from pipeline.tools.validate import validate_log
 
     cfg = _load(config, format=format, range_topics=range_topic, pose_topic=pose_topic)
     with open_log(log, cfg) as reader:

@@ -1,4 +1,4 @@
-"""``sonarmap batch``: map many logs in parallel on Dask (engine: :mod:`pipeline.batch`)."""
+"""``sonarmap batch``: map many logs in parallel on Dask (engine: :mod:`pipeline.tools.batch`)."""
 
 from __future__ import annotations
 
@@ -146,7 +146,7 @@ def register(app: typer.Typer) -> None:
 
           sonarmap batch logs/ -o out/ --rerun
         """
-        from pipeline.batch import run_batch
+        from pipeline.tools.batch import run_batch
 
         paths, lists = split_inputs(inputs or [], manifest or [])
         if not paths and not lists:

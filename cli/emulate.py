@@ -142,7 +142,7 @@ def emulate(
     """
     from pipeline.config import load_config
     from pipeline.drift import DriftModel
-    from pipeline.emulate import EmulateOptions, run_emulation
+    from pipeline.tools.emulate import EmulateOptions, run_emulation
 
     if format not in _FORMATS:
         raise typer.BadParameter(f"must be one of {', '.join(_FORMATS)}", param_hint="--format")

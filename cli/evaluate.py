@@ -77,7 +77,7 @@ def evaluate(
     """
     from formats.errors import OutputError
     from formats.writers.atomic import atomic_write_text
-    from pipeline.evaluate import evaluate_run
+    from pipeline.tools.evaluate import evaluate_run
 
     if output is not None:
         # A run's data files are immutable: results go next to them, never into the run.
@@ -91,7 +91,7 @@ def evaluate(
     if output is not None:
         atomic_write_text(output, result.to_json())
     if not no_report and (run_dir / "report.html").is_file():
-        from pipeline.run_report import write_run_reports
+        from pipeline.stages.run_report import write_run_reports
 
         write_run_reports(run_dir, evaluation=result.to_dict())
     if json_out:
@@ -128,8 +128,8 @@ def regress(
 
       sonarmap regress out/office --golden goldens/office --tolerances tolerances.toml --json
     """
-    from pipeline.regress import load_tolerances
-    from pipeline.regress import regress as run_regress
+    from pipeline.tools.regress import load_tolerances
+    from pipeline.tools.regress import regress as run_regress
 
     result = run_regress(run_dir, golden, load_tolerances(tolerances))
     if json_out:

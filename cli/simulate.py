@@ -62,7 +62,7 @@ def register(app: typer.Typer) -> None:
         """
         from formats.presets import PRESETS
         from pipeline.config import load_config
-        from pipeline.simulate.simulate import SimOptions, run_simulation
+        from pipeline.tools.simulate.simulate import SimOptions, run_simulation
 
         cfg = load_config(config)
         mounts = cfg.sensors.mounts or PRESETS[cfg.sensors.preset or "pioneer-p3dx"]

@@ -11,7 +11,7 @@ else reads ``[sensors]``. Its precedence, per sensor name:
   the value a reading carries; else the ``[sensors]`` default; else unknown (NaN).
 * **mount**: an explicit entry; else the log's own static transform (``/tf_static``, a
   CSV ``sensors.csv``); else the preset entry; else, for a sensor whose frame *is* the base
-  frame, the robot origin facing forward (decided by :func:`pipeline.sensors.resolve_sensors`,
+  frame, the robot origin facing forward (decided by :func:`pipeline.stages.sensors.resolve_sensors`,
   which also has the log).
 * **ring** (PointCloud / SonarArray messages carry no geometry: sonar i is the ring's i-th
   mount): the explicit ``[[sensors.mounts]]`` in file order when there are any, else the

@@ -193,8 +193,8 @@ def _simulated_content() -> object:
     """A short simulated run (a 4 x 3 m room, two sonar revolutions per second)."""
     import numpy as np
 
-    from pipeline.simulate.simulate import SimOptions, simulate
-    from pipeline.simulate.world import world_from_dict
+    from pipeline.tools.simulate.simulate import SimOptions, simulate
+    from pipeline.tools.simulate.world import world_from_dict
 
     world = world_from_dict(
         {"segment": [{"from": [0, 0], "to": [4, 0]}, {"from": [4, 0], "to": [4, 3]},

@@ -1,9 +1,9 @@
 """``run()``: a log in, a map directory out — the pipeline as named stages.
 
-1. **ingest** — open the log (:mod:`formats`), pass 1 survey (:mod:`pipeline.ingest`): the
+1. **ingest** — open the log (:mod:`formats`), pass 1 survey (:mod:`pipeline.stages.ingest`): the
    log is read and decoded once, its readings spilled in time order for the mapping passes;
-2. **pose_sync** — each reading's robot pose and sonar geometry (:mod:`pipeline.pose_sync`);
-3. **scan_building** — readings grouped into scans (:mod:`pipeline.scans`);
+2. **pose_sync** — each reading's robot pose and sonar geometry (:mod:`pipeline.stages.pose_sync`);
+3. **scan_building** — readings grouped into scans (:mod:`pipeline.stages.scans`);
 4. **mapping** — the mapper (:mod:`pipeline.mapper`), Andersone's method or the baseline;
 5. **outputs** — map.pgm/yaml, map.png, features.parquet, metrics.json, config.toml,
    reports, written into a temporary directory renamed into place when complete.
@@ -32,18 +32,18 @@ from formats.map_types import GridSpec
 from formats.writers.trajectory_tum import Trajectory
 from pipeline import __version__
 from pipeline.config import Config, dump_config
-from pipeline.ingest import Survey, survey
-from pipeline.mapped_share import check_mapped_share, mapped_readings
 from pipeline.mapper import Mapper, make_mapper
 from pipeline.mapper.types import MapSnapshot, Scan
 from pipeline.methods import Method
-from pipeline.metrics import (
+from pipeline.stages.ingest import Survey, survey
+from pipeline.stages.mapped_share import check_mapped_share, mapped_readings
+from pipeline.stages.metrics import (
     RunMetrics,
     StageTimer,
     map_cells,
     peak_rss_mb,
 )
-from pipeline.pose_sync import (
+from pipeline.stages.pose_sync import (
     POSE_OK,
     POSE_REASONS,
     PoseTrack,
@@ -51,11 +51,11 @@ from pipeline.pose_sync import (
     pose_gap_limit_s,
     sonar_geometry,
 )
-from pipeline.reading_quality import REASONS
-from pipeline.run_input import input_section, log_label, log_paths
-from pipeline.run_warnings import run_warnings
-from pipeline.scans import ScanBuilder, ScanKeys
-from pipeline.sensors import SensorTable, beam_problem, resolve_sensors
+from pipeline.stages.reading_quality import REASONS
+from pipeline.stages.run_warnings import run_warnings
+from pipeline.stages.scans import ScanBuilder, ScanKeys
+from pipeline.stages.sensors import SensorTable, beam_problem, resolve_sensors
+from pipeline.streaming.run_input import input_section, log_label, log_paths
 
 log = logging.getLogger("sonarmap")
 
@@ -571,7 +571,7 @@ def _write_outputs(
     from formats.writers.map_png import write_map_png
     from formats.writers.nav2_map import write_nav2_map
     from formats.writers.trajectory_tum import write_trajectory_tum
-    from pipeline.run_report import COMPARISON_IMAGES, write_run_reports
+    from pipeline.stages.run_report import COMPARISON_IMAGES, write_run_reports
 
     t_outputs = time.perf_counter()
     snap = snapshots["main"]

@@ -10,7 +10,7 @@ Two implementations of the per-scan loop, with the same results bit for bit (the
 compare them on random and real logs): the compiled kernels of
 :mod:`pipeline.mapper.kernels` (the default: merge, rasters, correction and layer updates
 run per scan in machine code), and the numpy reference (``reference=True``:
-:mod:`~pipeline.mapper.feature_set`, :mod:`~pipeline.mapper.free_space`,
+:mod:`~pipeline.mapper.features_reference`, :mod:`~pipeline.mapper.free_space`,
 :mod:`~pipeline.mapper.correction`), which states the method readably. Both prepare what
 does not depend on the map state (reading classes, reading features, cone geometry) with
 numpy, for groups of scans at once (:mod:`~pipeline.mapper.scan_group`). The compiled path
@@ -36,8 +36,8 @@ import numpy.typing as npt
 
 from pipeline.config import MapperConfig
 from pipeline.mapper.correction import correct_features
-from pipeline.mapper.feature_set import FeatureSet
-from pipeline.mapper.feature_store import FeatureStore
+from pipeline.mapper.features import FeatureStore
+from pipeline.mapper.features_reference import FeatureSet
 from pipeline.mapper.free_space import free_space_scans
 from pipeline.mapper.kernels import andersone_scans
 from pipeline.mapper.kernels.ellipse import occupied_cells

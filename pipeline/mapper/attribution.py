@@ -37,10 +37,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from pipeline import reading_quality as rq
 from pipeline.config import MapperConfig
 from pipeline.mapper.andersone import AndersoneMapper
-from pipeline.mapper.cone_kernels import (
+from pipeline.mapper.free_space import cone_table
+from pipeline.mapper.kernels.attribution import (
     attribute_echoes,
     count_arcs,
     count_free,
@@ -48,7 +48,6 @@ from pipeline.mapper.cone_kernels import (
     empty_span_counts,
     span_counts,
 )
-from pipeline.mapper.free_space import cone_table
 from pipeline.mapper.occupancy import logit
 from pipeline.mapper.paper_thread import PaperThread
 from pipeline.mapper.reading_features import distance_sigma
@@ -64,6 +63,7 @@ from pipeline.mapper.types import (
     MapSnapshot,
     Scan,
 )
+from pipeline.stages import reading_quality as rq
 
 
 class AttributionMapper:

@@ -23,9 +23,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from pipeline import reading_quality as rq
 from pipeline.config import MapperConfig
-from pipeline.mapper.feature_set import empty_table
+from pipeline.mapper.features_reference import empty_table
 from pipeline.mapper.free_space import cone_spans, cone_table, free_radius
 from pipeline.mapper.grid_raster import span_cells
 from pipeline.mapper.kernels.classic_scans import classic_scans
@@ -33,6 +32,7 @@ from pipeline.mapper.occupancy import logit
 from pipeline.mapper.reading_features import classify_scan, count_readings
 from pipeline.mapper.scan_group import ScanGroup, scan_groups
 from pipeline.mapper.types import F32, B, FeatureTable, GridSpec, MapperCounters, MapSnapshot, Scan
+from pipeline.stages import reading_quality as rq
 
 
 class ClassicMapper:

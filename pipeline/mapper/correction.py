@@ -44,7 +44,7 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.config import MapperConfig
-from pipeline.mapper.feature_set import FeatureSet
+from pipeline.mapper.features_reference import FeatureSet
 from pipeline.mapper.free_space import FreeSpaceScan
 from pipeline.mapper.grid_raster import ellipse_spans
 from pipeline.mapper.types import F64, I64, B, GridSpec, MapperCounters

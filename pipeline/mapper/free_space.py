@@ -21,11 +21,11 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from pipeline import reading_quality as rq
 from pipeline.config import MapperConfig
 from pipeline.mapper.grid_raster import Spans, cone_edges, sector_spans
 from pipeline.mapper.reading_features import distance_sigma
 from pipeline.mapper.types import F64, I64, B, GridSpec, Scan
+from pipeline.stages import reading_quality as rq
 
 
 class FreeSpaceScan:

@@ -6,7 +6,7 @@ origin ``o`` becomes ``N(μ, P)`` with ``μ = o + d (cos α, sin α)`` and
 ``σ_a = d·tan(β/2)/c_a`` (eq. 3). Covariances are stored as ``(xx, xy, yy)`` columns.
 
 Readings without a usable echo are classified by the shared
-:func:`pipeline.reading_quality.classify_readings` (NaN, ±inf, negative, below r_min,
+:func:`pipeline.stages.reading_quality.classify_readings` (NaN, ±inf, negative, below r_min,
 at or beyond ``r_max − ε_max``). Decision: a reading whose *geometry* (origin, α or β) is not
 finite cannot be placed in the world; it is counted as ``nan`` as well.
 """
@@ -18,9 +18,9 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from pipeline import reading_quality as rq
 from pipeline.config import MapperConfig
 from pipeline.mapper.types import F64, I64, MapperCounters, Scan
+from pipeline.stages import reading_quality as rq
 
 _SKIP_FIELD = {
     rq.NAN: "skipped_nan",

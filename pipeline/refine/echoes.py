@@ -19,9 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from formats.arrays import F64, I64
-from pipeline.pose_sync import POSE_OK, PoseTrack, interpolate_poses
-from pipeline.reorder_window import RangeChunk
-from pipeline.sensors import SensorTable
+from pipeline.stages.pose_sync import POSE_OK, PoseTrack, interpolate_poses
+from pipeline.stages.sensors import SensorTable
+from pipeline.streaming.reorder_window import RangeChunk
 
 ARC_SAMPLES = 7
 
@@ -90,7 +90,7 @@ def collect_echoes(
     max_gap_ns: int,
 ) -> Echoes:
     """One pass over the log's readings in time order (``chunks``: the survey's spill,
-    :meth:`pipeline.ingest.Survey.ordered_ranges`, so the log is not decoded again)
+    :meth:`pipeline.stages.ingest.Survey.ordered_ranges`, so the log is not decoded again)
     keeping the echoes that have a pose."""
     parts: list[tuple[I64, F64, F64, F64, F64, F64, F64]] = []
     for chunk in chunks:

@@ -46,7 +46,6 @@ from formats.angles import wrap_angle
 from formats.arrays import F64, I64
 from pipeline.config import PoseRefinementConfig
 from pipeline.drift import DriftModel, apply_drift
-from pipeline.pose_sync import POSE_OK, PoseTrack, interpolate_poses
 from pipeline.refine.calibration import (
     Calibration,
     Lean,
@@ -73,6 +72,7 @@ from pipeline.refine.matcher import LikelihoodField, Match, SearchWindow, match
 from pipeline.refine.stretches import consistency_needed, correct_stretches
 from pipeline.refine.submaps import Submap, build_submaps, path_length_at
 from pipeline.se2 import between, compose, inverse, transform_points
+from pipeline.stages.pose_sync import POSE_OK, PoseTrack, interpolate_poses
 
 
 @dataclass(frozen=True)

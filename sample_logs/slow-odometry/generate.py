@@ -21,8 +21,8 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
 sys.path.insert(0, str(ROOT))
 
-from pipeline.simulate.sonar import cast_rays  # noqa: E402
-from pipeline.simulate.world import load_world  # noqa: E402
+from pipeline.tools.simulate.sonar import cast_rays  # noqa: E402
+from pipeline.tools.simulate.world import load_world  # noqa: E402
 
 T0 = 1_700_000_000.0
 POSE_DT = 0.9  # s

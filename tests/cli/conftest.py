@@ -8,7 +8,7 @@ from typer.testing import CliRunner
 
 # The command tests build their inputs with the helpers of the packages they drive.
 _TESTS = Path(__file__).resolve().parents[1]
-for _helpers in (_TESTS / "pipeline" / "emulate", _TESTS / "pipeline" / "evaluate",
+for _helpers in (_TESTS / "pipeline" / "tools" / "emulate", _TESTS / "pipeline" / "tools" / "evaluate",
                  _TESTS / "formats" / "ros"):
     if str(_helpers) not in sys.path:
         sys.path.insert(0, str(_helpers))

@@ -323,7 +323,7 @@ def test_a_real_subprocess_maps_and_fails_cleanly(tmp_path):
 
 
 def test_evaluate_adds_its_results_to_the_run_report(runner, tmp_path):
-    from pipeline.run_report import write_run_reports
+    from pipeline.stages.run_report import write_run_reports
 
     out = tmp_path / "o"
     assert _run(runner, ["run", str(SAMPLES / "office" / "office.mcap"), "-o", str(out), "-q"]).exit_code == 0

@@ -17,8 +17,8 @@ from formats import detect_format, open_log
 from formats.contract import MountBatch, PoseBatch, RangeBatch
 from formats.log_writers import write_log
 from pipeline.config import Config
-from pipeline.simulate.simulate import SimOptions, simulate
-from pipeline.simulate.world import world_from_dict
+from pipeline.tools.simulate.simulate import SimOptions, simulate
+from pipeline.tools.simulate.world import world_from_dict
 
 CASES = [
     ("ros1", "log.bag", "none", "ros1"),

@@ -20,8 +20,8 @@ from formats.log_writers import (
     typestore,
     write_log,
 )
-from pipeline.simulate import SimOptions, simulate
-from pipeline.simulate.world import World
+from pipeline.tools.simulate import SimOptions, simulate
+from pipeline.tools.simulate.world import World
 
 T0 = 1_700_000_000_123_456_789
 

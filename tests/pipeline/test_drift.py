@@ -12,7 +12,7 @@ import pytest
 from formats.errors import ConfigError
 from pipeline.drift import DriftModel, apply_drift
 
-sys.path.insert(0, str(Path(__file__).resolve().parent / "emulate"))
+sys.path.insert(0, str(Path(__file__).resolve().parent / "tools" / "emulate"))
 
 
 def straight(n: int = 11, step: float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -69,8 +69,8 @@ def test_validate_names_the_parameter(kw: dict[str, float], key: str) -> None:
 
 
 def test_simulate_drifts_the_log_and_keeps_the_truth() -> None:
-    from pipeline.simulate import SimOptions, simulate
-    from pipeline.simulate.world import world_from_dict
+    from pipeline.tools.simulate import SimOptions, simulate
+    from pipeline.tools.simulate.world import world_from_dict
 
     world = world_from_dict({"polygon": [{"points": [[0, 0], [8, 0], [8, 4], [0, 4]]}]})
     wp = [[1.0, 2.0], [7.0, 2.0]]
@@ -92,7 +92,7 @@ def test_emulation_with_drift_keeps_the_poses_as_truth() -> None:
     from emulate_helpers import laser_log
 
     from formats.presets import PRESETS
-    from pipeline.emulate import emulate, ring_from_mounts
+    from pipeline.tools.emulate import emulate, ring_from_mounts
 
     poses = [(0.1 * k, 0.0, 0.0) for k in range(21)]
     log = laser_log(np.full((21, 181), 3.0), np.linspace(-90, 90, 181), poses=poses)

@@ -24,7 +24,7 @@ from pipeline.config import (
     dump_config,
     load_config,
 )
-from pipeline.ingest import ordered_ranges
+from pipeline.stages.ingest import ordered_ranges
 
 # Strings as TOML holds them: any Unicode scalar value (quotes, backslashes, controls,
 # astral characters), no surrogates.

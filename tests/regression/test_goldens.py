@@ -15,7 +15,7 @@ import pytest
 from typer.testing import CliRunner
 
 from cli.app import app
-from pipeline.regress import load_tolerances, regress
+from pipeline.tools.regress import load_tolerances, regress
 
 ROOT = Path(__file__).resolve().parents[2]
 GOLDENS = ROOT / "sample_logs" / "goldens"

@@ -13,9 +13,9 @@ from typer.testing import CliRunner
 
 from cli.app import app
 from fuzz.harness import ROOT
-from pipeline.batch import find_logs, read_manifest
 from pipeline.config import Config
-from pipeline.log_with_reference import reference_paths
+from pipeline.tools.batch import find_logs, read_manifest
+from pipeline.tools.log_with_reference import reference_paths
 
 
 def _run_error(*args: str) -> str:
@@ -76,7 +76,7 @@ def test_reference_files_keep_every_dot_of_the_log_name() -> None:
 
 
 def test_batch_log_name_of_250_characters_gets_a_short_output_name() -> None:
-    from pipeline.batch import output_names
+    from pipeline.tools.batch import output_names
 
     p = Path("/logs") / ("x" * 250 + ".mcap")
     name = output_names([p])[p]

@@ -10,8 +10,8 @@ from typer.testing import CliRunner
 
 from cli.app import app
 from fuzz.harness import ROOT
-from pipeline.batch import _map_one
 from pipeline.config import Config
+from pipeline.tools.batch import _map_one
 
 OFFICE = ROOT / "sample_logs" / "office" / "office.mcap"
 

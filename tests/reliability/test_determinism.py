@@ -12,9 +12,9 @@ from pathlib import Path
 from typing import Any
 
 from fuzz.harness import ROOT, Target
-from pipeline.batch import run_batch
 from pipeline.config import Config
 from pipeline.run import run
+from pipeline.tools.batch import run_batch
 
 SAME_BYTES = ("map.pgm", "map.yaml", "features.parquet", "config.toml", "map.png", "map.mcap",
               "trajectory.csv", "report.html", "report.md")

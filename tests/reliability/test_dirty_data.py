@@ -15,8 +15,8 @@ import pytest
 import formats.csv_log
 from fuzz.harness import Target
 from pipeline.config import Config
-from pipeline.reading_quality import REASONS, classify_readings
 from pipeline.run import run
+from pipeline.stages.reading_quality import REASONS, classify_readings
 
 # Row index (of the data rows) → the range text written there; spread over the log.
 INJECT = {

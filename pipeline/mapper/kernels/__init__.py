@@ -5,7 +5,7 @@ the tests compare it with (``tests/pipeline/mapper/test_kernels_*``):
 
 * :mod:`.cone` — a sonar cone (annular sector) as row spans, one reading at a time; the
   cell rule of :func:`pipeline.mapper.grid_raster.sector_spans`; every mapper's cones
-  (the attribution method's loops, :mod:`pipeline.mapper.cone_kernels`, use it too).
+  (the attribution method's loops, :mod:`pipeline.mapper.kernels.attribution`, use it too).
 * :mod:`.ellipse` — covariance ellipses as row spans; the occupied layer (§5).
 * :mod:`.free_space` — a scan's free-space scan as a window mask; the free-layer update.
 * :mod:`.free_unions` — a group's free-space scans packed, and their free-layer update

@@ -13,7 +13,7 @@ import numpy as np
 from numba import njit
 
 from pipeline.mapper.kernels.correction import CELLS_FREED, CREATED, MERGED, correct_features
-from pipeline.mapper.kernels.feature_index import (
+from pipeline.mapper.kernels.features import (
     FeatureArrays,
     compact_if_half_dead,
     merge_readings,

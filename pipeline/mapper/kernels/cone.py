@@ -21,7 +21,7 @@ level :func:`edge_sector_spans`, :func:`cone_rows` and :func:`cone_row_span` tak
 sines and cosines precomputed (the mappers take them from numpy's
 ``grid_raster.cone_edges``, so their cones match the numpy reference on any CPU). This is
 the mappers' one cone rasteriser: the andersone free space, the classic grid and the
-attribution method's cones and echo arcs (:mod:`pipeline.mapper.cone_kernels`) all use it.
+attribution method's cones and echo arcs (:mod:`pipeline.mapper.kernels.attribution`) all use it.
 """
 
 from __future__ import annotations

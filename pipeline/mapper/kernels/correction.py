@@ -19,7 +19,7 @@ import numpy as np
 from numba import njit
 
 from pipeline.mapper.kernels.ellipse import ellipse_row_span, ellipse_rows
-from pipeline.mapper.kernels.feature_index import (
+from pipeline.mapper.kernels.features import (
     N_SLOTS,
     FeatureArrays,
     delete_feature,

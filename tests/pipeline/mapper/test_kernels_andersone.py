@@ -16,9 +16,9 @@ import pytest
 
 from pipeline.config import MapperConfig
 from pipeline.mapper.andersone import AndersoneMapper
-from pipeline.mapper.feature_set import FeatureSet
-from pipeline.mapper.feature_store import FeatureStore
-from pipeline.mapper.kernels.feature_index import (
+from pipeline.mapper.features import FeatureStore
+from pipeline.mapper.features_reference import FeatureSet
+from pipeline.mapper.kernels.features import (
     compact_if_half_dead,
     delete_feature,
     merge_readings,

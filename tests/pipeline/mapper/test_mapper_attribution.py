@@ -8,7 +8,8 @@ from mapper_helpers import build_scan, cell_centres
 
 from pipeline.config import MapperConfig
 from pipeline.mapper import AttributionMapper, make_mapper
-from pipeline.mapper.cone_kernels import (
+from pipeline.mapper.grid_raster import cone_edges, sector_spans, span_cells
+from pipeline.mapper.kernels.attribution import (
     attribute_echoes,
     count_arcs,
     count_free,
@@ -16,7 +17,6 @@ from pipeline.mapper.cone_kernels import (
     empty_span_counts,
     span_counts,
 )
-from pipeline.mapper.grid_raster import cone_edges, sector_spans, span_cells
 from pipeline.mapper.synthetic import ring_scans, room_grid, room_segments
 from pipeline.mapper.types import GridSpec
 

@@ -9,7 +9,7 @@ from mapper_helpers import build_scan
 
 from pipeline.config import MapperConfig
 from pipeline.mapper.correction import correct_features, touched_features
-from pipeline.mapper.feature_set import FeatureSet
+from pipeline.mapper.features_reference import FeatureSet
 from pipeline.mapper.free_space import free_space_scan
 from pipeline.mapper.reading_features import classify_scan
 from pipeline.mapper.types import MapperCounters

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from formats.map_types import GridSpec
 from pipeline.config import MapperConfig
 from pipeline.mapper import AndersoneMapper
-from pipeline.mapper.feature_set import FeatureSet, feature_variance, kalman_merge
+from pipeline.mapper.features_reference import FeatureSet, feature_variance, kalman_merge
 from pipeline.mapper.reading_features import (
     beam_covariance,
     classify_scan,

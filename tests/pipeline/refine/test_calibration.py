@@ -20,7 +20,7 @@ from pipeline.config import Config
 from pipeline.refine import Echoes, collect_echoes
 from pipeline.refine.scores import Consistency, Sharpness
 from pipeline.refine.surfaces import FixedPoint, SurfaceScale
-from pipeline.simulate import SimOptions, simulate, write_simulation
+from pipeline.tools.simulate import SimOptions, simulate, write_simulation
 
 SampleEchoes = Callable[[str, float], tuple[tuple[np.ndarray, ...], Echoes]]
 
@@ -109,8 +109,8 @@ def test_an_established_offset_only_scale_is_not_asked_again() -> None:
 def pillar_hall(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[object, Echoes]]:
     """The hall of pillars (sample_logs/worlds/pillars.toml), true and with 3 % / 0.8°/m."""
     from pipeline.run import prepare
-    from pipeline.simulate import load_waypoints
-    from pipeline.simulate.world import load_world
+    from pipeline.tools.simulate import load_waypoints
+    from pipeline.tools.simulate.world import load_world
 
     worlds = Path(__file__).resolve().parents[3] / "sample_logs" / "worlds"
     world, route = load_world(worlds / "pillars.toml"), load_waypoints(worlds / "pillars.waypoints.csv")
@@ -368,9 +368,9 @@ def test_a_strongly_sharper_bias_is_applied_where_the_consistency_stays_level(
     # consistent. The first test alone refused it (refined F1 0.09 of the true poses');
     # the strong-sharpness route applies it, the drift's 3 % and 0.8°/m found.
     from pipeline.drift import DriftModel
-    from pipeline.emulate import EmulateOptions, run_emulation
-    from pipeline.pose_sync import pose_gap_limit_s
     from pipeline.refine.refine import configured_calibration
+    from pipeline.stages.pose_sync import pose_gap_limit_s
+    from pipeline.tools.emulate import EmulateOptions, run_emulation
     from tests.pipeline.refine.conftest import log_echoes
 
     src = Path(__file__).resolve().parents[3] / "sample_logs" / "radish" / "belgioioso-corrected.log.gz"
@@ -400,9 +400,9 @@ def test_yaw_noise_alone_gets_no_heading_bias(tmp_path: Path, building: str) -> 
     # finds a bias of -0.0105°/m, a hundredth of those failures (the CLI's emulation of the
     # same drift: F1 0.154 with the capped grid's, 0.188 with it, 0.166 unrefined).
     from pipeline.drift import DriftModel
-    from pipeline.emulate import EmulateOptions, run_emulation
-    from pipeline.pose_sync import pose_gap_limit_s
     from pipeline.refine.refine import configured_calibration
+    from pipeline.stages.pose_sync import pose_gap_limit_s
+    from pipeline.tools.emulate import EmulateOptions, run_emulation
     from tests.pipeline.refine.conftest import log_echoes
 
     src = (Path(__file__).resolve().parents[3] / "sample_logs" / "radish"
@@ -427,8 +427,8 @@ def _scripted_refinement(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
     import pipeline.refine.calibration as calibration
     import pipeline.refine.surfaces as surfaces
     from pipeline.drift import DriftModel
-    from pipeline.emulate import EmulateOptions, run_emulation
     from pipeline.run import run
+    from pipeline.tools.emulate import EmulateOptions, run_emulation
 
     asked: list[float] = []
 
@@ -503,7 +503,7 @@ def test_front_sonars_near_scale_misled_in_shelving_gives_way_to_the_far_one(
     # scale leans to the search's edge (+5.0 ± 0.6 %), the far echoes' (+3.4 ± 0.3 %)
     # disagrees and establishes one: it is applied (refined F1 0.70 → 0.98 of true poses).
     from pipeline.run import run
-    from pipeline.simulate import run_simulation
+    from pipeline.tools.simulate import run_simulation
 
     world = Path(__file__).resolve().parents[3] / "sample_logs" / "worlds" / "warehouse.toml"
     log = tmp_path / "warehouse.mcap"

@@ -192,8 +192,8 @@ def test_chords_follow_the_walls_of_the_simulated_corridor(sample_echoes):
 def test_a_round_hall_is_no_compass(tmp_path):
     """A ring corridor (walls of a 48-gon, radii 5 and 9 m) driven four times round: its
     walls turn with the travel as a drift would, but they share no lattice."""
-    from pipeline.simulate import SimOptions, simulate, write_simulation
-    from pipeline.simulate.world import world_from_dict
+    from pipeline.tools.simulate import SimOptions, simulate, write_simulation
+    from pipeline.tools.simulate.world import world_from_dict
     from tests.pipeline.refine.conftest import log_echoes
 
     def ring(radius: float, n: int) -> list[list[float]]:

@@ -13,9 +13,9 @@ import pytest
 
 from formats.writers.trajectory_csv import read_trajectory
 from pipeline.config import Config, PoseRefinementConfig
-from pipeline.simulate import SimOptions, simulate, write_simulation
-from pipeline.simulate.world import world_from_dict
-from pipeline.trajectory_error import trajectory_error
+from pipeline.tools.simulate import SimOptions, simulate, write_simulation
+from pipeline.tools.simulate.world import world_from_dict
+from pipeline.tools.trajectory_error import trajectory_error
 
 WORLD = {
     "polygon": [{"points": [[0, 0], [10, 0], [10, 6], [0, 6]]}],
@@ -299,7 +299,7 @@ def intel_drifted() -> tuple[object, object, tuple[np.ndarray, ...]]:
     """The Intel lab's sample log turned by 0.8°/m (no scale error): its odometry track,
     echoes on it, and the true poses."""
     from pipeline.drift import DriftModel, apply_drift
-    from pipeline.pose_sync import PoseTrack
+    from pipeline.stages.pose_sync import PoseTrack
     from tests.pipeline.refine.conftest import log_echoes
 
     log = Path(__file__).resolve().parents[3] / "sample_logs" / "intel-lab" / "intel.mcap"

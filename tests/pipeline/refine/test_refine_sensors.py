@@ -18,9 +18,9 @@ from formats.writers.trajectory_tum import Trajectory
 from pipeline.config import PoseRefinementConfig
 from pipeline.drift import DriftModel, apply_drift
 from pipeline.refine import collect_echoes, refine_track
-from pipeline.simulate import SimOptions, simulate, write_simulation
-from pipeline.simulate.world import world_from_dict
-from pipeline.trajectory_error import trajectory_error
+from pipeline.tools.simulate import SimOptions, simulate, write_simulation
+from pipeline.tools.simulate.world import world_from_dict
+from pipeline.tools.trajectory_error import trajectory_error
 
 WORLD = {
     "polygon": [{"points": [[0, 0], [10, 0], [10, 6], [0, 6]]}],

@@ -15,8 +15,8 @@ from formats.presets import PRESETS
 from pipeline.drift import DriftModel
 from pipeline.refine import Echoes
 from pipeline.refine.scores import BinnedSharpness, Consistency, Placed, Sharpness
-from pipeline.simulate import SimOptions, simulate, write_simulation
-from pipeline.simulate.world import world_from_dict
+from pipeline.tools.simulate import SimOptions, simulate, write_simulation
+from pipeline.tools.simulate.world import world_from_dict
 from tests.pipeline.refine.conftest import log_echoes
 
 Run = tuple[tuple[np.ndarray, ...], Echoes]  # the pose track (t, x, y, yaw), its echoes

@@ -14,8 +14,8 @@ from formats import open_log
 from pipeline.config import Config
 from pipeline.refine import Echoes, collect_echoes
 from pipeline.refine.stretches import correct_stretches
-from pipeline.simulate import SimOptions, simulate, write_simulation
-from pipeline.simulate.world import world_from_dict
+from pipeline.tools.simulate import SimOptions, simulate, write_simulation
+from pipeline.tools.simulate.world import world_from_dict
 
 WORLD = {
     "polygon": [{"points": [[0, 0], [10, 0], [10, 6], [0, 6]]}],
@@ -138,8 +138,8 @@ def test_true_poses_the_patches_loss_would_move_are_kept_by_the_echoes_consisten
 
     from formats.presets import PRESETS
     from pipeline.run import prepare
-    from pipeline.simulate import load_waypoints
-    from pipeline.simulate.world import load_world
+    from pipeline.tools.simulate import load_waypoints
+    from pipeline.tools.simulate.world import load_world
 
     worlds = Path(__file__).resolve().parents[3] / "sample_logs" / "worlds"
     sim = simulate(load_world(worlds / "rooms.toml"), load_waypoints(worlds / "rooms.waypoints.csv"),

@@ -1,0 +1,1 @@
+"""A run's streaming plumbing: readings spilled to disk, reordered and read back in bounded memory."""

@@ -1,0 +1,90 @@
+"""What went into a run: the log's path(s) as given, and ``metrics.json``'s input section.
+
+A log is one file or bag directory, or one recording in several files (split bags,
+separate sonar and odometry bags: :class:`formats.ros.multi_source.MultiSource`). The
+input section names every file with its sha256 and span; for several files ``sha256``
+is the hash of their hashes in time order, so naming the files in another order changes
+nothing in a run's outputs.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from formats.contract import LogInfo
+from pipeline.stages.metrics import sha256_of
+
+
+def log_paths(log: str | Path | Sequence[str | Path]) -> list[Path]:
+    """The path(s) of a log as a list (one path, or the files of one recording)."""
+    if isinstance(log, str | Path):
+        return [Path(log)]
+    return [Path(p) for p in log]
+
+
+def files_sha256(paths: Sequence[Path]) -> str:
+    """sha256 of a log's input: of its one file (or bag directory), or for several files
+    :func:`hashes_sha256` of theirs — the same files named in any order (or moved) hash
+    the same."""
+    if len(paths) == 1:
+        return sha256_of(paths[0])
+    return hashes_sha256([sha256_of(p) for p in paths])
+
+
+def hashes_sha256(hashes: Sequence[str]) -> str:
+    """sha256 of several files' sha256 hex digests, sorted (independent of their order)."""
+    return hashlib.sha256("".join(f"{h}\n" for h in sorted(hashes)).encode()).hexdigest()
+
+
+def log_label(paths: Sequence[Path]) -> Path:
+    """The log as messages name it: its path, or every file joined by `` + ``."""
+    return paths[0] if len(paths) == 1 else Path(" + ".join(str(p) for p in paths))
+
+
+def log_name(names: Sequence[str]) -> str:
+    """A short name for titles: ``a.bag``, ``a.bag + b.bag``, ``a_0.bag … a_9.bag (10 files)``."""
+    if len(names) <= 3:
+        return " + ".join(names)
+    return f"{names[0]} … {names[-1]} ({len(names)} files)"
+
+
+def input_section(paths: Sequence[Path], info: LogInfo, start_ns: int | None,
+                  end_ns: int | None, max_range_m: float) -> dict[str, Any]:
+    """``metrics.json`` → ``input``: path(s), sha256, format, duration, losses summed over
+    the files (``bytes_lost``, ``messages_recovered``, one line per loss naming its file)."""
+    section: dict[str, Any] = {}
+    if len(paths) == 1:
+        path = paths[0]
+        section |= {"path": str(path), "name": path.name, "sha256": sha256_of(path)}
+    else:
+        files: list[dict[str, Any]] = []
+        for f in info.files:  # in time order
+            p = Path(f.path)
+            files.append({
+                "path": f.path, "name": p.name, "sha256": sha256_of(p),
+                "start_ns": f.start_ns, "end_ns": f.end_ns, "messages": f.message_count,
+            })
+        joined = "".join(f"{f['sha256']}  {f['name']}\n" for f in files)
+        section |= {
+            "path": str(log_label([Path(f.path) for f in info.files])),
+            "name": log_name([Path(f.path).name for f in info.files]),
+            "sha256": hashlib.sha256(joined.encode()).hexdigest(),
+        }
+    section |= {
+        "format": info.format,
+        "duration_s": info.duration_s,
+        "start_ns": start_ns,
+        "end_ns": end_ns,
+        "max_range_m": max_range_m,
+        # A damaged log is mapped from its intact part; what was lost is recorded.
+        "bytes_lost": info.bytes_lost,
+        "messages_recovered": info.message_count if info.losses else None,
+        "losses": list(info.losses),
+    }
+    if len(paths) > 1:
+        section["files"] = files
+        section["duplicates_read_once"] = info.duplicates_read_once
+    return section

@@ -1,0 +1,640 @@
+"""``run_batch()``: many logs mapped in parallel on Dask, one task per log.
+
+Each log is mapped exactly as ``sonarmap run`` would (:func:`pipeline.run.run`) into
+``OUT/<name>/``. A log is a file or bag directory, or — named on one manifest line with
+`` + `` between the paths — one recording in several files (split bags, separate sonar and
+odometry bags), read as one log like ``sonarmap run a.bag b.bag``. The engine is
+``dask.distributed``: a local cluster of single-threaded worker processes (default), or an
+existing cluster reached by its scheduler address.
+Only paths, the configuration (a plain dict) and small result dicts travel through the
+scheduler; each worker opens and streams its own input.
+
+Resume: a finished log's directory holds ``.sonarmap-done.json`` (input sha256, config
+hash and its summary values). The marker is written into the run's own staging directory
+(:class:`~formats.writers.atomic.OutputDir`) before it is committed, so a directory under
+the final name with a marker is always complete; one without a marker (a plain
+``sonarmap run`` output) is re-mapped and replaced. Only sonarmap outputs are replaced:
+an ``OUT/<name>`` that is an input, holds one or holds the user's files makes that log
+fail with a one-line reason. A log whose input sha256 and config hash match its marker is
+skipped unless ``rerun``. At start, the staging directories of interrupted batches whose
+processes are dead are removed (a concurrent batch's are left alone).
+
+Failure isolation: a log that raises :class:`~formats.errors.SonarmapError` is recorded
+with its one-line message; any other exception with its type, message and traceback (the
+traceback is logged); the other logs complete. The summary (``summary.parquet``,
+``summary.md``, one row per log sorted by path) is written atomically at the end.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import hashlib
+import io
+import json
+import logging
+import os
+import re
+import secrets
+import time
+import traceback
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from formats.errors import ConfigError, FormatError, InputError, OutputError, SonarmapError
+from formats.tables import markdown_table
+from formats.text_file import read_text
+from pipeline.config import Config, config_from_dict, load_config
+from pipeline.cores import usable_cores
+from pipeline.stages.metrics_schema import finite, read_metrics
+
+if TYPE_CHECKING:
+    from pipeline.stages.metrics import RunMetrics
+
+log = logging.getLogger("sonarmap.batch")
+
+MARKER = ".sonarmap-done.json"
+SUMMARY_PARQUET = "summary.parquet"
+SUMMARY_MD = "summary.md"
+MARKER_VERSION = 1
+MAX_NAME_BYTES = 200  # an output name, so that OutputDir's temporary sibling fits 255
+SCHEDULER_TIMEOUT_S = 10.0
+# Memory per local worker process: Dask's "auto" is the machine's memory / the workers.
+MEMORY_LIMIT = "auto"  # connecting to an existing scheduler (--scheduler)
+# Local workers warm up (imports, compiled kernels) as the cluster starts, not in their
+# first log (:mod:`pipeline.tools.batch_warm`).
+WORKER_PRELOAD = "pipeline.tools.batch_warm"
+
+BatchProgress = Callable[[int, int], None]  # (logs finished, logs total)
+# A log: a file or bag directory, or the files of one recording (a manifest line
+# ``a.bag + b.bag``, as sonarmap names such a recording: run_input.log_label).
+LogInput = Path | tuple[Path, ...]
+# What separates the files of one recording on a manifest line: a '+' with a blank (or the
+# line's end) on each side.
+_SEPARATOR = re.compile(r"(?:^|\s)\+(?:\s|$)")
+
+# A file detected as CSV is only taken as a log when directory search finds it if it
+# is not one of these (looks_like_csv accepts any text with two fields per line).
+_NOT_LOG_SUFFIXES = frozenset(
+    {".md", ".rst", ".toml", ".yaml", ".yml", ".json", ".html", ".htm", ".py", ".cfg",
+     ".ini", ".xml", ".pgm", ".sh", ".in"}
+)
+_LOG_SUFFIXES = frozenset({".bag", ".mcap", ".db3"})
+_HEADERLESS_SUFFIXES = frozenset({".csv", ".tsv", ".txt", ".dat", ".log"})
+_SINGLE_COLUMNS = frozenset({"t", "x", "y", "yaw", "sensor", "range"})
+_RESERVED_NAMES = frozenset({SUMMARY_PARQUET, SUMMARY_MD})
+
+
+# --------------------------------------------------------------------------- results
+
+
+@dataclass
+class LogOutcome:
+    """One summary row: a log and what happened to it.
+
+    ``duration_s`` is the log's own duration (s); ``seconds`` the wall time spent on it in
+    this batch (s). Mapping values are None when the log failed.
+    """
+
+    path: str
+    name: str
+    status: str  # "ok", "failed" or "skipped"
+    error: str | None = None
+    duration_s: float | None = None
+    readings: int | None = None
+    features: int | None = None
+    mean_feature_variance_m2: float | None = None
+    mapped_area_m2: float | None = None
+    seconds: float = 0.0
+    warnings: str | None = None  # the run's warnings (data lost, readings dropped), "; "
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> LogOutcome:
+        names = {f.name for f in fields(cls)}
+        return cls(**{k: v for k, v in d.items() if k in names})
+
+
+@dataclass
+class BatchResult:
+    """What a batch did: one outcome per log (sorted by path) and where the summary is."""
+
+    out_dir: Path
+    outcomes: list[LogOutcome]
+    summary_parquet: Path
+    summary_md: Path
+
+    def count(self, status: str) -> int:
+        return sum(o.status == status for o in self.outcomes)
+
+    @property
+    def failures(self) -> list[LogOutcome]:
+        return [o for o in self.outcomes if o.status == "failed"]
+
+    @property
+    def ok(self) -> bool:
+        """True when no log failed (skipped logs are finished ones)."""
+        return not self.failures
+
+
+# --------------------------------------------------------------------------- finding logs
+
+
+def read_manifest(path: Path) -> list[LogInput]:
+    """The logs a manifest lists: one per line, ``#`` comments and blank lines ignored,
+    relative paths taken relative to the manifest's directory; a line with `` + ``
+    between paths names one recording in several files (a tuple of its paths)."""
+    # utf-8-sig: a byte-order mark is not a path
+    text = read_text(path, "manifest", errors=(InputError, InputError), encoding="utf-8-sig")
+    out: list[LogInput] = []
+    for number, line in enumerate(text.splitlines(), start=1):
+        s = line.strip()
+        if not s or s.startswith("#"):
+            continue  # only whole-line comments: a path may contain '#'
+        parts = [part.strip() for part in _SEPARATOR.split(s)]
+        if not all(parts):
+            raise InputError(f"line {number}: an empty path beside '+' in {s!r}", path)
+        files = tuple(_manifest_path(path, part) for part in parts)
+        out.append(files[0] if len(files) == 1 else files)
+    return out
+
+
+def _manifest_path(manifest: Path, text: str) -> Path:
+    p = Path(text).expanduser()
+    return p if p.is_absolute() else Path(manifest).parent / p
+
+
+def log_files(log_input: LogInput) -> tuple[Path, ...]:
+    """The file(s) of a log."""
+    return log_input if isinstance(log_input, tuple) else (log_input,)
+
+
+def log_text(log_input: LogInput) -> str:
+    """A log as summary rows and messages name it (:func:`pipeline.streaming.run_input.log_label`)."""
+    from pipeline.streaming.run_input import log_label
+
+    return str(log_label(log_files(log_input)))
+
+
+def is_sonarmap_output(d: Path) -> bool:
+    """Whether a directory is an output of sonarmap (a run's or a batch's)."""
+    from formats.writers.output_marker import is_run_output
+
+    return (
+        (d / MARKER).is_file()
+        or is_run_output(d)
+        or ((d / SUMMARY_PARQUET).is_file() and (d / SUMMARY_MD).is_file())
+    )
+
+
+def _is_log_dir(d: Path, config: Config) -> bool:
+    """A directory that is one log: a rosbag2 bag or a CSV log set."""
+    from formats.csv_log import looks_like_csv
+
+    return (d / "metadata.yaml").is_file() or looks_like_csv(d, config)
+
+
+def _is_log_file(f: Path, config: Config) -> bool:
+    """Whether directory search takes ``f`` as a log: its content must be a known format,
+    and a CSV must be a single-layout log (right header, or a data-file suffix)."""
+    from formats import detect_format
+
+    if ".truth." in f.name or f.suffix.lower() in _NOT_LOG_SUFFIXES:
+        return False
+    try:
+        fmt = detect_format(f)
+    except FormatError:
+        # A file named like a log (an empty or cut .bag) is a log that fails, not noise.
+        return f.suffix.lower() in _LOG_SUFFIXES
+    if fmt != "csv":
+        return True
+    csv = config.input.csv
+    if csv.layout != "single":
+        return False  # set layouts are directories, found as such
+    if not csv.header:
+        return f.suffix.lower() in _HEADERLESS_SUFFIXES
+    return _single_header_ok(f, csv.delimiter)
+
+
+def _single_header_ok(f: Path, delimiter: str) -> bool:
+    try:
+        with f.open("r", encoding="utf-8", errors="replace") as fh:
+            for line in fh:
+                s = line.strip()
+                if not s or s.startswith("#"):
+                    continue
+                parts = s.split() if delimiter == "whitespace" else s.split(delimiter)
+                names = {p.strip().strip('"').lower() for p in parts}
+                return names >= _SINGLE_COLUMNS
+    except OSError:
+        return False
+    return False
+
+
+def _search(d: Path, config: Config, skip: set[Path]) -> Iterator[Path]:
+    """Logs under directory ``d``, recursively, in sorted order."""
+    try:
+        entries = sorted(d.iterdir(), key=lambda p: p.name)
+    except OSError as err:
+        raise InputError(f"cannot list directory: {err.strerror or err}", d) from err
+    for e in entries:
+        if e.name.startswith(".") or e.resolve() in skip:
+            continue  # hidden: staging and temporary dirs, VCS metadata
+        if e.is_dir():
+            if is_sonarmap_output(e):
+                continue
+            if _is_log_dir(e, config):
+                yield e
+            else:
+                yield from _search(e, config, skip)
+        elif e.is_file() and _is_log_file(e, config):
+            yield e
+
+
+def find_logs(
+    inputs: Sequence[Path],
+    config: Config,
+    *,
+    manifests: Sequence[Path] = (),
+    exclude: Sequence[Path] = (),
+) -> list[LogInput]:
+    """The logs a batch maps, deduplicated and sorted by absolute path.
+
+    Files named directly or in a manifest are taken as they are (a failure to read them
+    is that log's failure); so is a manifest's recording in several files. Directories are
+    one log when they are a rosbag2 bag (a ``metadata.yaml``) or a CSV log set, else
+    searched recursively for files whose content is a log; hidden entries, ``*.truth.*`` files, sonarmap's own outputs and ``exclude``
+    (the batch's output directory) are skipped.
+    """
+    skip = {Path(p).resolve() for p in exclude}
+    named: list[LogInput] = [Path(p) for p in inputs]
+    for m in manifests:
+        named += read_manifest(Path(m))
+    found: dict[Path | tuple[Path, ...], LogInput] = {}
+    for p in named:
+        if isinstance(p, tuple):
+            # In path order: a recording is read in time order whatever order names it,
+            # so its name and row do not depend on it either.
+            files = tuple(sorted((Path(os.path.abspath(f)) for f in p), key=str))
+            found.setdefault(tuple(sorted((f.resolve() for f in files), key=str)), files)
+            continue
+        ap = Path(os.path.abspath(p))
+        if ap.is_dir() and not _is_log_dir(ap, config):
+            for f in _search(ap, config, skip):
+                found.setdefault(f.resolve(), Path(os.path.abspath(f)))
+        else:
+            found.setdefault(ap.resolve(), ap)
+    return sorted(found.values(), key=log_text)
+
+
+def output_names(paths: Sequence[LogInput]) -> dict[LogInput, str]:
+    """Output directory name of each log: the file stem (or directory name), the stems
+    joined by ``+`` for a recording in several files; names that collide
+    (case-insensitively, or with the summary files) all get ``-<8 hex of the sha256 of the
+    path>``, so a name depends only on its own path and its peers; a name longer than
+    MAX_NAME_BYTES is cut and gets the same suffix (its output directory and the temporary
+    sibling must fit the file system's 255-byte limit)."""
+    base = {p: "+".join((f.name if f.is_dir() else f.stem) or "log" for f in log_files(p))
+            for p in paths}
+    counts: dict[str, int] = {}
+    for n in base.values():
+        counts[n.casefold()] = counts.get(n.casefold(), 0) + 1
+    out = {}
+    for p, n in base.items():
+        long = len(os.fsencode(n)) > MAX_NAME_BYTES
+        if counts[n.casefold()] > 1 or n in _RESERVED_NAMES or n.startswith(".") or long:
+            digest = hashlib.sha256(log_text(p).encode()).hexdigest()[:8]
+            n = f"{_clip(n, MAX_NAME_BYTES - 9)}-{digest}"
+        out[p] = n
+    return out
+
+
+def _clip(name: str, max_bytes: int) -> str:
+    """``name`` cut to at most ``max_bytes`` of UTF-8 (on a character boundary)."""
+    raw = os.fsencode(name)[:max_bytes]
+    return raw.decode("utf-8", errors="ignore") or "log"
+
+
+# --------------------------------------------------------------------------- the worker
+
+
+def _map_one(
+    path: str | list[str], out_dir: str, name: str, config: dict[str, Any], rerun: bool
+) -> dict[str, Any]:
+    """Map one log (a path, or the files of one recording) into ``out_dir/name`` (runs on
+    a Dask worker); never raises.
+
+    Returns a :class:`LogOutcome` as a dict, plus ``traceback`` (text) for unexpected
+    exceptions.
+    """
+    t0 = time.perf_counter()
+    files = tuple(Path(p) for p in ([path] if isinstance(path, str) else path))
+    label = log_text(files)
+    try:
+        row = _map_one_checked(files, Path(out_dir), name, config, rerun)
+    except SonarmapError as err:
+        row = LogOutcome(label, name, "failed", error=str(err))
+    except Exception as err:  # a bug or an unforeseen library error: record, go on
+        msg = " ".join(f"{type(err).__name__}: {err}".split())
+        return {**asdict(LogOutcome(label, name, "failed", error=msg,
+                                    seconds=time.perf_counter() - t0)),
+                "traceback": traceback.format_exc()}
+    row.seconds = time.perf_counter() - t0
+    return asdict(row)
+
+
+def _map_one_checked(
+    files: tuple[Path, ...], out_dir: Path, name: str, config: dict[str, Any], rerun: bool
+) -> LogOutcome:
+    from pipeline.run import run
+    from pipeline.streaming.run_input import files_sha256, hashes_sha256
+
+    cfg = config_from_dict(config)
+    for f in files:
+        if not f.exists():
+            raise InputError("no such file or directory", f)
+    path = log_text(files)
+    final = out_dir / name
+    config_hash = cfg.hash()
+    marker = None if rerun else read_marker(final)
+    if (
+        marker is not None
+        and marker.get("config_hash") == config_hash
+        and marker.get("input_sha256") == files_sha256(files)  # hashed only when it can matter
+    ):
+        saved = marker.get("row")
+        saved = saved if isinstance(saved, dict) else {}
+        return LogOutcome.from_dict(
+            {**saved, "path": path, "name": name, "status": "skipped", "error": None}
+        )
+    from formats.writers.atomic import atomic_write_text
+
+    outcome: list[LogOutcome] = []
+
+    def add_marker(tmp_dir: Path, _: RunMetrics) -> None:
+        # The row holds what the run wrote: its metrics.json, read through the schema.
+        m = read_metrics(tmp_dir / "metrics.json")
+        inp, counts = m.get("input", {}), m.get("counts", {})
+        row = LogOutcome(
+            path=path,
+            name=name,
+            status="ok",
+            duration_s=finite(inp.get("duration_s")),
+            readings=counts["readings"],
+            features=counts["features"],
+            mean_feature_variance_m2=finite(
+                m.get("paper_metric", {}).get("mean_feature_variance_m2")
+            ),
+            mapped_area_m2=finite(m.get("map", {}).get("mapped_area_m2")),
+            warnings="; ".join(m.get("warnings", [])) or None,
+        )
+        marker_data = {
+            "marker_version": MARKER_VERSION,
+            # files_sha256 of the input, from the hashes the run made (no file read again)
+            "input_sha256": inp["sha256"] if len(files) == 1 else hashes_sha256(
+                [f["sha256"] for f in inp["files"]]),
+            "config_hash": config_hash,
+            "tool_version": m.get("run", {}).get("tool_version"),
+            "row": {k: v for k, v in asdict(row).items()
+                    if k not in ("path", "status", "error", "seconds")},
+        }
+        atomic_write_text(tmp_dir / MARKER, json.dumps(marker_data, indent=2) + "\n")
+        outcome.append(row)
+
+    # The run's own OutputDir stages, commits and replaces: only a previous sonarmap
+    # output of this log is ever replaced, never an input or the user's files.
+    run(files[0] if len(files) == 1 else list(files), final, cfg, force=True,
+        on_complete=add_marker)
+    return outcome[0]
+
+
+def read_marker(run_dir: Path) -> dict[str, Any] | None:
+    """The resume marker of a finished log's output directory, or None (absent/unreadable)."""
+    try:
+        data = json.loads((run_dir / MARKER).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return data if isinstance(data, dict) else None
+
+
+# --------------------------------------------------------------------------- the driver
+
+
+@contextlib.contextmanager
+def _client(
+    workers: int | None, scheduler: str | None, memory_limit: str | int = MEMORY_LIMIT
+) -> Iterator[Any]:
+    """A Dask client: to ``scheduler`` if given, else to a new local process cluster."""
+    with _quiet_dask():
+        yield from _client_inner(workers, scheduler, memory_limit)
+
+
+@contextlib.contextmanager
+def _quiet_dask() -> Iterator[None]:
+    """Dask logs cluster life (INFO) to the root handler; keep only its errors unless
+    sonarmap itself logs at DEBUG (``-vv``)."""
+    dlog = logging.getLogger("distributed")
+    old = dlog.level
+    if logging.getLogger("sonarmap").getEffectiveLevel() > logging.DEBUG:
+        dlog.setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        dlog.setLevel(old)
+
+
+def _client_inner(
+    workers: int | None, scheduler: str | None, memory_limit: str | int = MEMORY_LIMIT
+) -> Iterator[Any]:
+    from distributed import Client, LocalCluster
+
+    if scheduler:
+        try:
+            client = Client(scheduler, timeout=SCHEDULER_TIMEOUT_S, set_as_default=False)
+        except (OSError, TimeoutError, ValueError) as err:
+            raise ConfigError(
+                f"cannot connect to the Dask scheduler at {scheduler}: {err}"
+            ) from err
+        with client:
+            yield client
+        return
+    n = workers if workers is not None else usable_cores()
+    if n < 1:
+        raise ConfigError(f"--workers must be >= 1, got {n}")
+    if memory_limit != "auto":
+        from dask.utils import parse_bytes
+
+        try:
+            memory_limit = parse_bytes(memory_limit)
+        except (ValueError, TypeError) as err:
+            raise ConfigError(
+                f"--memory-limit must be 'auto' or a size like 4GB, got {memory_limit!r}"
+            ) from err
+    with (
+        LocalCluster(
+            n_workers=n,
+            threads_per_worker=1,
+            processes=True,
+            host="127.0.0.1",
+            # Any free port for the scheduler's HTTP server: with None it still takes 8787,
+            # and a second cluster on the machine (another batch, a parallel test) warned.
+            dashboard_address=":0",
+            silence_logs=logging.ERROR,
+            # Each worker's share of the machine: a log whose map outgrows it (an odometry
+            # glitch, an absurd grid) has its worker restarted and fails as a row, instead
+            # of the operating system killing whatever process it picks.
+            memory_limit=memory_limit,
+            preload=[WORKER_PRELOAD],
+        ) as cluster,
+        Client(cluster, set_as_default=False) as client,
+    ):
+        yield client
+
+
+def run_batch(
+    inputs: list[Path],
+    out_dir: Path,
+    config_path: Path | None,
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    memory_limit: str | int = MEMORY_LIMIT,
+    rerun: bool = False,
+    progress: BatchProgress | None = None,
+    manifests: Sequence[Path] = (),
+) -> BatchResult:
+    """Map every log of ``inputs`` (files, directories) and ``manifests`` into
+    ``out_dir/<name>/``; write ``summary.parquet`` and ``summary.md``.
+
+    Raises SonarmapError only for problems of the whole batch (bad configuration, no logs
+    found, unreachable scheduler, unwritable output directory); a log's failure is a row.
+    """
+    from distributed import as_completed
+
+    cfg = load_config(config_path)
+    out_dir = Path(os.path.abspath(out_dir))
+    if out_dir.exists() and not out_dir.is_dir():
+        raise OutputError("exists and is not a directory", out_dir)
+    logs = find_logs(inputs, cfg, manifests=manifests, exclude=[out_dir])
+    if not logs:
+        where = ", ".join(str(p) for p in [*inputs, *manifests]) or "(no inputs)"
+        raise InputError(f"no logs found in {where}")
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise OutputError(f"cannot create output directory: {err.strerror or err}", out_dir) from err
+    from formats.writers.atomic import clean_stale_entries
+
+    # Staging left by interrupted batches (their processes are dead), whatever log it
+    # was for; a concurrent batch's live staging stays.
+    clean_stale_entries(out_dir)
+    names = output_names(logs)
+    # One thread per worker (mapper.threads = 1): the workers already share the cores.
+    cfg_dict = cfg.replace(mapper=dataclasses.replace(cfg.mapper, threads=1)).to_dict()
+    total = len(logs)
+    rows: list[LogOutcome] = []
+    if progress is not None:
+        progress(0, total)
+    with _client(workers, scheduler, memory_limit) as client:
+        futures = {
+            client.submit(_map_one, [str(f) for f in log_files(p)], str(out_dir), names[p],
+                          cfg_dict, rerun, pure=False,
+                          key=f"sonarmap-{names[p]}-{secrets.token_hex(4)}"): p
+            for p in logs
+        }
+        try:
+            for fut in as_completed(futures, loop=client.loop):
+                p = futures[fut]
+                rows.append(_collect(fut, p, names[p]))
+                if progress is not None:
+                    progress(len(rows), total)
+        except BaseException:
+            client.cancel(list(futures))  # interrupted: finished logs keep their markers
+            raise
+    rows.sort(key=lambda r: r.path)
+    pq_path, md_path = write_summary(out_dir, rows)
+    return BatchResult(out_dir, rows, pq_path, md_path)
+
+
+def _collect(fut: Any, path: LogInput, name: str) -> LogOutcome:
+    """A finished task's outcome; a task that died (worker killed) is a failed row."""
+    try:
+        d = fut.result()
+    except Exception as err:
+        log.error("%s: task failed on the cluster: %s: %s", log_text(path), type(err).__name__,
+                  err)
+        return LogOutcome(log_text(path), name, "failed",
+                          error=" ".join(f"{type(err).__name__}: {err}".split()))
+    tb = d.pop("traceback", None)
+    if tb:
+        log.error("%s: unexpected error while mapping\n%s", log_text(path), tb.rstrip())
+    return LogOutcome.from_dict(d)
+
+
+# --------------------------------------------------------------------------- summary
+
+
+def summary_table(rows: Sequence[LogOutcome]) -> Any:
+    """The summary as a pyarrow Table (one row per log, in the given order)."""
+    import pyarrow as pa
+
+    schema = pa.schema([
+        pa.field("path", pa.string(), nullable=False),
+        pa.field("name", pa.string(), nullable=False),
+        pa.field("status", pa.string(), nullable=False),
+        pa.field("error", pa.string()),
+        pa.field("duration_s", pa.float64(), metadata={"unit": "s"}),
+        pa.field("readings", pa.int64()),
+        pa.field("features", pa.int64()),
+        pa.field("mean_feature_variance_m2", pa.float64(), metadata={"unit": "m^2"}),
+        pa.field("mapped_area_m2", pa.float64(), metadata={"unit": "m^2"}),
+        pa.field("seconds", pa.float64(), nullable=False, metadata={"unit": "s"}),
+        pa.field("warnings", pa.string()),
+    ])
+    cols = {f.name: [getattr(r, f.name) for r in rows] for f in schema}
+    return pa.table(cols, schema=schema)
+
+
+def write_summary(out_dir: Path, rows: Sequence[LogOutcome]) -> tuple[Path, Path]:
+    """Write ``summary.parquet`` and ``summary.md`` atomically; return their paths."""
+    import pyarrow.parquet as pq
+
+    from formats.writers.atomic import atomic_write_bytes, atomic_write_text
+
+    buf = io.BytesIO()
+    pq.write_table(summary_table(rows), buf, compression="zstd")
+    pq_path, md_path = out_dir / SUMMARY_PARQUET, out_dir / SUMMARY_MD
+    atomic_write_bytes(pq_path, buf.getvalue())
+    atomic_write_text(md_path, summary_markdown(rows))
+    return pq_path, md_path
+
+
+def summary_markdown(rows: Sequence[LogOutcome]) -> str:
+    """The summary as a Markdown document with one table row per log."""
+    counts = {s: sum(r.status == s for r in rows) for s in ("ok", "skipped", "failed")}
+    lines = [
+        "# sonarmap batch summary",
+        "",
+        f"{len(rows)} logs: {counts['ok']} mapped, {counts['skipped']} skipped (unchanged), "
+        f"{counts['failed']} failed.",
+        "",
+    ]
+    header = ["log", "status", "duration (s)", "readings", "features",
+              "mean feature variance (m²)", "mapped area (m²)", "wall (s)", "path", "error",
+              "warnings"]
+    cells = [
+        [
+            r.name, r.status, _fmt(r.duration_s, ".1f"), _fmt(r.readings, "d"),
+            _fmt(r.features, "d"), _fmt(r.mean_feature_variance_m2, ".4g"),
+            _fmt(r.mapped_area_m2, ".2f"), _fmt(r.seconds, ".2f"), r.path, r.error or "",
+            r.warnings or "",
+        ]
+        for r in rows
+    ]
+    lines += markdown_table(header, cells, right=range(2, 8))
+    return "\n".join(lines) + "\n"
+
+
+def _fmt(v: float | int | None, spec: str) -> str:
+    return "" if v is None else format(v, spec)
