@@ -119,7 +119,7 @@ def render_map_diff(diff: MapDiff, trajectory_xy: np.ndarray | None, title: str 
     width = max(left + map_w + 2 * _MARGIN, 560)
     legend = [(NEW_RGB, f"newly occupied: {int(new.sum())} cells"),
               (GONE_RGB, f"no longer occupied: {int(gone.sum())} cells"),
-              ((0, 0, 0), "golden map: free white, occupied grey")]
+              ((0, 0, 0), "golden map: free white, occupied dark grey, unknown blue-grey")]
     if trajectory_xy is not None:
         legend.append((TRAJECTORY_RGB, "path (new run)"))
     strip = top + map_h + _AXIS_BOTTOM
