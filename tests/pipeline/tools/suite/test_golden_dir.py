@@ -23,7 +23,6 @@ from pipeline.tools.suite.golden_dir import (
 )
 
 
-
 def staged(d: Path, tag: str, size: int = 1000) -> Path:
     """A golden-like directory whose every file says ``tag`` (``size`` bytes each)."""
     d.mkdir(parents=True)
