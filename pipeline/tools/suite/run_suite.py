@@ -4,7 +4,8 @@ Before anything runs, each log is planned: its configuration loaded, its golden 
 at. A log that cannot run (a bad configuration; comparing: no golden — ``no golden for
 office: run with --update``; updating: a directory under ``--goldens`` that is not a
 golden sonarmap wrote, or one that is or holds an input of the suite) gets its failed
-row at once; the others go to the workers (:func:`.check.check_log`), each mapping into
+row at once; the others go to the workers (:func:`.check.check_log`), largest input
+first, each mapping into
 a temporary work directory removed at the end. Updating, the driver puts each staged
 golden in place as it arrives (:func:`.golden_dir.replace_golden`; byte-identical goldens
 are left untouched), so an interrupted update leaves every golden old or new.
@@ -193,6 +194,7 @@ def run_suite(
             n = min(workers or usable_cores(), len(jobs))
             with _client(n, None, memory_limit) as client:
                 futures = {client.submit(check_log, job, pure=False,
+                                         priority=_input_bytes(job),
                                          key=f"sonarmap-regress-{job.name}-"
                                              f"{secrets.token_hex(4)}"): job.name
                            for job in jobs}
@@ -207,6 +209,17 @@ def run_suite(
                     raise
     outcomes = [done[log.name] for log in suite.logs]
     return SuiteResult(suite.path, goldens, update, outcomes, tol)
+
+
+def _input_bytes(job: CheckJob) -> int:
+    """The size of a log's input, bytes: the workers take the largest logs first, so that
+    a long log does not start last and leave the other workers idle at the end."""
+    total = 0
+    for text in job.paths:
+        p = Path(text)
+        files = p.rglob("*") if p.is_dir() else [p]
+        total += sum(f.stat().st_size for f in files if f.is_file())
+    return total
 
 
 def _collect(fut: object, name: str) -> CheckResult:
