@@ -32,7 +32,7 @@ def regress_suite(
 
     suite = read_suite(suite_path)
     with contextlib.ExitStack() as stack:
-        progress = None if quiet else stack.enter_context(_log_progress())
+        progress = None if quiet else stack.enter_context(_log_progress("regress"))
         result = run_suite(suite, goldens, workers=workers, update=update, diff_dir=diff_dir,
                            tolerances=tolerances, progress=progress)
     typer.echo(suite_table(result))
