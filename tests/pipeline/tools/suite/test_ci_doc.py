@@ -43,16 +43,26 @@ def sonarmap_commands(lines: list[str]) -> list[list[str]]:
             if line.startswith("sonarmap ")]
 
 
+@pytest.fixture(scope="module")
+def made(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """regress.toml (one log) and its golden, made once by --update."""
+    root = tmp_path_factory.mktemp("made")
+    shutil.copytree(ROOT / "sample_logs" / "slow-odometry", root / "logs" / "slow")
+    (root / "regress.toml").write_text('[[log]]\nname = "slow"\npath = "logs/slow"\n',
+                                       encoding="utf-8")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.chdir(root)
+        result = CliRunner().invoke(app, ["regress", "--suite", "regress.toml", "--goldens",
+                                          "goldens", "--update", "-q", "--workers", "1"])
+    assert result.exit_code == 0, result.output
+    return root
+
+
 @pytest.fixture
-def project(tmp_path: Path, monkeypatch) -> Path:
-    """regress.toml (one log), its golden made by --update, then regressed by hand."""
-    shutil.copytree(ROOT / "sample_logs" / "slow-odometry", tmp_path / "logs" / "slow")
-    (tmp_path / "regress.toml").write_text('[[log]]\nname = "slow"\npath = "logs/slow"\n',
-                                           encoding="utf-8")
+def project(made: Path, tmp_path: Path, monkeypatch) -> Path:
+    """A copy of ``made`` whose golden was then regressed by hand."""
+    shutil.copytree(made, tmp_path, dirs_exist_ok=True)
     monkeypatch.chdir(tmp_path)
-    made = CliRunner().invoke(app, ["regress", "--suite", "regress.toml", "--goldens", "goldens",
-                                    "--update", "-q", "--workers", "1"])
-    assert made.exit_code == 0, made.output
     metrics_path = tmp_path / "goldens" / "slow" / "metrics.json"
     metrics = json.loads(metrics_path.read_text())
     metrics["counts"]["features"] += 10
