@@ -128,12 +128,12 @@ def regress(
     goldens: Annotated[
         Path | None,
         typer.Option("--goldens", help="With --suite: the directory holding one golden "
-                     "per log, GOLDENS/<name>.", file_okay=False, metavar="DIR"),
+                     "per log, DIR/<name>.", file_okay=False, metavar="DIR"),
     ] = None,
     workers: Annotated[
         int | None,
-        typer.Option("--workers", "-w", min=1, help="With --suite: local worker processes "
-                     "(default: the CPUs this process may use)."),
+        typer.Option("--workers", "-w", min=1, metavar="N", help="With --suite: local worker "
+                     "processes (default: the CPUs this process may use)."),
     ] = None,
     junit: Annotated[
         Path | None,
@@ -195,6 +195,9 @@ def regress(
         if json_out:
             raise typer.BadParameter("--json is for one run; use --junit with --suite",
                                      param_hint="--json")
+        if update and diff_dir is not None:
+            raise typer.BadParameter("--update writes goldens, it draws no diffs",
+                                     param_hint="--diff-dir")
         regress_suite(suite, goldens, tolerances=tolerances, workers=workers, junit=junit,
                       diff_dir=diff_dir, summary=summary, diff_link=diff_link, update=update,
                       quiet=quiet)

@@ -109,6 +109,7 @@ def test_the_command_exits_1_with_the_line(tree: Path, tmp_path: Path) -> None:
     (["run_dir", "--golden", "g", "--junit", "j.xml"], "--junit"),
     (["run_dir", "--golden", "g", "--update"], "--update"),
     (["run_dir"], "RUN"),
+    (["--suite", "s.toml", "--goldens", "g", "--update", "--diff-dir", "d"], "--diff-dir"),
 ])
 def test_the_two_forms_do_not_mix(args: list[str], hint: str) -> None:
     result = CliRunner().invoke(app, ["regress", *args])
