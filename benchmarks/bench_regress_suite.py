@@ -15,6 +15,7 @@ each time (``--rerun``: no log skipped).
 from __future__ import annotations
 
 import argparse
+import resource
 import shutil
 import subprocess
 import sys
@@ -45,11 +46,16 @@ def suite_text(logs: tuple[tuple[str, str, str | None, str | None], ...]) -> str
     return "\n".join(parts)
 
 
-def _timed(args: list[str], cwd: Path) -> float:
+def _timed(args: list[str], cwd: Path) -> tuple[float, float]:
+    """Wall and CPU seconds of one command (CPU: the process and the workers it waited for,
+    which the machine's other jobs barely change)."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     subprocess.run([sys.executable, "-m", "cli", *args], cwd=cwd, check=True,
                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    return time.perf_counter() - t0
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
 def main(argv: list[str] | None = None) -> dict[str, float]:
@@ -68,17 +74,19 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
         _timed([*suite, "--update"], work)
         batch = ["batch", *(str(SAMPLES / log) for _, log, _, _ in logs), "-o", "out",
                  "--workers", "2", "--rerun", "-q"]
-        walls: dict[str, list[float]] = {"suite": [], "batch": []}
+        runs: dict[str, list[tuple[float, float]]] = {"suite": [], "batch": []}
         for _ in range(repeat):
             shutil.rmtree(work / "out", ignore_errors=True)
-            walls["batch"].append(_timed(batch, work))
-            walls["suite"].append(_timed(suite, work))
-        s, b = min(walls["suite"]), min(walls["batch"])
-        print(f"{len(logs)} sample logs on 2 workers: regress --suite {s:.2f} s, batch "
-              f"{b:.2f} s, ratio {s / b:.2f}x (target <= 1.2x); all runs: suite "
-              f"{', '.join(f'{w:.2f}' for w in walls['suite'])}, batch "
-              f"{', '.join(f'{w:.2f}' for w in walls['batch'])}")
-        return {"logs": len(logs), "suite": s, "batch": b, "ratio": s / b}
+            runs["batch"].append(_timed(batch, work))
+            runs["suite"].append(_timed(suite, work))
+        s, b = min(runs["suite"]), min(runs["batch"])  # the fastest wall, with its CPU
+        print(f"{len(logs)} sample logs on 2 workers: regress --suite {s[0]:.2f} s "
+              f"({s[1]:.1f} s CPU), batch {b[0]:.2f} s ({b[1]:.1f} s CPU), ratio "
+              f"{s[0] / b[0]:.2f}x wall, {s[1] / b[1]:.2f}x CPU (target <= 1.2x); all walls: "
+              f"suite {', '.join(f'{w:.2f}' for w, _ in runs['suite'])}, batch "
+              f"{', '.join(f'{w:.2f}' for w, _ in runs['batch'])}")
+        return {"logs": len(logs), "suite": s[0], "batch": b[0], "ratio": s[0] / b[0],
+                "suite cpu": s[1], "batch cpu": b[1], "cpu ratio": s[1] / b[1]}
     finally:
         shutil.rmtree(work, ignore_errors=True)
 
