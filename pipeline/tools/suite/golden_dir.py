@@ -33,6 +33,7 @@ from formats.writers.dir_swap import exchange
 __all__ = [
     "GOLDEN_FILES",
     "GOLDEN_MARKER",
+    "alive",
     "golden_refusal",
     "recover_goldens",
     "replace_golden",
@@ -169,14 +170,15 @@ def recover_goldens(goldens: Path) -> list[Path]:
             if m is None or not p.is_dir() or p.is_symlink():
                 continue
             final = goldens / m["name"]
-            if not final.exists() and _listed(p) is not None and not _alive(int(m["pid"])):
+            if not final.exists() and _listed(p) is not None and not alive(int(m["pid"])):
                 os.rename(p, final)
                 restored.append(final)
     clean_stale_entries(goldens)
     return restored
 
 
-def _alive(pid: int) -> bool:
+def alive(pid: int) -> bool:
+    """Whether a process with this id exists on this host (unsure: yes)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 import secrets
 import shutil
 import tempfile
@@ -29,6 +30,7 @@ from pipeline.tools.batch import MEMORY_LIMIT
 from pipeline.tools.regress import Tolerances, load_tolerances
 from pipeline.tools.suite.check import CheckJob, CheckResult, check_log
 from pipeline.tools.suite.golden_dir import (
+    alive,
     golden_refusal,
     recover_goldens,
     replace_golden,
@@ -133,9 +135,20 @@ def _put_in_place(result: CheckResult, goldens: Path) -> CheckResult:
     return result
 
 
+_WORK = re.compile(r"sonarmap-regress-(?P<pid>\d+)-.+")
+
+
 @contextlib.contextmanager
 def _work_dir() -> Iterator[Path]:
-    work = Path(tempfile.mkdtemp(prefix=f"sonarmap-regress-{secrets.token_hex(2)}-"))
+    """A temporary directory for the runs, removed at the end; the ones that suites killed
+    before their end left (their process is gone) are removed first."""
+    tmp = Path(tempfile.gettempdir())
+    with contextlib.suppress(OSError):
+        for d in tmp.iterdir():
+            m = _WORK.fullmatch(d.name)
+            if m and d.is_dir() and not d.is_symlink() and not alive(int(m["pid"])):
+                shutil.rmtree(d, ignore_errors=True)
+    work = Path(tempfile.mkdtemp(prefix=f"sonarmap-regress-{os.getpid()}-"))
     try:
         yield work
     finally:
