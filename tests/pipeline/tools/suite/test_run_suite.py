@@ -54,3 +54,34 @@ def test_plans_refuse_goldens_that_are_inputs(tmp_path: Path, monkeypatch) -> No
     assert isinstance(plan, CheckJob)
     assert plan.paths == ("a.mcap",) and plan.golden_dir == "goldens/a"
     assert plan.diff_png is None  # updating draws nothing
+
+
+def test_a_recording_in_several_files_is_one_log(tmp_path: Path, monkeypatch) -> None:
+    """``path = [...]``: the sonar and odometry files of one recording map as the whole
+    recording does (the same map bytes), into one golden."""
+    import json
+
+    from benchmarks.log_parts import anything, before, split_mcap, topics
+    from pipeline.tools.suite.check import check_log
+    from pipeline.tools.suite.golden_dir import replace_golden
+
+    office = Path(__file__).resolve().parents[4] / "sample_logs" / "office" / "office.mcap"
+    monkeypatch.chdir(tmp_path)
+    split_mcap(office, [(tmp_path / "whole.mcap", before(1_700_000_015_000_000_000))])
+    split_mcap(tmp_path / "whole.mcap", [(tmp_path / "odom.mcap", topics("/odom")),
+                                         (tmp_path / "sonar.mcap", anything())])
+    (tmp_path / "s.toml").write_text('[[log]]\nname = "whole"\npath = "whole.mcap"\n'
+                                     '[[log]]\nname = "parts"\n'
+                                     'path = ["sonar.mcap", "odom.mcap"]\n')
+    suite = read_suite(tmp_path / "s.toml")
+    for log in suite.logs:
+        job = plan_log(log, suite, tmp_path / "goldens", True, Tolerances(),
+                       tmp_path / "work", None)
+        assert isinstance(job, CheckJob)
+        result = check_log(job)
+        assert result.status == "new" and result.staged is not None, result.reason
+        replace_golden(Path(result.staged), tmp_path / "goldens" / log.name)
+    whole, parts = tmp_path / "goldens" / "whole", tmp_path / "goldens" / "parts"
+    assert (parts / "map.pgm").read_bytes() == (whole / "map.pgm").read_bytes()
+    metrics = json.loads((parts / "metrics.json").read_text())
+    assert sorted(f["path"] for f in metrics["input"]["files"]) == ["odom.mcap", "sonar.mcap"]
