@@ -8,6 +8,14 @@ from pathlib import Path
 import typer
 
 from cli.errors import EXIT_FAILURE
+from formats.errors import OutputError
+
+
+def _make_parent(path: Path) -> None:
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise OutputError(f"cannot create its directory: {err.strerror or err}", path) from err
 
 
 def regress_suite(
@@ -31,6 +39,9 @@ def regress_suite(
     from pipeline.tools.suite.suite_file import read_suite
 
     suite = read_suite(suite_path)
+    for report in (junit, summary):  # made before the suite runs, not found missing after
+        if report is not None:
+            _make_parent(report)
     with contextlib.ExitStack() as stack:
         progress = None if quiet else stack.enter_context(_log_progress("regress"))
         result = run_suite(suite, goldens, workers=workers, update=update, diff_dir=diff_dir,
@@ -39,8 +50,6 @@ def regress_suite(
     if junit is not None:
         write_junit_xml(junit, f"sonarmap regress {suite.path.name}", junit_cases(result))
     if summary is not None:
-        from formats.errors import OutputError
-
         text = suite_markdown(result, summary, diff_link)
         try:  # appended: $GITHUB_STEP_SUMMARY collects every step's summary
             with summary.open("a", encoding="utf-8") as f:

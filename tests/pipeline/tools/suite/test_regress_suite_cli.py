@@ -76,10 +76,11 @@ def test_update_compare_regress_and_update_again(project: Path) -> None:
     first = {p.name: p.read_bytes() for p in golden.iterdir()}
 
     # 2. Comparing holds, with an empty diff directory and a valid report.
-    code, out = regress("--junit", "report.xml", "--diff-dir", "diffs", "--summary", "sum.md")
+    code, out = regress("--junit", "reports/report.xml", "--diff-dir", "diffs", "--summary",
+                        "sum.md")
     assert code == 0, out
     assert out.splitlines()[-1] == "2 logs: 2 hold, 0 regressed, 0 could not run"
-    doc = etree.parse("report.xml")
+    doc = etree.parse("reports/report.xml")  # its directory made
     assert schema.validate(doc), schema.error_log
     assert [c.get("name") for c in doc.iter("testcase")] == ["slow", "slow-coarse"]
     assert not list(doc.iter("failure")) and not list(doc.iter("error"))
