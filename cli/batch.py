@@ -159,11 +159,14 @@ def register(app: typer.Typer) -> None:
                                memory_limit=memory_limit)
         for row in result.failures:
             print(f"sonarmap: failed: {row.name}: {row.error}", file=sys.stderr)
+        for row in result.unread:
+            print(f"sonarmap: skipped: {row.path}: {row.error}", file=sys.stderr)
         if not quiet:
+            unread = f", {len(result.unread)} directories not read" if result.unread else ""
             typer.echo(
                 f"{len(result.outcomes)} logs: {result.count('ok')} mapped, "
-                f"{result.count('skipped')} skipped (unchanged), "
-                f"{result.count('failed')} failed; summary in {result.summary_md}"
+                f"{result.count('skipped') - len(result.unread)} skipped (unchanged), "
+                f"{result.count('failed')} failed{unread}; summary in {result.summary_md}"
             )
         if not result.ok:
             raise typer.Exit(EXIT_FAILURE)

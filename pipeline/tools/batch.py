@@ -46,6 +46,7 @@ from typing import TYPE_CHECKING, Any
 from formats.errors import ConfigError, FormatError, InputError, OutputError, SonarmapError
 from formats.tables import markdown_table
 from formats.text_file import read_text
+from formats.writers.output_marker import SUMMARY_MD_TITLE
 from pipeline.config import Config, config_from_dict, load_config
 from pipeline.cores import usable_cores
 from pipeline.stages.metrics_schema import finite, read_metrics
@@ -133,6 +134,11 @@ class BatchResult:
         return [o for o in self.outcomes if o.status == "failed"]
 
     @property
+    def unread(self) -> list[LogOutcome]:
+        """Directories the search could not read (skipped rows with a reason)."""
+        return [o for o in self.outcomes if o.status == "skipped" and o.error is not None]
+
+    @property
     def ok(self) -> bool:
         """True when no log failed (skipped logs are finished ones)."""
         return not self.failures
@@ -175,17 +181,6 @@ def log_text(log_input: LogInput) -> str:
     from pipeline.streaming.run_input import log_label
 
     return str(log_label(log_files(log_input)))
-
-
-def is_sonarmap_output(d: Path) -> bool:
-    """Whether a directory is an output of sonarmap (a run's or a batch's)."""
-    from formats.writers.output_marker import is_run_output
-
-    return (
-        (d / MARKER).is_file()
-        or is_run_output(d)
-        or ((d / SUMMARY_PARQUET).is_file() and (d / SUMMARY_MD).is_file())
-    )
 
 
 def _is_log_dir(d: Path, config: Config) -> bool:
@@ -232,24 +227,51 @@ def _single_header_ok(f: Path, delimiter: str) -> bool:
     return False
 
 
-def _search(d: Path, config: Config, skip: set[Path]) -> Iterator[Path]:
-    """Logs under directory ``d``, recursively, in sorted order."""
+@dataclass(frozen=True)
+class Unread:
+    """A directory the search could not read (listed as a skipped row, with its reason)."""
+
+    path: Path
+    reason: str
+
+
+def _search(
+    d: Path, config: Config, skip: set[Path], seen: set[tuple[int, int]], unread: list[Unread]
+) -> Iterator[Path]:
+    """Logs under directory ``d``, recursively, in sorted order. Each real directory is
+    walked once (``seen``: device and inode), so symlink loops end; a directory that cannot
+    be listed goes to ``unread``. In a directory sonarmap wrote (its marker, or its
+    metrics.json: :mod:`formats.writers.output_marker`), the files it wrote are not logs;
+    any other file there is searched like anywhere else."""
+    from formats.writers.output_marker import local_reader, written_files
+
     try:
+        st = d.stat()
+        if (st.st_dev, st.st_ino) in seen:
+            return
+        seen.add((st.st_dev, st.st_ino))
         entries = sorted(d.iterdir(), key=lambda p: p.name)
     except OSError as err:
-        raise InputError(f"cannot list directory: {err.strerror or err}", d) from err
+        unread.append(Unread(d, f"cannot list directory: {err.strerror or err}"))
+        return
+    ours = written_files([e.name for e in entries], local_reader(d)) or frozenset()
     for e in entries:
-        if e.name.startswith(".") or e.resolve() in skip:
+        if e.name.startswith(".") or e.name in ours or _resolved(e) in skip:
             continue  # hidden: staging and temporary dirs, VCS metadata
         if e.is_dir():
-            if is_sonarmap_output(e):
-                continue
             if _is_log_dir(e, config):
                 yield e
             else:
-                yield from _search(e, config, skip)
+                yield from _search(e, config, skip, seen, unread)
         elif e.is_file() and _is_log_file(e, config):
             yield e
+
+
+def _resolved(p: Path) -> Path:
+    try:
+        return p.resolve()
+    except (OSError, RuntimeError):  # a symlink loop
+        return Path(os.path.abspath(p))
 
 
 def find_logs(
@@ -258,33 +280,37 @@ def find_logs(
     *,
     manifests: Sequence[Path] = (),
     exclude: Sequence[Path] = (),
+    unread: list[Unread] | None = None,
 ) -> list[LogInput]:
     """The logs a batch maps, deduplicated and sorted by absolute path.
 
     Files named directly or in a manifest are taken as they are (a failure to read them
     is that log's failure); so is a manifest's recording in several files. Directories are
     one log when they are a rosbag2 bag (a ``metadata.yaml``) or a CSV log set, else
-    searched recursively for files whose content is a log; hidden entries, ``*.truth.*`` files, sonarmap's own outputs and ``exclude``
-    (the batch's output directory) are skipped.
+    searched recursively for files whose content is a log; hidden entries, ``*.truth.*``
+    files, the files sonarmap wrote and ``exclude`` are skipped. Directories that cannot be
+    listed are appended to ``unread``.
     """
-    skip = {Path(p).resolve() for p in exclude}
+    skip = {_resolved(Path(p)) for p in exclude}
     named: list[LogInput] = [Path(p) for p in inputs]
     for m in manifests:
         named += read_manifest(Path(m))
     found: dict[Path | tuple[Path, ...], LogInput] = {}
+    seen: set[tuple[int, int]] = set()
+    unread = [] if unread is None else unread
     for p in named:
         if isinstance(p, tuple):
             # In path order: a recording is read in time order whatever order names it,
             # so its name and row do not depend on it either.
             files = tuple(sorted((Path(os.path.abspath(f)) for f in p), key=str))
-            found.setdefault(tuple(sorted((f.resolve() for f in files), key=str)), files)
+            found.setdefault(tuple(sorted((_resolved(f) for f in files), key=str)), files)
             continue
         ap = Path(os.path.abspath(p))
         if ap.is_dir() and not _is_log_dir(ap, config):
-            for f in _search(ap, config, skip):
-                found.setdefault(f.resolve(), Path(os.path.abspath(f)))
+            for f in _search(ap, config, skip, seen, unread):
+                found.setdefault(_resolved(f), Path(os.path.abspath(f)))
         else:
-            found.setdefault(ap.resolve(), ap)
+            found.setdefault(_resolved(ap), ap)
     return sorted(found.values(), key=log_text)
 
 
@@ -516,10 +542,15 @@ def run_batch(
     out_dir = Path(os.path.abspath(out_dir))
     if out_dir.exists() and not out_dir.is_dir():
         raise OutputError("exists and is not a directory", out_dir)
-    logs = find_logs(inputs, cfg, manifests=manifests, exclude=[out_dir])
+    check_summary_replaceable(out_dir)
+    unread: list[Unread] = []
+    # OUT itself is searched too: a user's logs there are mapped (sonarmap's files are not
+    # logs, :func:`_search`).
+    logs = find_logs(inputs, cfg, manifests=manifests, unread=unread)
     if not logs:
         where = ", ".join(str(p) for p in [*inputs, *manifests]) or "(no inputs)"
-        raise InputError(f"no logs found in {where}")
+        also = f" ({unread[0].path}: {unread[0].reason})" if unread else ""
+        raise InputError(f"no logs found in {where}{also}")
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as err:
@@ -552,6 +583,7 @@ def run_batch(
         except BaseException:
             client.cancel(list(futures))  # interrupted: finished logs keep their markers
             raise
+    rows += [LogOutcome(str(u.path), u.path.name, "skipped", error=u.reason) for u in unread]
     rows.sort(key=lambda r: r.path)
     pq_path, md_path = write_summary(out_dir, rows)
     return BatchResult(out_dir, rows, pq_path, md_path)
@@ -596,12 +628,29 @@ def summary_table(rows: Sequence[LogOutcome]) -> Any:
     return pa.table(cols, schema=schema)
 
 
+def check_summary_replaceable(out_dir: Path) -> None:
+    """Refuse (OutputError, before any work) a ``summary.md`` or ``summary.parquet`` in
+    ``out_dir`` that sonarmap did not write: a batch replaces only its own summaries."""
+    from formats.writers.output_marker import not_replaceable_file_reason
+
+    for name, kind in ((SUMMARY_MD, "summary_md"), (SUMMARY_PARQUET, "summary_parquet")):
+        p = out_dir / name
+        if p.exists() or p.is_symlink():
+            reason = not_replaceable_file_reason(p, kind)
+            if reason is not None:
+                raise OutputError(f"{reason}; not replacing it with the batch summary, "
+                                  "choose another output directory", p)
+
+
 def write_summary(out_dir: Path, rows: Sequence[LogOutcome]) -> tuple[Path, Path]:
-    """Write ``summary.parquet`` and ``summary.md`` atomically; return their paths."""
+    """Write ``summary.parquet`` and ``summary.md`` atomically; return their paths. Only
+    summaries sonarmap wrote are replaced (:func:`check_summary_replaceable`, again: a
+    file may have appeared while the logs were mapped)."""
     import pyarrow.parquet as pq
 
     from formats.writers.atomic import atomic_write_bytes, atomic_write_text
 
+    check_summary_replaceable(out_dir)
     buf = io.BytesIO()
     pq.write_table(summary_table(rows), buf, compression="zstd")
     pq_path, md_path = out_dir / SUMMARY_PARQUET, out_dir / SUMMARY_MD
@@ -613,11 +662,13 @@ def write_summary(out_dir: Path, rows: Sequence[LogOutcome]) -> tuple[Path, Path
 def summary_markdown(rows: Sequence[LogOutcome]) -> str:
     """The summary as a Markdown document with one table row per log."""
     counts = {s: sum(r.status == s for r in rows) for s in ("ok", "skipped", "failed")}
+    unread = sum(r.status == "skipped" and r.error is not None for r in rows)
     lines = [
-        "# sonarmap batch summary",
+        SUMMARY_MD_TITLE,
         "",
-        f"{len(rows)} logs: {counts['ok']} mapped, {counts['skipped']} skipped (unchanged), "
-        f"{counts['failed']} failed.",
+        f"{len(rows)} logs: {counts['ok']} mapped, {counts['skipped'] - unread} skipped "
+        f"(unchanged), {counts['failed']} failed"
+        + (f", {unread} directories not read." if unread else "."),
         "",
     ]
     header = ["log", "status", "duration (s)", "readings", "features",
