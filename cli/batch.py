@@ -84,14 +84,12 @@ def register(app: typer.Typer) -> None:
         ] = None,
         config: Annotated[
             Path | None,
-            typer.Option("--config", "-c", help="TOML configuration for every log.",
-                         dir_okay=False),
+            typer.Option("--config", "-c", help="TOML configuration for every log."),
         ] = None,
         manifest: Annotated[
             list[Path] | None,
             typer.Option("--manifest", help="File listing one log path per line, the files "
                          "of one recording joined by ' + ' (repeatable; same as @FILE).",
-                         dir_okay=False,
                          metavar="FILE"),
         ] = None,
         workers: Annotated[

@@ -18,13 +18,18 @@ from types import TracebackType
 from typing import BinaryIO
 
 from formats.errors import OutputError
-from formats.writers.output_marker import not_replaceable_reason, write_output_marker
+from formats.writers.output_marker import (
+    not_replaceable_file_reason,
+    not_replaceable_reason,
+    write_output_marker,
+)
 
 __all__ = [
     "OutputDir",
     "atomic_open",
     "atomic_write_bytes",
     "atomic_write_text",
+    "check_output_file",
     "clean_stale_entries",
     "clean_stale_siblings",
 ]
@@ -326,6 +331,45 @@ class OutputDir:
             _fsync_path(final.parent)
         if old is not None:
             shutil.rmtree(old, ignore_errors=True)
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a.resolve() == b.resolve() or os.path.samefile(a, b)
+    except (OSError, RuntimeError):
+        return False
+
+
+def check_output_file(
+    path: Path,
+    *,
+    kind: str | None,
+    force: bool,
+    inputs: tuple[tuple[Path, str], ...] = (),
+) -> None:
+    """Refuse (OutputError, before any work) to write the single file ``path`` when it is,
+    or is inside, one of ``inputs`` (``(path, what)``: "the truth map"), is a symlink or not a
+    regular file, or exists and is not a sonarmap file of ``kind``
+    (:func:`~formats.writers.output_marker.stamped`; None: no existing file is replaced);
+    one that is sonarmap's is replaced only with ``force``. Messages suggest --force only
+    for that last case."""
+    path = Path(path)
+    for p, what in inputs:
+        p = Path(p)
+        inside = p.is_dir() and _inside(Path(os.path.abspath(path)).resolve(), p.resolve())
+        if inside or _same_file(path, p):
+            how = "is inside" if inside else "is"
+            raise OutputError(f"{how} {what}, an input of this command; choose another "
+                              "output file", path)
+    if not (path.exists() or path.is_symlink()):
+        return
+    reason = (not_replaceable_file_reason(path, kind) if kind is not None
+              else "exists already")
+    if reason is not None:
+        raise OutputError(f"{reason}; not replacing it, choose another output file", path)
+    if not force:
+        raise OutputError("exists already (an earlier sonarmap output); use --force to "
+                          "replace it, or choose another output file", path)
 
 
 @contextlib.contextmanager

@@ -27,7 +27,7 @@ import numpy.typing as npt
 from formats.arrays import F64, I64
 from formats.errors import FormatError
 from formats.stamps import format_time_s, parse_time
-from formats.text_file import read_text
+from formats.text_file import MAX_LIST_BYTES, read_text
 from formats.writers.atomic import atomic_open
 
 __all__ = ["Trajectory", "read_trajectory_tum", "write_trajectory_tum"]
@@ -111,7 +111,7 @@ def read_trajectory_tum(path: Path) -> Trajectory:
     yaw from the quaternion's rotation about +z. InputError when the file is missing,
     FormatError naming the file and line when a line is not 8 numbers."""
     path = Path(path)
-    text = read_text(path, "trajectory file")
+    text = read_text(path, "trajectory file", max_bytes=MAX_LIST_BYTES)
     t: list[int] = []
     vals: list[list[float]] = []
     for lineno, line in enumerate(text.splitlines(), start=1):

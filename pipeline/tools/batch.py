@@ -45,7 +45,7 @@ from typing import TYPE_CHECKING, Any
 
 from formats.errors import ConfigError, FormatError, InputError, OutputError, SonarmapError
 from formats.tables import markdown_table
-from formats.text_file import read_text
+from formats.text_file import MAX_LIST_BYTES, read_bounded, read_text
 from formats.writers.output_marker import SUMMARY_MD_TITLE
 from pipeline.config import Config, config_from_dict, load_config
 from pipeline.cores import usable_cores
@@ -60,6 +60,7 @@ MARKER = ".sonarmap-done.json"
 SUMMARY_PARQUET = "summary.parquet"
 SUMMARY_MD = "summary.md"
 MARKER_VERSION = 1
+MAX_MARKER_BYTES = 1 << 20  # a resume marker is a few hundred bytes
 MAX_NAME_BYTES = 200  # an output name, so that OutputDir's temporary sibling fits 255
 SCHEDULER_TIMEOUT_S = 10.0
 # Memory per local worker process: Dask's "auto" is the machine's memory / the workers.
@@ -152,7 +153,8 @@ def read_manifest(path: Path) -> list[LogInput]:
     relative paths taken relative to the manifest's directory; a line with `` + ``
     between paths names one recording in several files (a tuple of its paths)."""
     # utf-8-sig: a byte-order mark is not a path
-    text = read_text(path, "manifest", errors=(InputError, InputError), encoding="utf-8-sig")
+    text = read_text(path, "manifest", errors=(InputError, InputError), encoding="utf-8-sig",
+                     max_bytes=MAX_LIST_BYTES)
     out: list[LogInput] = []
     for number, line in enumerate(text.splitlines(), start=1):
         s = line.strip()
@@ -438,8 +440,8 @@ def _map_one_checked(
 def read_marker(run_dir: Path) -> dict[str, Any] | None:
     """The resume marker of a finished log's output directory, or None (absent/unreadable)."""
     try:
-        data = json.loads((run_dir / MARKER).read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        data = json.loads(read_bounded(run_dir / MARKER, "resume marker", MAX_MARKER_BYTES))
+    except (SonarmapError, ValueError, RecursionError):
         return None
     return data if isinstance(data, dict) else None
 

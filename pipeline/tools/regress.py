@@ -257,9 +257,11 @@ def _f1_row(
         return None
     import json
 
+    from formats.text_file import read_text
+
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        doc = json.loads(read_text(path, "golden evaluation", errors=(FormatError, FormatError)))
+    except (json.JSONDecodeError, RecursionError) as err:
         raise FormatError(f"cannot read golden evaluation: {err}", path) from err
     golden = Evaluation.from_dict(doc, path)
     truth = _resolve(golden.truth, golden_dir)
