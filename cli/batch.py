@@ -105,7 +105,8 @@ def register(app: typer.Typer) -> None:
         memory_limit: Annotated[
             str,
             typer.Option("--memory-limit", help="Memory per local worker, e.g. 4GB "
-                         "(default auto: the machine's memory / --workers); a log that "
+                         "(default auto: the machine's memory / --workers; at least 512MB, 0 = no "
+                         "limit); a log that "
                          "needs more fails as its own row."),
         ] = "auto",
         rerun: Annotated[

@@ -65,6 +65,13 @@ MAX_NAME_BYTES = 200  # an output name, so that OutputDir's temporary sibling fi
 SCHEDULER_TIMEOUT_S = 10.0
 # Memory per local worker process: Dask's "auto" is the machine's memory / the workers.
 MEMORY_LIMIT = "auto"  # connecting to an existing scheduler (--scheduler)
+# The least --memory-limit a local worker can map with: a warmed worker holds ~270 MB
+# before its first log (imports, kernels; measured RSS), and Dask pauses a worker at 80 %
+# of its limit — below this a worker would never start a log, and the batch would wait
+# forever. Refused up front.
+MIN_MEMORY_LIMIT = 512 << 20
+# Local workers must have joined the cluster within this (s), else the batch fails.
+WORKERS_TIMEOUT_S = 120.0
 # Local workers warm up (imports, compiled kernels) as the cluster starts, not in their
 # first log (:mod:`pipeline.tools.batch_warm`).
 WORKER_PRELOAD = "pipeline.tools.batch_warm"
@@ -472,6 +479,27 @@ def _quiet_dask() -> Iterator[None]:
         dlog.setLevel(old)
 
 
+def parse_memory_limit(memory_limit: str | int) -> str | int:
+    """``--memory-limit`` as Dask takes it: "auto", or bytes (0: no limit); ConfigError
+    for a size no worker can start a log under (:data:`MIN_MEMORY_LIMIT`)."""
+    if memory_limit == "auto":
+        return memory_limit
+    from dask.utils import format_bytes, parse_bytes
+
+    try:
+        value = parse_bytes(memory_limit)
+    except (ValueError, TypeError) as err:
+        raise ConfigError(
+            f"--memory-limit must be 'auto' or a size like 4GB, got {memory_limit!r}"
+        ) from err
+    if 0 < value < MIN_MEMORY_LIMIT:  # 0: no limit (Dask)
+        raise ConfigError(
+            f"--memory-limit {format_bytes(value)} is below what a worker holds before its "
+            f"first log; give at least {format_bytes(MIN_MEMORY_LIMIT)} (or auto)"
+        )
+    return value
+
+
 def _client_inner(
     workers: int | None, scheduler: str | None, memory_limit: str | int = MEMORY_LIMIT
 ) -> Iterator[Any]:
@@ -490,15 +518,7 @@ def _client_inner(
     n = workers if workers is not None else usable_cores()
     if n < 1:
         raise ConfigError(f"--workers must be >= 1, got {n}")
-    if memory_limit != "auto":
-        from dask.utils import parse_bytes
-
-        try:
-            memory_limit = parse_bytes(memory_limit)
-        except (ValueError, TypeError) as err:
-            raise ConfigError(
-                f"--memory-limit must be 'auto' or a size like 4GB, got {memory_limit!r}"
-            ) from err
+    memory_limit = parse_memory_limit(memory_limit)
     with (
         LocalCluster(
             n_workers=n,
@@ -517,6 +537,11 @@ def _client_inner(
         ) as cluster,
         Client(cluster, set_as_default=False) as client,
     ):
+        try:
+            client.wait_for_workers(n, timeout=WORKERS_TIMEOUT_S)
+        except TimeoutError as err:
+            raise ConfigError(f"the {n} local Dask worker(s) did not start within "
+                              f"{WORKERS_TIMEOUT_S:.0f} s") from err
         yield client
 
 
@@ -541,6 +566,8 @@ def run_batch(
     from distributed import as_completed
 
     cfg = load_config(config_path)
+    if scheduler is None:
+        memory_limit = parse_memory_limit(memory_limit)
     out_dir = Path(os.path.abspath(out_dir))
     if out_dir.exists() and not out_dir.is_dir():
         raise OutputError("exists and is not a directory", out_dir)
