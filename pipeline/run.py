@@ -123,7 +123,7 @@ def run(
                 found = None if progress is None else (lambda n: progress("reading", n, None))
                 sv, sensors = surveyed(reader, config, found)
                 info = reader.info()
-                _check_mcap_stamps(out.path("map.mcap"), sv.track)
+                _check_mcap_stamps(label, sv.track)
             odometry: PoseTrack | None = None
             refinement: dict[str, Any] | None = None
             if config.pose_refinement.enabled:
@@ -182,15 +182,19 @@ def run(
     return RunResult(Path(out_dir), metrics, snapshots["main"])
 
 
-def _check_mcap_stamps(path: Path, track: PoseTrack) -> None:
-    """Refuse, before mapping, a log whose stamps ``map.mcap`` cannot carry: its messages
-    are stamped at the last pose, its paths with every pose's stamp (refinement keeps
-    them)."""
+def _check_mcap_stamps(label: Path, track: PoseTrack) -> None:
+    """Refuse (InputError naming the log), before mapping, a log whose stamps ``map.mcap``
+    cannot carry: its messages are stamped at the last pose, its paths with every pose's
+    stamp (refinement keeps them)."""
+    from formats.errors import OutputError
     from formats.writers.map_mcap import check_stamps
 
     if len(track):
         t = np.asarray(track.t_ns)
-        check_stamps(path, int(t[-1]), int(t.min()), int(t.max()))
+        try:
+            check_stamps(Path("map.mcap"), int(t[-1]), int(t.min()), int(t.max()))
+        except OutputError as err:
+            raise InputError(f"the log's {err.reason}", label) from err
 
 
 def _refine_poses(
@@ -253,12 +257,10 @@ def grid_for(sv: Survey, sensors: SensorTable, config: Config) -> GridSpec:
     if g.extent:
         x0, y0, x1, y1 = g.extent
     else:
-        reach_candidates = [sv.ranges.max_range_m, sensors.default_max]
-        reach_candidates += [v for v in sensors.max_override.tolist() if not math.isnan(v)]
-        finite = [v for v in reach_candidates if not math.isnan(v) and math.isfinite(v)]
+        finite = [v for v in _reaches(sv, sensors) if math.isfinite(v) and v > 0]
         if not finite:
             raise InputError(
-                "cannot size the grid: no sensor reports a max range; set [grid] extent "
+                "cannot size the grid: no sensor reports a max range > 0; set [grid] extent "
                 "or [sensors] max_range"
             )
         offsets = np.hypot(sensors.mount_x, sensors.mount_y)
@@ -277,6 +279,19 @@ def grid_for(sv: Survey, sensors: SensorTable, config: Config) -> GridSpec:
             "or a larger grid.max_cells if the memory is there (~32 bytes a cell)"
         )
     return grid
+
+
+def _reaches(sv: Survey, sensors: SensorTable) -> list[float]:
+    """Each sensor's r_max as the mapping uses it (:meth:`SensorTable.apply_limits`): a
+    config or preset max_range wins over what the log's readings claim, which wins over
+    the ``[sensors] max_range`` default. Sensors without readings do not widen the grid."""
+    out = []
+    for sid in sorted(sv.ranges.per_sensor):
+        override = float(sensors.max_override[sid])
+        logged = sv.ranges.max_range_by_sensor.get(sid, math.nan)
+        out.append(override if not math.isnan(override)
+                   else logged if not math.isnan(logged) else sensors.default_max)
+    return out
 
 
 def _map_stream(
@@ -401,9 +416,13 @@ def _sync(
     state.per_sensor.update(dict(zip(ids.tolist(), per.tolist(), strict=True)))
     fov, lo, hi = sensors.apply_limits(b)
     if np.isnan(fov).any():
-        bad = sorted({sensors.names[i] for i in sid[np.isnan(fov)].tolist()})
+        bad_ids = np.unique(sid[np.isnan(fov)])
+        bad = [sensors.names[i] for i in bad_ids.tolist()]
+        n_nan, n_all = int(np.isnan(fov).sum()), int(np.isin(sid, bad_ids).sum())
+        what = ("the log carries none" if n_nan == n_all else
+                f"{n_nan} of their {n_all} readings in this part of the log carry a NaN fov")
         raise InputError(
-            f"no beam width (fov) for sensor(s) {', '.join(bad)}: the log carries none; set "
+            f"no beam width (fov) for sensor(s) {', '.join(bad)}: {what}; set "
             f"fov_deg in [sensors] or [[sensors.mounts]]"
         )
     problem = beam_problem(sensors.names, sid, fov, lo, hi)

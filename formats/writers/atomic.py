@@ -39,6 +39,20 @@ NAME_MAX = 255  # bytes in one path component (Linux, macOS, Windows)
 _SIBLING_EXTRA = len(".") + len(".tmp-") + 10 + len("-") + 8
 
 
+def check_path_names(path: Path) -> None:
+    """OutputError, before any work, when a component of ``path`` is longer than
+    NAME_MAX bytes or cannot be encoded as a file name."""
+    for part in Path(path).parts:
+        try:
+            size = len(os.fsencode(part))
+        except UnicodeEncodeError as err:
+            raise OutputError(f"a path component cannot be a file name ({err.reason})",
+                              path) from err
+        if size > NAME_MAX:
+            raise OutputError(f"a path component is too long ({size} bytes; at most "
+                              f"{NAME_MAX})", path)
+
+
 def _fsync_path(path: Path) -> None:
     """fsync a file or directory by path (directories: makes renames inside them durable)."""
     flags = os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) if path.is_dir() else os.O_RDONLY
@@ -154,6 +168,7 @@ class OutputDir:
         final = self.final
         if final.name in ("", ".", ".."):
             raise OutputError("output directory needs a name (not '.', '..' or '/')", final)
+        check_path_names(final)
         if final.is_symlink():
             raise OutputError("output directory is a symlink; refusing to write through it", final)
         if final.parent.is_symlink():
@@ -403,5 +418,6 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
 
 
 def atomic_write_text(path: Path, text: str) -> None:
-    """Write UTF-8 ``text`` (``\\n`` newlines, on every OS) to ``path`` atomically."""
-    atomic_write_bytes(path, text.encode("utf-8"))
+    """Write UTF-8 ``text`` (``\\n`` newlines, on every OS) to ``path`` atomically. A file
+    name's bytes that are not UTF-8 (surrogate-escaped) are written as ``\\udcXX``."""
+    atomic_write_bytes(path, text.encode("utf-8", errors="backslashreplace"))

@@ -600,7 +600,7 @@ def run_batch(
         futures = {
             client.submit(_map_one, [str(f) for f in log_files(p)], str(out_dir), names[p],
                           cfg_dict, rerun, pure=False,
-                          key=f"sonarmap-{names[p]}-{secrets.token_hex(4)}"): p
+                          key=f"sonarmap-{_utf8(names[p])}-{secrets.token_hex(4)}"): p
             for p in logs
         }
         try:
@@ -653,8 +653,16 @@ def summary_table(rows: Sequence[LogOutcome]) -> Any:
         pa.field("seconds", pa.float64(), nullable=False, metadata={"unit": "s"}),
         pa.field("warnings", pa.string()),
     ])
-    cols = {f.name: [getattr(r, f.name) for r in rows] for f in schema}
+    cols = {f.name: [_utf8(getattr(r, f.name)) for r in rows] for f in schema}
     return pa.table(cols, schema=schema)
+
+
+def _utf8(v: Any) -> Any:
+    """A string Arrow can hold: a file name's non-UTF-8 bytes (surrogate-escaped) as
+    ``\\udcXX`` text, as the Markdown summary shows them."""
+    if isinstance(v, str):
+        return v.encode("utf-8", errors="backslashreplace").decode("utf-8")
+    return v
 
 
 def check_summary_replaceable(out_dir: Path) -> None:
