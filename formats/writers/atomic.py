@@ -235,7 +235,9 @@ class OutputDir:
             except FileExistsError:
                 continue
             except OSError as err:
-                raise OutputError(f"cannot create temporary directory: {err}", tmp) from err
+                # Named by OUT, the user's name, not by the hidden temporary directory.
+                raise OutputError(f"cannot create the output directory: "
+                                  f"{err.strerror or err}", self.final) from err
             except BaseException:
                 # SIGTERM/Ctrl-C right after mkdir: __exit__ will not run for a failed
                 # __enter__, so the directory is removed here.
