@@ -68,7 +68,7 @@ from formats.contract import (
 from formats.errors import FormatError
 from formats.options import CsvConfig, ReaderSettings
 from formats.sensor_config import BeamLimits, sensor_setup
-from formats.stamps import ROS_TIME_END_NS, parse_time
+from formats.stamps import parse_time
 
 CHUNK_BYTES = 4 << 20  # bytes of text per chunk (about 60 000 rows of a typical log)
 POSE_PARENT_FRAME = "odom"
@@ -464,13 +464,6 @@ def _times_ns(table: _Table, chunk: _Chunk, name: str) -> I64:
         out[ok] = np.where(neg[ok], -mag, mag)
     for i in np.flatnonzero(~ok).tolist():
         out[i] = _time_slow(table, int(chunk.lines[i]), name, str(s[i]), k)
-    bad = np.flatnonzero((out < 0) | (out >= ROS_TIME_END_NS))
-    if bad.size:
-        # Times are seconds since an epoch: what a ROS stamp and an MCAP log time hold.
-        i = int(bad[0])
-        raise table.error(int(chunk.lines[i]), f"column '{name}': time {str(s[i]).strip()} "
-                          f"is outside 0 … {ROS_TIME_END_NS // 10**9 - 1} s (seconds since an "
-                          "epoch, as ROS stamps hold)")
     return out
 
 

@@ -78,7 +78,9 @@ def test_a_logged_max_range_below_zero_is_none_and_the_default_applies(tmp_path:
     assert code == 0, err
 
 
-def test_negative_csv_times_fail_where_they_are_read(tmp_path: Path) -> None:
+def test_negative_csv_times_fail_before_mapping_naming_the_log(tmp_path: Path) -> None:
+    """Stamps map.mcap cannot carry (a log time below 0) fail at ingest, before mapping, in
+    one line naming the log, never a map.mcap that does not exist."""
     d = tmp_path / "log"
     shutil.copytree(OFFICE / "office_csv", d)
     for name in ("poses.csv", "ranges.csv"):
@@ -88,8 +90,9 @@ def test_negative_csv_times_fail_where_they_are_read(tmp_path: Path) -> None:
         (d / name).write_text("\n".join([rows[0], *shifted]) + "\n")
     code, err = _cli("run", d, "-o", tmp_path / "o", "-q")
     assert code == 1
-    assert err.startswith(f"sonarmap: error: {d}/")
-    assert ": line 2: column 't': time -200.000000 is outside 0 … 2147483647 s" in err
+    assert err == (f"sonarmap: error: {d}: the log's stamps -200.000 … -94.139 s (the map's "
+                   "-94.139 s) cannot be written to MCAP: a header stamp holds -2147483648 … "
+                   "2147483647 s (ROS 2's int32 seconds), a log time no negative one\n")
     assert not (tmp_path / "o").exists()
 
 
