@@ -55,6 +55,8 @@ def _log_progress() -> Iterator[Callable[[int, int], None]]:
 
 def split_inputs(inputs: list[str], manifests: list[Path]) -> tuple[list[Path], list[Path]]:
     """``@FILE`` arguments are manifests; the rest are log files or directories."""
+    from cli.errors import check_path_arguments
+
     paths: list[Path] = []
     lists = list(manifests)
     for s in inputs:
@@ -62,6 +64,7 @@ def split_inputs(inputs: list[str], manifests: list[Path]) -> tuple[list[Path], 
             lists.append(Path(s[1:]))
         else:
             paths.append(Path(s))
+    check_path_arguments([paths, lists])
     return paths, lists
 
 

@@ -315,7 +315,7 @@ def find_logs(
             found.setdefault(tuple(sorted((_resolved(f) for f in files), key=str)), files)
             continue
         ap = Path(os.path.abspath(p))
-        if ap.is_dir() and not _is_log_dir(ap, config):
+        if os.path.isdir(ap) and not _is_log_dir(ap, config):  # False on any OSError
             for f in _search(ap, config, skip, seen, unread):
                 found.setdefault(_resolved(f), Path(os.path.abspath(f)))
         else:
@@ -330,7 +330,8 @@ def output_names(paths: Sequence[LogInput]) -> dict[LogInput, str]:
     path>``, so a name depends only on its own path and its peers; a name longer than
     MAX_NAME_BYTES is cut and gets the same suffix (its output directory and the temporary
     sibling must fit the file system's 255-byte limit)."""
-    base = {p: "+".join((f.name if f.is_dir() else f.stem) or "log" for f in log_files(p))
+    base = {p: "+".join((f.name if os.path.isdir(f) else f.stem) or "log"
+                        for f in log_files(p))
             for p in paths}
     counts: dict[str, int] = {}
     for n in base.values():
@@ -387,7 +388,7 @@ def _map_one_checked(
 
     cfg = config_from_dict(config)
     for f in files:
-        if not f.exists():
+        if not os.path.lexists(f):  # False on any OSError (a name too long: run says why)
             raise InputError("no such file or directory", f)
     path = log_text(files)
     final = out_dir / name

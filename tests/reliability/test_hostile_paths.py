@@ -41,6 +41,19 @@ def test_a_name_longer_than_name_max_fails_before_the_work(tmp_path: Path) -> No
     assert list(tmp_path.iterdir()) == []
 
 
+def test_names_too_long_are_one_line_errors_in_every_command(tmp_path: Path) -> None:
+    long = tmp_path / ("a" * 300)
+    for args in (["batch", OFFICE / "office.mcap", "-o", long], ["batch", long, "-o", tmp_path],
+                 ["evaluate", tmp_path, "--truth", long], ["config", "-o", long],
+                 ["info", long], ["validate", long], ["run", OFFICE / "office.mcap", "-o",
+                 tmp_path / "o", "-c", long]):
+        code, err = _cli(*args)
+        assert code == 1
+        assert err == (f"sonarmap: error: {long}: a path component is too long (300 bytes; "
+                       "at most 255)\n"), args
+    assert list(tmp_path.iterdir()) == []
+
+
 def _csv_log(tmp_path: Path, max_range: str) -> tuple[Path, list[str]]:
     d = tmp_path / "log"
     shutil.copytree(OFFICE / "office_csv", d)
