@@ -26,7 +26,7 @@ from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 
@@ -274,16 +274,27 @@ def grid_for(sv: Survey, sensors: SensorTable, config: Config) -> GridSpec:
         (bx0, by0, bx1, by1), _ = sv.track.bulk_bounds()
         x0, x1 = bx0 - reach, bx1 + reach
         y0, y1 = by0 - reach, by1 + reach
+    # Sized in floats first: a box of 1e308 m (a mount or pose at the edge of a float)
+    # must be the same one-line refusal, not an overflow.
+    w_m, h_m = x1 - x0, y1 - y0
+    cells_f = (w_m / g.resolution + 1.0) * (h_m / g.resolution + 1.0)
+    if not math.isfinite(cells_f) or cells_f > 2.0 * g.max_cells:
+        _too_many_cells(f"{w_m:.3g} x {h_m:.3g} m", f"{cells_f:.3g}", g.max_cells)
     grid = GridSpec.covering(x0, y0, x1, y1, g.resolution)
     cells = grid.width * grid.height
     if cells > g.max_cells:
-        raise ConfigError(
-            f"grid of {grid.width}x{grid.height} = {cells} cells "
-            f"({grid.width * g.resolution:.0f} x {grid.height * g.resolution:.0f} m) exceeds "
-            f"grid.max_cells = {g.max_cells}; use a coarser grid.resolution, a [grid] extent, "
-            "or a larger grid.max_cells if the memory is there (~32 bytes a cell)"
-        )
+        _too_many_cells(f"{grid.width}x{grid.height} = {cells} cells "
+                        f"({grid.width * g.resolution:.0f} x {grid.height * g.resolution:.0f} m)",
+                        None, g.max_cells)
     return grid
+
+
+def _too_many_cells(size: str, cells: str | None, max_cells: int) -> NoReturn:
+    what = f"{size} ({cells} cells)" if cells is not None else size
+    raise ConfigError(
+        f"grid of {what} exceeds grid.max_cells = {max_cells}; use a coarser grid.resolution, "
+        "a [grid] extent, or a larger grid.max_cells if the memory is there (~32 bytes a cell)"
+    )
 
 
 def _reaches(sv: Survey, sensors: SensorTable) -> list[float]:

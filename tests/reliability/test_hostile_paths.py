@@ -122,3 +122,29 @@ def test_ros2_metadata_naming_files_outside_the_bag_is_refused(tmp_path: Path) -
         assert code == 1
         assert err == (f"sonarmap: error: {bag / 'metadata.yaml'}: metadata names a storage "
                        f"file outside the bag: {name!r}\n")
+
+
+def test_garbage_quaternions_and_absurd_mounts_say_one_line_without_warnings(
+    tmp_path: Path,
+) -> None:
+    """numpy warnings are silenced where they arise (np.errstate), not globally; a mount at
+    the edge of a float is the grid's one-line refusal, not an OverflowError."""
+    import warnings
+
+    import numpy as np
+
+    from formats.angles import yaw_from_quaternion
+
+    big = np.array([1e308, 0.0])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        yaw = yaw_from_quaternion(big, big, big, big)
+    assert not np.isfinite(yaw[0]) and yaw[1] == 0.0
+    log, _ = _csv_log(tmp_path, "5.0")
+    rows = (log / "sensors.csv").read_text().splitlines()
+    rows[1] = rows[1].replace(rows[1].split(",")[1], "-1e308", 1)
+    (log / "sensors.csv").write_text("\n".join(rows) + "\n")
+    code, err = _cli("run", log, "-o", tmp_path / "o", "-q")
+    assert code == 1
+    assert err.startswith("sonarmap: error: grid of inf x inf m (inf cells) exceeds "
+                          "grid.max_cells = 40000000")
