@@ -72,6 +72,11 @@ MEMORY_LIMIT = "auto"  # connecting to an existing scheduler (--scheduler)
 MIN_MEMORY_LIMIT = 512 << 20
 # Local workers must have joined the cluster within this (s), else the batch fails.
 WORKERS_TIMEOUT_S = 120.0
+# How often a batch looks at its workers (s), and how long none may be able to run a task
+# (all paused by their memory limit, or none alive) before the logs left fail (s).
+WATCH_S = 2.0
+POLL_S = 0.1  # how often finished tasks are collected (s)
+STALL_S = 20.0
 # Local workers warm up (imports, compiled kernels) as the cluster starts, not in their
 # first log (:mod:`pipeline.tools.batch_warm`).
 WORKER_PRELOAD = "pipeline.tools.batch_warm"
@@ -564,8 +569,6 @@ def run_batch(
     Raises SonarmapError only for problems of the whole batch (bad configuration, no logs
     found, unreachable scheduler, unwritable output directory); a log's failure is a row.
     """
-    from distributed import as_completed
-
     cfg = load_config(config_path)
     if scheduler is None:
         memory_limit = parse_memory_limit(memory_limit)
@@ -605,9 +608,10 @@ def run_batch(
             for p in logs
         }
         try:
-            for fut in as_completed(futures, loop=client.loop):
+            for fut, stalled in _finished(client, list(futures)):
                 p = futures[fut]
-                rows.append(_collect(fut, p, names[p]))
+                rows.append(_collect(fut, p, names[p]) if stalled is None
+                            else LogOutcome(log_text(p), names[p], "failed", error=stalled))
                 if progress is not None:
                     progress(len(rows), total)
         except BaseException:
@@ -617,6 +621,58 @@ def run_batch(
     rows.sort(key=lambda r: r.path)
     pq_path, md_path = write_summary(out_dir, rows)
     return BatchResult(out_dir, rows, pq_path, md_path)
+
+
+def _finished(client: Any, futures: list[Any]) -> Iterator[tuple[Any, str | None]]:
+    """``(future, None)`` as each task finishes; when no worker can make progress for
+    :data:`STALL_S` — every worker paused by Dask's memory limit with nothing executing,
+    or none alive — ``(future, reason)`` for each task left (cancelled), so a batch never
+    waits forever."""
+    pending = list(futures)
+    stalled_since: float | None = None
+    looked = time.monotonic()
+    while pending:
+        done = [f.done() for f in pending]
+        for fut, d in zip(pending, done, strict=True):
+            if d:
+                yield fut, None
+        pending = [f for f, d in zip(pending, done, strict=True) if not d]
+        done_any = any(done)
+        now = time.monotonic()
+        if done_any or not pending:
+            stalled_since = None
+            continue
+        time.sleep(POLL_S)
+        if now - looked < WATCH_S:
+            continue
+        looked = now
+        reason = _stall_reason(client)
+        if reason is None:
+            stalled_since = None
+            continue
+        stalled_since = now if stalled_since is None else stalled_since
+        if now - stalled_since >= STALL_S:
+            client.cancel(list(pending))
+            for fut in sorted(pending, key=lambda f: str(f.key)):
+                yield fut, reason
+            return
+
+
+def _stall_reason(client: Any) -> str | None:
+    """Why no worker can run a task now, or None when one can."""
+    from dask.utils import format_bytes
+
+    workers = client.scheduler_info().get("workers", {}).values()
+    if not workers:
+        return "no Dask worker stayed alive to map it (killed at its memory limit?)"
+    for w in workers:
+        executing = w.get("metrics", {}).get("task_counts", {}).get("executing", 0)
+        if w.get("status") == "running" or executing:
+            return None
+    w = next(iter(workers))
+    return (f"no Dask worker could start it: a worker holds {format_bytes(w['metrics']['memory'])}"
+            f" before any log, above the pause threshold of its memory limit "
+            f"{format_bytes(w['memory_limit'])}; give a larger --memory-limit")
 
 
 def _collect(fut: Any, path: LogInput, name: str) -> LogOutcome:

@@ -95,3 +95,20 @@ def test_a_memory_limit_below_a_workers_baseline_is_refused(tmp_path: Path, limi
     assert res.exit_code == 1
     assert res.stderr.count("\n") == 1
     assert "is below what a worker holds before its first log; give at least 512.00 MiB (or auto)" in res.stderr
+
+
+def test_workers_that_can_never_run_a_log_fail_the_rows_instead_of_hanging(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Past the floor (a machine whose workers hold more): the batch's watch fails the logs
+    left, with the reason, once no worker could run one for STALL_S."""
+    import pipeline.tools.batch as batch
+
+    monkeypatch.setattr(batch, "MIN_MEMORY_LIMIT", 0)
+    monkeypatch.setattr(batch, "STALL_S", 4.0)
+    res = batch.run_batch([OFFICE / "office.mcap"], tmp_path / "o", None, workers=1,
+                          memory_limit="150MB")
+    [row] = res.outcomes
+    assert row.status == "failed"
+    assert row.error is not None and row.error.startswith("no Dask worker")
+    assert row.error.endswith(("(killed at its memory limit?)", "give a larger --memory-limit"))
