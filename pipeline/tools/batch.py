@@ -475,6 +475,8 @@ def _client(
 def _quiet_dask() -> Iterator[None]:
     """Dask logs cluster life (INFO) to the root handler; keep only its errors unless
     sonarmap itself logs at DEBUG (``-vv``)."""
+    import distributed  # noqa: F401  (its import configures its loggers: before the level is set)
+
     dlog = logging.getLogger("distributed")
     old = dlog.level
     if logging.getLogger("sonarmap").getEffectiveLevel() > logging.DEBUG:
