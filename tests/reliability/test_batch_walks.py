@@ -112,3 +112,14 @@ def test_workers_that_can_never_run_a_log_fail_the_rows_instead_of_hanging(
     assert row.status == "failed"
     assert row.error is not None and row.error.startswith("no Dask worker")
     assert row.error.endswith(("(killed at its memory limit?)", "give a larger --memory-limit"))
+
+
+def test_a_quiet_batch_says_nothing_in_a_fresh_process(tmp_path: Path) -> None:
+    """Dask's own INFO lines stay out of stderr (its import must not reset the level)."""
+    import subprocess
+    import sys
+
+    res = subprocess.run([sys.executable, "-m", "cli", "batch", str(OFFICE / "office.mcap"),
+                          "-o", str(tmp_path / "o"), "--workers", "1", "-q"],
+                         cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0 and res.stderr == "" and res.stdout == ""
