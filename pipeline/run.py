@@ -278,7 +278,7 @@ def grid_for(sv: Survey, sensors: SensorTable, config: Config) -> GridSpec:
     # must be the same one-line refusal, not an overflow.
     w_m, h_m = x1 - x0, y1 - y0
     cells_f = (w_m / g.resolution + 1.0) * (h_m / g.resolution + 1.0)
-    if not math.isfinite(cells_f) or cells_f > 2.0 * g.max_cells:
+    if not math.isfinite(cells_f) or cells_f > 2.0**53:  # beyond exact integers
         _too_many_cells(f"{w_m:.3g} x {h_m:.3g} m", f"{cells_f:.3g}", g.max_cells)
     grid = GridSpec.covering(x0, y0, x1, y1, g.resolution)
     cells = grid.width * grid.height
