@@ -21,12 +21,12 @@ JsonOpt = Annotated[bool, typer.Option("--json", help="Print JSON instead of a t
 def evaluate(
     run_dir: RunDirArg,
     truth: Annotated[
-        Path, typer.Option("--truth", "-t", help="Ground-truth nav2 map (YAML).", dir_okay=False)
+        Path, typer.Option("--truth", "-t", help="Ground-truth nav2 map (YAML).")
     ],
     trajectory: Annotated[
         Path | None,
         typer.Option("--trajectory", help="True trajectory CSV (t,x,y,yaw): recall only counts "
-                     "walls within sensor reach of it.", dir_okay=False),
+                     "walls within sensor reach of it."),
     ] = None,
     tolerance: Annotated[
         float, typer.Option("--tolerance", help="Match distance for occupied cells, m.")
@@ -38,8 +38,7 @@ def evaluate(
     truth_trajectory: Annotated[
         Path | None,
         typer.Option("--truth-trajectory", help="True trajectory CSV (t,x,y,yaw): adds the "
-                     "ATE (after SE(2) alignment) and RPE of the run's trajectory.csv.",
-                     dir_okay=False),
+                     "ATE (after SE(2) alignment) and RPE of the run's trajectory.csv."),
     ] = None,
     rpe_delta: Annotated[
         float, typer.Option("--rpe-delta", help="RPE pose-pair spacing, in --rpe-unit.")
@@ -50,8 +49,7 @@ def evaluate(
     json_out: JsonOpt = False,
     output: Annotated[
         Path | None,
-        typer.Option("--output", "-o", help="Also write the JSON to this file (atomically).",
-                     dir_okay=False),
+        typer.Option("--output", "-o", help="Also write the JSON to this file (atomically)."),
     ] = None,
     force: Annotated[bool, typer.Option("--force", help="Replace an existing --output.")] = False,
     no_report: Annotated[
@@ -75,22 +73,32 @@ def evaluate(
 
       sonarmap evaluate out/drifted --truth office.truth.yaml --truth-trajectory office.truth.csv
     """
-    from formats.errors import OutputError
-    from formats.writers.atomic import atomic_write_text
+    from formats.writers.atomic import atomic_write_text, check_output_file
+    from formats.writers.nav2_map import nav2_image_path
+    from formats.writers.output_marker import written_files_in
     from pipeline.tools.evaluate import evaluate_run
 
-    if output is not None:
-        # A run's data files are immutable: results go next to them, never into the run.
-        if output.resolve().is_relative_to(run_dir.resolve()):
-            raise OutputError("will not write into the run directory (it is immutable)", output)
-        if (output.exists() or output.is_symlink()) and not force:
-            raise OutputError("exists already; use --force to replace", output)
+    inputs = [(run_dir, "the run directory"), (truth, "the truth map")]
+    inputs += [(p, f"the {what}") for p, what in ((trajectory, "trajectory"),
+               (truth_trajectory, "truth trajectory")) if p is not None]
+
+    def check_output() -> None:
+        # Before the work, and again before writing: the truth image is known once its
+        # YAML has been read.
+        if output is not None:
+            image = nav2_image_path(truth)
+            found = inputs + ([(image, "the truth map's image")] if image is not None else [])
+            check_output_file(output, kind="evaluation", force=force, inputs=tuple(found))
+
+    check_output()
     result = evaluate_run(run_dir, truth, trajectory=trajectory, tolerance_m=tolerance,
                           sensor_reach_m=reach, truth_trajectory=truth_trajectory,
                           rpe_delta=rpe_delta, rpe_unit=rpe_unit)
     if output is not None:
+        check_output()
         atomic_write_text(output, result.to_json())
-    if not no_report and (run_dir / "report.html").is_file():
+    # The reports are rewritten only in a run directory sonarmap proves it wrote.
+    if not no_report and "report.html" in (written_files_in(run_dir) or ()):
         from pipeline.stages.run_report import write_run_reports
 
         write_run_reports(run_dir, evaluation=result.to_dict())
@@ -116,8 +124,7 @@ def regress(
         Path | None,
         typer.Option("--tolerances", help="TOML file of tolerances: keys f1_drop, features_rel, "
                      "mean_feature_variance_rel, map_cells_differ, readings_used_abs "
-                     "(with --suite: instead of the suite file's).",
-                     dir_okay=False),
+                     "(with --suite: instead of the suite file's)."),
     ] = None,
     json_out: JsonOpt = False,
     suite: Annotated[

@@ -207,8 +207,11 @@ def _relative_row(
 
 def _compare_maps(run_yaml: Path, golden_yaml: Path, tol: Tolerances) -> list[RegressionRow]:
     from formats.writers.nav2_map import load_nav2_map
+    from pipeline.tools.evaluate import run_max_cells
 
-    run, gold = load_nav2_map(run_yaml), load_nav2_map(golden_yaml)
+    # Each map within its own run's [grid] max_cells (checked before its image is read).
+    run = load_nav2_map(run_yaml, run_max_cells(run_yaml.parent))
+    gold = load_nav2_map(golden_yaml, run_max_cells(golden_yaml.parent))
     g, c = gold.grid, run.grid
 
     def describe(grid: Any) -> str:
@@ -258,9 +261,11 @@ def _f1_row(
         return None
     import json
 
+    from formats.text_file import read_text
+
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        doc = json.loads(read_text(path, "golden evaluation", errors=(FormatError, FormatError)))
+    except (json.JSONDecodeError, RecursionError) as err:
         raise FormatError(f"cannot read golden evaluation: {err}", path) from err
     golden = Evaluation.from_dict(doc, path)
     if truth_files is not None:
