@@ -15,16 +15,16 @@ from cli.errors import EXIT_FAILURE, handle_errors
 
 
 @contextmanager
-def _log_progress() -> Iterator[Callable[[int, int], None]]:
+def _log_progress(command: str = "batch") -> Iterator[Callable[[int, int], None]]:
     """A ``(done, total)`` callback driving a rich progress bar over logs on stderr; on a
-    non-terminal (CI, cron) a plain line per finished log instead."""
+    non-terminal (CI, cron) a plain line per finished log instead, named by ``command``."""
     from rich.console import Console
 
     from cli.progress import plain_progress
 
     if not Console(stderr=True).is_terminal:
         with plain_progress("logs", sys.stderr, every_s=0.0) as plain:
-            yield lambda done, total: plain("batch", done, total)
+            yield lambda done, total: plain(command, done, total)
         return
     from rich.progress import (
         BarColumn,

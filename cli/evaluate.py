@@ -110,21 +110,73 @@ def evaluate(
 
 @handle_errors
 def regress(
-    run_dir: RunDirArg,
+    run_dir: Annotated[
+        Path | None,
+        typer.Argument(help="Run directory written by `sonarmap run` (not with --suite).",
+                       show_default=False),
+    ] = None,
     golden: Annotated[
-        Path, typer.Option("--golden", "-g", help="Golden run directory to compare with.",
-                           file_okay=False)
-    ],
+        Path | None,
+        typer.Option("--golden", "-g", help="Golden run directory to compare RUN with.",
+                     file_okay=False),
+    ] = None,
     tolerances: Annotated[
         Path | None,
         typer.Option("--tolerances", help="TOML file of tolerances: keys f1_drop, features_rel, "
-                     "mean_feature_variance_rel, map_cells_differ, readings_used_abs."),
+                     "mean_feature_variance_rel, map_cells_differ, readings_used_abs "
+                     "(with --suite: instead of the suite file's)."),
     ] = None,
     json_out: JsonOpt = False,
+    suite: Annotated[
+        Path | None,
+        typer.Option("--suite", help="Suite file (TOML) listing the logs to map and hold to "
+                     "their goldens (see docs/ci.md).", dir_okay=False, metavar="FILE"),
+    ] = None,
+    goldens: Annotated[
+        Path | None,
+        typer.Option("--goldens", help="With --suite: the directory holding one golden "
+                     "per log, DIR/<name>.", file_okay=False, metavar="DIR"),
+    ] = None,
+    workers: Annotated[
+        int | None,
+        typer.Option("--workers", "-w", min=1, metavar="N", help="With --suite: local worker "
+                     "processes (default: the CPUs this process may use)."),
+    ] = None,
+    junit: Annotated[
+        Path | None,
+        typer.Option("--junit", help="With --suite: write a JUnit XML report here (a test "
+                     "case per log).", dir_okay=False, metavar="FILE"),
+    ] = None,
+    diff_dir: Annotated[
+        Path | None,
+        typer.Option("--diff-dir", help="With --suite: a PNG per log whose map changed, "
+                     "DIR/<name>.png.", file_okay=False, metavar="DIR"),
+    ] = None,
+    summary: Annotated[
+        Path | None,
+        typer.Option("--summary", help="With --suite: append a Markdown summary to this file "
+                     "(e.g. $GITHUB_STEP_SUMMARY).", dir_okay=False, metavar="FILE"),
+    ] = None,
+    diff_link: Annotated[
+        str | None,
+        typer.Option("--diff-link", help="With --summary: link each diff as URL/<name>.png "
+                     "(default: the picture's path relative to the summary).", metavar="URL"),
+    ] = None,
+    update: Annotated[
+        bool, typer.Option("--update", help="With --suite: write or replace each log's golden "
+                           "(atomically; only goldens sonarmap wrote) and print what moved.")
+    ] = False,
+    quiet: Annotated[
+        bool, typer.Option("--quiet", "-q", help="With --suite: no progress bar.")
+    ] = False,
 ) -> None:
     """Compare a run with a golden run: F1 (when the golden has evaluation.json), feature
     count, mean feature variance, map cells and readings used. Exit 0 when within the
     tolerances, 1 with a table of what regressed.
+
+    With --suite FILE --goldens DIR: map every log the suite lists (in parallel, as
+    `sonarmap batch`) and compare each with DIR/<name>; one table, exit 0 only when every
+    log holds. --update writes the goldens instead.
 
     Default tolerances: F1 drop ≤ 0.01, features ±2 %, mean feature variance ±5 %,
     ≤ 0.5 % of map cells changed class (different grids regress), readings used exact.
@@ -134,7 +186,37 @@ def regress(
       sonarmap regress out/office --golden sample_logs/goldens/office
 
       sonarmap regress out/office --golden goldens/office --tolerances tolerances.toml --json
+
+      sonarmap regress --suite regress.toml --goldens goldens --junit report.xml --diff-dir diffs
+
+      sonarmap regress --suite regress.toml --goldens goldens --update
     """
+    if suite is not None:
+        from cli.regress_suite import regress_suite
+
+        if run_dir is not None or golden is not None:
+            raise typer.BadParameter("--suite runs its own logs: give no RUN or --golden",
+                                     param_hint="--suite")
+        if goldens is None:
+            raise typer.BadParameter("--suite needs --goldens DIR", param_hint="--goldens")
+        if json_out:
+            raise typer.BadParameter("--json is for one run; use --junit with --suite",
+                                     param_hint="--json")
+        if update and diff_dir is not None:
+            raise typer.BadParameter("--update writes goldens, it draws no diffs",
+                                     param_hint="--diff-dir")
+        regress_suite(suite, goldens, tolerances=tolerances, workers=workers, junit=junit,
+                      diff_dir=diff_dir, summary=summary, diff_link=diff_link, update=update,
+                      quiet=quiet)
+        return
+    suite_only = {"--goldens": goldens, "--workers": workers, "--junit": junit,
+                  "--diff-dir": diff_dir, "--summary": summary, "--diff-link": diff_link}
+    for flag, value in [*suite_only.items(), ("--update", update or None)]:
+        if value is not None:
+            raise typer.BadParameter(f"{flag} needs --suite", param_hint=flag)
+    if run_dir is None or golden is None:
+        raise typer.BadParameter("give RUN --golden DIR, or --suite FILE --goldens DIR",
+                                 param_hint="RUN")
     from pipeline.tools.regress import load_tolerances
     from pipeline.tools.regress import regress as run_regress
 
