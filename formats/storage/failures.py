@@ -11,7 +11,7 @@ import errno
 
 from formats.storage.urls import redact_text
 
-__all__ = ["describe", "is_transient"]
+__all__ = ["describe", "is_not_found", "is_transient"]
 
 _STATUS_WORDS = {
     400: "bad request (HTTP 400)", 401: "not authorised (HTTP 401): check the credentials",
@@ -37,8 +37,23 @@ def _names(err: BaseException) -> str:
     return " ".join(c.__name__ for c in type(err).__mro__)
 
 
+def _inner(err: BaseException) -> BaseException:
+    """The failure under fsspec's wrapping: its HTTP filesystem raises every failure to
+    reach a URL (403, a timeout, a refused connection) as FileNotFoundError from it."""
+    cause = err.__cause__
+    if isinstance(err, FileNotFoundError) and cause is not None:
+        return _inner(cause)
+    return err
+
+
+def is_not_found(err: BaseException) -> bool:
+    """Whether the object is missing (HTTP 404), not its bucket or the way to it."""
+    return describe(err) == _STATUS_WORDS[404]
+
+
 def describe(err: BaseException) -> str:
     """One phrase for an exception raised while reading or writing a URL."""
+    err = _inner(err)
     text = " ".join(redact_text(str(err)).split())
     names = _names(err)
     status = _status(err)
@@ -62,6 +77,7 @@ def describe(err: BaseException) -> str:
 def is_transient(err: BaseException) -> bool:
     """Whether the failure may pass: a timeout, a lost or refused connection, HTTP 5xx or
     429 (too many requests). Not found, access denied and bad requests are final."""
+    err = _inner(err)
     if isinstance(err, FileNotFoundError | PermissionError | IsADirectoryError):
         return False
     status = _status(err)

@@ -26,7 +26,7 @@ from pathlib import Path, PurePosixPath
 from typing import Any, BinaryIO, Literal, TextIO, TypeAlias, TypeVar, cast, overload
 
 from formats.errors import StorageError
-from formats.storage.failures import describe
+from formats.storage.failures import describe, is_not_found
 from formats.storage.options import filesystem
 from formats.storage.remote_file import RemoteRaw, with_retries
 from formats.storage.urls import is_url, redact_url, scheme_of
@@ -146,7 +146,7 @@ class Url:
         try:
             self.info()
         except StorageError as err:
-            if isinstance(err.__cause__, FileNotFoundError) and "bucket" not in err.reason:
+            if err.__cause__ is not None and is_not_found(err.__cause__):
                 return False
             raise
         return True

@@ -28,6 +28,7 @@ from pathlib import Path
 from types import TracebackType
 
 from formats.errors import OutputError, StorageError
+from formats.storage.failures import is_not_found
 from formats.storage.location import Location, Url
 from formats.writers.atomic import OutputDir
 from formats.writers.output_marker import OUTPUT_MARKER, write_output_marker
@@ -95,7 +96,7 @@ def remote_state(prefix: Url) -> RemoteState:
     try:
         keys = prefix.call("cannot list", lambda: fs.find(root))
     except StorageError as err:
-        if isinstance(err.__cause__, FileNotFoundError) and "bucket" not in err.reason:
+        if err.__cause__ is not None and is_not_found(err.__cause__):
             keys = []
         else:
             raise
