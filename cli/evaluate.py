@@ -12,7 +12,9 @@ import typer
 from cli.errors import EXIT_FAILURE, handle_errors
 
 RunDirArg = Annotated[
-    Path, typer.Argument(help="Run directory written by `sonarmap run`.", show_default=False)
+    str, typer.Argument(help="Run directory written by `sonarmap run`, or its object-store "
+                        "prefix (read only when complete: its .sonarmap-output marker lists "
+                        "exactly what is there).", show_default=False)
 ]
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")]
 
@@ -75,6 +77,24 @@ def evaluate(
 
       sonarmap evaluate out/drifted --truth office.truth.yaml --truth-trajectory office.truth.csv
     """
+    import contextlib
+
+    from formats.storage.location import Url, as_location
+    from formats.writers.remote_output import complete_output
+
+    where = as_location(run_dir)
+    with contextlib.ExitStack() as stack:
+        local = stack.enter_context(complete_output(where))
+        _evaluate(local, truth, trajectory, tolerance, reach, truth_trajectory, rpe_delta,
+                  rpe_unit, output, force,
+                  # a prefix's report is not rewritten: the prefix stays as it was written
+                  no_report or isinstance(where, Url), json_out)
+
+
+def _evaluate(run_dir: Path, truth: Path, trajectory: Path | None, tolerance: float,
+              reach: float | None, truth_trajectory: Path | None, rpe_delta: float,
+              rpe_unit: str, output: Path | None, force: bool, no_report: bool,
+              json_out: bool) -> None:
     from formats.errors import OutputError
     from formats.writers.atomic import atomic_write_text
     from pipeline.tools.evaluate import evaluate_run
@@ -104,8 +124,8 @@ def evaluate(
 def regress(
     run_dir: RunDirArg,
     golden: Annotated[
-        Path, typer.Option("--golden", "-g", help="Golden run directory to compare with.",
-                           file_okay=False)
+        str, typer.Option("--golden", "-g", help="Golden run directory (or complete "
+                          "object-store prefix) to compare with.")
     ],
     tolerances: Annotated[
         Path | None,
@@ -128,10 +148,17 @@ def regress(
 
       sonarmap regress out/office --golden goldens/office --tolerances tolerances.toml --json
     """
+    import contextlib
+
+    from formats.storage.location import as_location
+    from formats.writers.remote_output import complete_output
     from pipeline.tools.regress import load_tolerances
     from pipeline.tools.regress import regress as run_regress
 
-    result = run_regress(run_dir, golden, load_tolerances(tolerances))
+    with contextlib.ExitStack() as stack:
+        local_run = stack.enter_context(complete_output(as_location(run_dir)))
+        local_golden = stack.enter_context(complete_output(as_location(golden), "golden"))
+        result = run_regress(local_run, local_golden, load_tolerances(tolerances))
     if json_out:
         typer.echo(json.dumps(result.to_dict(), indent=2))
     elif result.ok:

@@ -20,21 +20,23 @@ else — objects sonarmap did not write — is refused, and nothing of it is del
 
 from __future__ import annotations
 
+import contextlib
 import json
 import shutil
 import tempfile
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
 
-from formats.errors import OutputError, StorageError
+from formats.errors import InputError, OutputError, StorageError
 from formats.storage.failures import is_not_found
 from formats.storage.location import Location, Url
 from formats.writers.atomic import OutputDir
 from formats.writers.output_marker import OUTPUT_MARKER, write_output_marker
 
-__all__ = ["PARTIAL_MARKER", "RemoteOutputDir", "RemoteState", "open_output_dir",
-           "remote_state"]
+__all__ = ["PARTIAL_MARKER", "RemoteOutputDir", "RemoteState", "complete_output",
+           "open_output_dir", "remote_state"]
 
 PARTIAL_MARKER = ".sonarmap-output.partial"
 _MARKERS = frozenset({OUTPUT_MARKER, PARTIAL_MARKER})
@@ -215,3 +217,29 @@ def open_output_dir(final: Location, force: bool = False,
         return RemoteOutputDir(final, force=force, protect=protect)
     return OutputDir(final, force=force,
                      protect=tuple(p for p in protect if isinstance(p, Path)))
+
+
+@contextlib.contextmanager
+def complete_output(where: Location, what: str = "run") -> Iterator[Path]:
+    """A run's output as a local directory: a local path as it is; a URL prefix copied to
+    a temporary directory (removed after) only when it is complete — a prefix without its
+    ``.sonarmap-output`` marker, or holding other objects, is an InputError (incomplete)."""
+    if not isinstance(where, Url):
+        yield where
+        return
+    state = remote_state(where)
+    if not state.complete:
+        why = ("not found" if not state.present else
+               "incomplete: no .sonarmap-output marker (an upload was interrupted or is "
+               "under way)" if OUTPUT_MARKER not in state.present else
+               "incomplete: its .sonarmap-output marker does not list exactly what is there")
+        raise InputError(f"{what} output {why}", where)
+    tmp = Path(tempfile.mkdtemp(prefix="sonarmap-fetch-"))
+    try:
+        for rel in sorted(state.files):
+            dst = tmp / rel
+            dst.parent.mkdir(parents=True, exist_ok=True)
+            (where / rel).download(dst)
+        yield tmp
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)

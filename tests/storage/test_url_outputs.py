@@ -112,3 +112,24 @@ def test_an_output_inside_the_input_prefix_is_refused(s3):
                                  f"s3://{bucket}/in", "-q", "--force"])
     assert result.exit_code == 1
     assert "contains the input" in result.output
+
+
+def test_regress_and_evaluate_read_a_complete_prefix_and_refuse_an_incomplete_one(s3):
+    fs, bucket = s3
+    out = f"s3://{bucket}/maps/eval"
+    assert _run(out).exit_code == 0
+    golden = str(ROOT / "sample_logs" / "goldens" / "office")
+    truth = str(ROOT / "sample_logs" / "office" / "office.truth.yaml")
+    before = fs.cat(f"{bucket}/maps/eval/report.html")
+    result = runner.invoke(app, ["regress", out, "--golden", golden])
+    assert result.exit_code == 0, result.output
+    result = runner.invoke(app, ["evaluate", out, "--truth", truth, "--json"])
+    assert result.exit_code == 0, result.output
+    assert 0 < json.loads(result.output)["f1"] <= 1
+    fs.invalidate_cache()
+    assert fs.cat(f"{bucket}/maps/eval/report.html") == before  # the prefix is not rewritten
+    fs.rm_file(f"{bucket}/maps/eval/.sonarmap-output")  # as if the upload never finished
+    for args in (["regress", out, "--golden", golden], ["evaluate", out, "--truth", truth]):
+        result = runner.invoke(app, args)
+        assert result.exit_code == 1
+        assert f"{out}: run output incomplete: no .sonarmap-output marker" in result.output
