@@ -11,7 +11,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from loopback import http_server, s3_env, s3_server  # noqa: E402
+from loopback import http_server, s3_env, s3_server
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -66,7 +66,7 @@ def test_connection_refused(fast):
 
 
 def test_s3_missing_object_and_missing_bucket(s3, fast):
-    fs, bucket = s3
+    _fs, bucket = s3
     _fails(["info", f"s3://{bucket}/nope.bag", "-c", str(fast)],
            f"s3://{bucket}/nope.bag", "HTTP 404")
     _fails(["info", "s3://no-such-bucket-here/a.bag", "-c", str(fast)],

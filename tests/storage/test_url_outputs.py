@@ -43,7 +43,7 @@ def test_run_writes_every_file_then_the_marker_listing_exactly_them(s3, local_ma
 
 
 def test_an_interrupted_upload_leaves_no_marker_and_force_completes_it(s3, monkeypatch):
-    fs, bucket = s3
+    _fs, bucket = s3
     out = f"s3://{bucket}/maps/cut"
     target = Url(out).fs  # the filesystem instance the run will use
     real = target.put_file
