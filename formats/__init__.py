@@ -82,7 +82,7 @@ def check_log_path(p: Location) -> None:
         if p.name == "metadata.yaml":
             raise FormatError(f"is a rosbag2 bag's metadata file; pass the bag directory "
                               f"{p.parent} instead", p)
-        if not (p.is_dir() or p.exists()):
+        if not (p.exists() or p.is_dir()):  # the URL itself first: errors name it
             raise FormatError("no such object or prefix (HTTP 404)", p)
         return
     try:

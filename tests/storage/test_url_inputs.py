@@ -127,3 +127,13 @@ def test_several_files_of_one_recording_may_be_urls(logs, s3):
     assert result.exit_code == 0, result.output
     assert "Files:        2" in result.output
     assert f"s3://{bucket}/a/office.bag" in result.output
+
+
+def test_validate_reads_a_log_from_a_url(logs, s3):
+    fs, bucket = s3
+    _put(fs, logs["ros1"], f"{bucket}/v/office.bag")
+    result = runner.invoke(app, ["validate", f"s3://{bucket}/v/office.bag", "--json"])
+    assert result.exit_code == 0, result.output
+    report = json.loads(result.output)
+    assert report["ok"] is True
+    assert report["path"] == f"s3://{bucket}/v/office.bag"
