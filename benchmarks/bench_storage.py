@@ -73,7 +73,7 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     ap.add_argument("--smoke", action="store_true", help="a 20 s log, one run each")
     args = ap.parse_args(argv)
     if args.smoke:
-        args.seconds, args.repeat, args.rss_factor = 20.0, 1, 2.0
+        args.seconds, args.repeat, args.rss_factor = 20.0, 1, 0.0
     log = cached_log(LogSpec(seconds=args.seconds))
     size_mb = log.stat().st_size / 1e6
     with loopback_s3(), tempfile.TemporaryDirectory(prefix="bench_storage_") as tmp:

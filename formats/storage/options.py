@@ -105,7 +105,10 @@ def filesystem(protocol: str) -> Any:
         hint = f"pip install 'sonarmap[{extra}]'" if extra else "no fsspec filesystem for it"
         raise StorageError(f"{protocol}:// URLs need the '{extra}' extra ({hint})"
                            if extra else f"unsupported URL scheme {protocol}:// ({hint})") from err
-    return fsspec.filesystem(protocol, **_kwargs(protocol, _current))
+    fs = fsspec.filesystem(protocol, **_kwargs(protocol, _current))
+    if protocol in ("s3", "s3a", "gs", "gcs"):
+        fs.retries = 1  # s3fs's and gcsfs's own retry loops: one attempt (see _kwargs)
+    return fs
 
 
 def _kwargs(protocol: str, o: StorageConfig) -> dict[str, Any]:
@@ -115,9 +118,11 @@ def _kwargs(protocol: str, o: StorageConfig) -> dict[str, Any]:
             kw["endpoint_url"] = o.endpoint_url
         if o.anonymous:
             kw["anon"] = True
+        # One attempt each in botocore and s3fs: the retries are sonarmap's own, with its
+        # backoff (formats/storage/remote_file.py); nested retry loops would multiply.
         kw["config_kwargs"] = {
             "connect_timeout": o.timeout_s, "read_timeout": o.timeout_s,
-            "retries": {"max_attempts": o.retries + 1, "mode": "standard"},
+            "retries": {"max_attempts": 1, "mode": "standard"},
         }
     elif protocol in ("http", "https"):
         import aiohttp
@@ -126,7 +131,6 @@ def _kwargs(protocol: str, o: StorageConfig) -> dict[str, Any]:
             total=None, connect=o.timeout_s, sock_connect=o.timeout_s, sock_read=o.timeout_s)}
     elif protocol in ("gs", "gcs"):
         kw["requests_timeout"] = o.timeout_s
-        kw["retries"] = max(1, o.retries + 1)
         if o.anonymous:
             kw["token"] = "anon"
     elif protocol in ("az", "abfs", "abfss") and o.anonymous:
