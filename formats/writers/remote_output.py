@@ -33,10 +33,15 @@ from formats.errors import InputError, OutputError, StorageError
 from formats.storage.failures import is_not_found
 from formats.storage.location import Location, Url
 from formats.writers.atomic import OutputDir
-from formats.writers.output_marker import OUTPUT_MARKER, write_output_marker
+from formats.writers.output_marker import (
+    MAX_PROOF_BYTES,
+    OUTPUT_MARKER,
+    ReadRange,
+    write_output_marker,
+)
 
 __all__ = ["PARTIAL_MARKER", "RemoteOutputDir", "RemoteState", "complete_output",
-           "open_output_dir", "remote_state"]
+           "open_output_dir", "remote_state", "url_reader"]
 
 PARTIAL_MARKER = ".sonarmap-output.partial"
 _MARKERS = frozenset({OUTPUT_MARKER, PARTIAL_MARKER})
@@ -243,3 +248,24 @@ def complete_output(where: Location, what: str = "run") -> Iterator[Path]:
         yield tmp
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+def url_reader(prefix: Url) -> ReadRange:
+    """:data:`~formats.writers.output_marker.ReadRange` over the objects under ``prefix``
+    (byte ranges, at most MAX_PROOF_BYTES; None when an object cannot be read), so that the
+    ownership rule of :mod:`formats.writers.output_marker` judges objects as it judges
+    files."""
+
+    def read(name: str, offset: int, length: int) -> bytes | None:
+        url = prefix / name
+        length = max(0, min(length, MAX_PROOF_BYTES))
+        try:
+            size = url.stat().st_size
+            start = max(0, size + offset) if offset < 0 else offset
+            data: bytes = url.call("cannot read", lambda: url.fs.cat_file(
+                url.fs_path, start=start, end=min(size, start + length)))
+        except StorageError:
+            return None
+        return data
+
+    return read
