@@ -133,3 +133,12 @@ def test_regress_and_evaluate_read_a_complete_prefix_and_refuse_an_incomplete_on
         result = runner.invoke(app, args)
         assert result.exit_code == 1
         assert f"{out}: run output incomplete: no .sonarmap-output marker" in result.output
+
+
+def test_a_batch_never_replaces_a_summary_it_did_not_write_under_a_prefix(s3):
+    fs, bucket = s3
+    fs.pipe_file(f"{bucket}/b/summary.md", b"# my notes\n")
+    result = runner.invoke(app, ["batch", str(MCAP), "-o", f"s3://{bucket}/b", "-q"])
+    assert result.exit_code == 1
+    assert f"s3://{bucket}/b/summary.md: exists and sonarmap did not write it" in result.output
+    assert fs.cat(f"{bucket}/b/summary.md") == b"# my notes\n"
