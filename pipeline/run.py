@@ -34,6 +34,7 @@ from formats import open_log
 from formats.contract import LogInfo, LogReader, RangeBatch
 from formats.errors import ConfigError, InputError
 from formats.map_types import GridSpec
+from formats.storage.location import Location, as_location
 from formats.writers.trajectory_tum import Trajectory
 from pipeline import __version__
 from pipeline.config import Config, dump_config
@@ -74,7 +75,7 @@ Progress = Callable[[str, int, int | None], None]
 class RunResult:
     """What a run produced: where, its metrics and the final map."""
 
-    out_dir: Path
+    out_dir: Location
     metrics: RunMetrics
     snapshot: MapSnapshot
 
@@ -92,8 +93,8 @@ class StreamState:
 
 
 def run(
-    log_path: str | Path | Sequence[str | Path],
-    out_dir: str | Path,
+    log_path: str | Location | Sequence[str | Location],
+    out_dir: str | Location,
     config: Config,
     *,
     force: bool = False,
@@ -109,10 +110,16 @@ def run(
     ``force`` replaces a previous sonarmap output only (never the input's directory, the
     working directory or the user's files: :class:`~formats.writers.atomic.OutputDir`).
     ``on_complete(tmp_dir, metrics)`` may add files after the outputs are written and
-    before the directory is committed (a batch's resume marker)."""
-    from formats.writers.atomic import OutputDir
+    before the directory is committed (a batch's resume marker).
 
+    Logs and ``out_dir`` may be URLs (``s3://bucket/prefix``): read by ranges, written by
+    :class:`~formats.writers.remote_output.RemoteOutputDir` (marker last)."""
+    from formats.storage.options import configure
+    from formats.writers.remote_output import open_output_dir
+
+    configure(config.storage)
     paths = log_paths(log_path)
+    final = as_location(out_dir)
     label = log_label(paths)
     if compare_correction and config.mapper.method == Method.CLASSIC:
         raise ConfigError(
@@ -120,7 +127,7 @@ def run(
         )
     timer = StageTimer()
     t_start = time.perf_counter()
-    with OutputDir(Path(out_dir), force=force, protect=tuple(paths)) as out:
+    with open_output_dir(final, force=force, protect=tuple(paths)) as out:
         with timer.stage("ingest"):
             reader = open_log(paths, config)
         with reader:
@@ -184,10 +191,10 @@ def run(
                        odometry=odometry)
         if on_complete is not None:
             on_complete(out.tmp_dir, metrics)
-    return RunResult(Path(out_dir), metrics, snapshots["main"])
+    return RunResult(final, metrics, snapshots["main"])
 
 
-def _check_mcap_stamps(label: Path, track: PoseTrack) -> None:
+def _check_mcap_stamps(label: Location, track: PoseTrack) -> None:
     """Refuse (InputError naming the log), before mapping, a log whose stamps ``map.mcap``
     cannot carry: its messages are stamped at the last pose, its paths with every pose's
     stamp (refinement keeps them)."""
@@ -452,7 +459,7 @@ def _sync(
 
 
 def _metrics(
-    paths: list[Path],
+    paths: list[Location],
     info: LogInfo,
     sv: Survey,
     sensors: SensorTable,
