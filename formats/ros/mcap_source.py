@@ -560,14 +560,17 @@ class McapSource(FileSource, SourceAccessors):
             return
         if block.is_chunk:
             try:
-                if content[0] != OP_CHUNK:
+                if not content or content[0] != OP_CHUNK:
                     raise ChunkError("chunk index points at a non-chunk record")
                 data = _inflated_chunk(content[_RECORD_HEAD:])
             except ChunkError as err:
-                lost = sum(block.counts.get(c, 0) for c in block.counts)
+                lost = sum(block.counts.values())
                 what = f"{lost} messages" if lost else "its messages"
-                self._lose(block.record_length, f"corrupt chunk at byte {block.record_offset}"
-                           f" skipped ({err}); {what} lost")
+                line = (f"corrupt chunk at byte {block.record_offset} skipped ({err});"
+                        f" {what} lost")
+                if line not in self._warnings:
+                    self._messages_lost += lost
+                self._lose(block.record_length, line)
                 return
         else:
             data = content
