@@ -55,10 +55,10 @@ def test_method_is_the_one_typed_choice():
         ({"mapperx": {}}, r"unknown key 'mapperx'"),
         ({"mapper": {"n_particles": "many"}}, r"'mapper.n_particles' must be an integer"),
         ({"mapper": {"feature_correction": 1}}, r"must be true or false"),
-        ({"mapper": {"p_free": 0.7}}, r"'mapper.p_free' must be < 0.5"),
-        ({"mapper": {"p_occ": 1.5}}, r"'mapper.p_occ' must be a probability"),
+        ({"mapper": {"p_free": 0.7}}, r"'mapper.p_free' must be in \(0, 0.5\), got 0.7"),
+        ({"mapper": {"p_occ": 1.5}}, r"'mapper.p_occ' must be in \(0.5, 1\), got 1.5"),
         ({"mapper": {"method": "magic"}}, r"'mapper.method' must be one of"),
-        ({"grid": {"resolution": 0}}, r"'grid.resolution' must be > 0"),
+        ({"grid": {"resolution": 0}}, r"'grid.resolution' must be in \[0.001, 100\] m, got 0"),
         ({"grid": {"extent": [0, 0, -1, 1]}}, r"xmin < xmax"),
         ({"sensors": {"min_range": 3.0, "max_range": 1.0}}, r"min_range' must be < max_range"),
         ({"sensors": {"preset": "roomba"}}, r"'sensors.preset' must be one of"),
@@ -83,7 +83,7 @@ def test_file_errors_name_the_file(tmp_path):
     with pytest.raises(ConfigError, match=r"bad\.toml: invalid TOML"):
         load_config(p)
     p.write_text("[mapper]\nk_d = -1\n")
-    with pytest.raises(ConfigError, match=r"bad\.toml: 'mapper.k_d' must be >= 0"):
+    with pytest.raises(ConfigError, match=r"bad\.toml: 'mapper.k_d' must be in \[0, 1\], got -1"):
         load_config(p)
     with pytest.raises(ConfigError, match=r"missing\.toml: configuration file not found"):
         load_config(tmp_path / "missing.toml")
