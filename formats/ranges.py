@@ -54,6 +54,13 @@ def _num(v: float) -> str:
     return f"{v:g}"
 
 
+# Physical ranges shared by the configuration and the files sonarmap reads.
+#: A map cell: 1 mm (finer is no sonar map) to 100 m.
+CELL_M = Range(1e-3, 100, "m")
+#: A map coordinate (an origin, an extent, a pose): within 10 000 km of the map frame.
+COORD_M = Range(-1e7, 1e7, "m")
+
+
 def open_range(lo: float, hi: float, unit: str = "", zero: str = "") -> Range:
     """``(lo, hi)``: both ends excluded."""
     return Range(lo, hi, unit, lo_open=True, hi_open=True, zero=zero)

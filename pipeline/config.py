@@ -32,7 +32,7 @@ from formats.options import (
     doc_field,
 )
 from formats.presets import PRESETS
-from formats.ranges import Range, above, open_range
+from formats.ranges import CELL_M, COORD_M, Range, above, open_range
 from formats.toml_file import read_toml
 from pipeline.methods import Method
 
@@ -499,8 +499,8 @@ RANGES: dict[str, Range] = {
     "mapper.attr_threshold": Range(0, 1e6),
     "mapper.seed": Range(0, 2**63, hi_open=True),
     "mapper.threads": Range(1, 2),
-    "grid.resolution": Range(1e-3, 100, "m"),
-    "grid.extent": Range(-1e7, 1e7, "m"),
+    "grid.resolution": CELL_M,
+    "grid.extent": COORD_M,
     "grid.margin": Range(0, 1e4, "m"),
     "grid.max_cells": Range(1, _INT32),
     "scans.window_s": Range(1e-6, 3600, "s"),
