@@ -59,6 +59,12 @@ def _num(v: float) -> str:
 CELL_M = Range(1e-3, 100, "m")
 #: A map coordinate (an origin, an extent, a pose): within 10 000 km of the map frame.
 COORD_M = Range(-1e7, 1e7, "m")
+#: A sensor's mount in the robot's base frame: on a robot, within 100 m of its centre.
+MOUNT_M = Range(-100, 100, "m")
+#: A beam's range limit (r_min, r_max; 0 = from the log where configured): a sonar's reach.
+LIMIT_M = Range(0, 1000, "m")
+#: An angle read from a log (a yaw): any turn count whose radians keep their precision.
+ANGLE_RAD = Range(-1e6, 1e6, "rad")
 
 
 def open_range(lo: float, hi: float, unit: str = "", zero: str = "") -> Range:

@@ -32,7 +32,7 @@ from formats.options import (
     doc_field,
 )
 from formats.presets import PRESETS
-from formats.ranges import CELL_M, COORD_M, Range, above, open_range
+from formats.ranges import CELL_M, COORD_M, LIMIT_M, MOUNT_M, Range, above, open_range
 from formats.toml_file import read_toml
 from pipeline.methods import Method
 
@@ -511,15 +511,15 @@ RANGES: dict[str, Range] = {
     "input.max_file_gap_s": Range(0, 86_400 * 365, "s"),
     "input.csv.no_echo_value": Range(-1e9, 1e9, zero="none"),
     "sensors.fov_deg": Range(FOV_MIN_DEG, FOV_MAX_DEG, "deg", hi_open=True, zero="from the log"),
-    "sensors.min_range": Range(0, 1000, "m", zero="from the log"),
-    "sensors.max_range": Range(0, 1000, "m", zero="from the log"),
-    "sensors.mounts.x": Range(-100, 100, "m"),
-    "sensors.mounts.y": Range(-100, 100, "m"),
+    "sensors.min_range": dataclasses.replace(LIMIT_M, zero="from the log"),
+    "sensors.max_range": dataclasses.replace(LIMIT_M, zero="from the log"),
+    "sensors.mounts.x": MOUNT_M,
+    "sensors.mounts.y": MOUNT_M,
     "sensors.mounts.yaw_deg": Range(-360, 360, "deg"),
     "sensors.mounts.fov_deg": Range(FOV_MIN_DEG, FOV_MAX_DEG, "deg", hi_open=True,
                                     zero="from the log"),
-    "sensors.mounts.min_range": Range(0, 1000, "m", zero="from the log"),
-    "sensors.mounts.max_range": Range(0, 1000, "m", zero="from the log"),
+    "sensors.mounts.min_range": dataclasses.replace(LIMIT_M, zero="from the log"),
+    "sensors.mounts.max_range": dataclasses.replace(LIMIT_M, zero="from the log"),
     # [pose_refinement]: generous outer limits (its own rules follow in _check_ranges).
     **{f"pose_refinement.{k}": r for k, r in {
         "local_stretch_m": above(0, 1e5, "m"), "local_iterations": Range(1, 1000),
