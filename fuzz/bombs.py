@@ -73,7 +73,7 @@ def mcap_declaring(valid: bytes, declared: int) -> bytes:
     for op, pos, _ in _mcap_records(valid):
         if op == 0x06:  # start, end, uncompressed size
             struct.pack_into("<Q", out, pos + 9 + 16, declared)
-    for op, pos, end in _mcap_records(valid):
+    for op, pos, _end in _mcap_records(valid):
         if op == 0x08:  # chunk index: start, end, chunk offset, chunk length, index map
             c = pos + 9 + 32
             (n,) = struct.unpack_from("<I", valid, c)

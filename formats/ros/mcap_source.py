@@ -408,6 +408,7 @@ class McapSource(FileSource, SourceAccessors):
         loose: _Block | None = None
         counts: dict[int, int] = {}
         times: list[int] = []
+        summary = False
         while True:
             head = self._read_at(pos, _RECORD_HEAD)
             if len(head) < _RECORD_HEAD:
@@ -426,8 +427,19 @@ class McapSource(FileSource, SourceAccessors):
                     f" file ends first; {self._size - pos} bytes lost"
                 )
                 break
-            if op in (OP_DATA_END, OP_FOOTER) or (op == OP_HEADER and pos > len(MCAP_MAGIC)):
+            if op == OP_FOOTER:
+                if end + len(MCAP_MAGIC) < self._size:
+                    tail = self._size - end - len(MCAP_MAGIC)
+                    self._lose(tail, f"{tail} bytes after the footer at byte {pos} are not a"
+                                     " record (lost)")
                 break
+            if op == OP_DATA_END:
+                summary = True  # then only framed up to the footer (trailing bytes)
+            if summary or (op == OP_HEADER and pos > len(MCAP_MAGIC)):
+                if op == OP_HEADER:
+                    break
+                pos = end
+                continue
             if op == OP_CHUNK:
                 loose = None
                 content = f.read(length)

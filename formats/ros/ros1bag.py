@@ -215,9 +215,15 @@ class Ros1BagSource(FileSource):
             reason = f"index position {index_pos} is outside the file ({self._size} bytes)"
         else:
             try:
-                conns, chunks = self._read_index(index_pos, conn_count, chunk_count)
+                conns, chunks, index_end = self._read_index(index_pos, conn_count, chunk_count)
             except _Corrupt as err:
                 reason = f"index at byte {index_pos} is unreadable ({err})"
+            else:
+                if index_end < self._size:
+                    tail = self._size - index_end
+                    self._bytes_lost += tail
+                    self._warnings.append(f"{self.path}: {tail} bytes after the index at byte"
+                                          f" {index_end} are not a record (lost)")
         if reason:
             scan = self._scan()
             conns, chunks = scan.conns, scan.chunks
@@ -281,7 +287,8 @@ class Ros1BagSource(FileSource):
 
     def _read_index(
         self, index_pos: int, conn_count: int, chunk_count: int
-    ) -> tuple[dict[int, _ConnRecord], list[_Chunk]]:
+    ) -> tuple[dict[int, _ConnRecord], list[_Chunk], int]:
+        """Connections and chunk infos of the index at ``index_pos``, and where it ends."""
         conns: dict[int, _ConnRecord] = {}
         chunks: list[_Chunk] = []
         pos = index_pos
@@ -314,7 +321,7 @@ class Ros1BagSource(FileSource):
                 if cid not in conns:
                     raise _Corrupt(f"chunk info names unknown connection {cid}")
                 conns[cid].count += k
-        return conns, chunks
+        return conns, chunks, pos
 
     def _scan(self) -> _ScanResult:
         """Walk the records from the start, keeping every intact one (no index needed)."""
