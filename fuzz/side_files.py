@@ -452,7 +452,9 @@ def _run(fx: Fixtures, what: str, log: Path, files: dict[Path, bytes],
          layout: str = "single") -> Case:
     cfg = log.parent / "c.toml"
     files = dict(files)
-    files[cfg] = f"[input.csv]\nlayout = \"{layout}\"\n[grid]\nresolution = 0.1\n".encode()
+    mounts = "" if layout == "set" else CONFIG_TEXT.split("\n\n", 1)[1]  # sensors.csv has them
+    files[cfg] = (f"[input.csv]\nlayout = \"{layout}\"\n[grid]\nresolution = 0.1\n\n"
+                  f"{mounts}").encode()
     out = fx.root / "csv-out"
     return Case("csv numbers", what, ["run", str(log), "-o", str(out), "-c", str(cfg), "-q"],
                 out, files=files)
