@@ -61,7 +61,7 @@ from pipeline.stages.reading_quality import REASONS
 from pipeline.stages.run_warnings import run_warnings
 from pipeline.stages.scans import ScanBuilder, ScanKeys
 from pipeline.stages.sensors import SensorTable, beam_problem, resolve_sensors
-from pipeline.streaming.run_input import input_section, log_label, log_paths
+from pipeline.streaming.run_input import input_section, log_label, log_paths, losses_named
 
 log = logging.getLogger("sonarmap")
 
@@ -130,7 +130,7 @@ def run(
     with open_output_dir(final, force=force, protect=tuple(paths)) as out:
         with timer.stage("ingest"):
             reader = open_log(paths, config)
-        with reader:
+        with reader, losses_named(reader.info):
             with timer.stage("ingest"):
                 found = None if progress is None else (lambda n: progress("reading", n, None))
                 sv, sensors = surveyed(reader, config, found)
@@ -185,8 +185,9 @@ def run(
         metrics = _metrics(paths, info, sv, sensors, mappers, snapshots, state, config)
         metrics.pose_refinement = refinement
         # A map of (almost) nothing is an error, not an empty result with exit 0.
-        check_mapped_share(label, metrics.counts, metrics.dropped, state.max_pose_gap_s,
-                           state.median_pose_interval_s, config)
+        with losses_named(lambda: info):
+            check_mapped_share(label, metrics.counts, metrics.dropped, state.max_pose_gap_s,
+                               state.median_pose_interval_s, config)
         _write_outputs(out, config, sv, drawn, snapshots, metrics, timer, t_start,
                        odometry=odometry)
         if on_complete is not None:
@@ -285,7 +286,7 @@ def grid_for(sv: Survey, sensors: SensorTable, config: Config) -> GridSpec:
     # must be the same one-line refusal, not an overflow.
     w_m, h_m = x1 - x0, y1 - y0
     cells_f = (w_m / g.resolution + 1.0) * (h_m / g.resolution + 1.0)
-    if not math.isfinite(cells_f) or cells_f > 2.0 * g.max_cells:
+    if not math.isfinite(cells_f) or cells_f > 2.0**53:  # beyond exact integers
         _too_many_cells(f"{w_m:.3g} x {h_m:.3g} m", f"{cells_f:.3g}", g.max_cells)
     grid = GridSpec.covering(x0, y0, x1, y1, g.resolution)
     cells = grid.width * grid.height

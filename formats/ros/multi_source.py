@@ -45,7 +45,7 @@ import numpy as np
 
 from formats.contract import LogFile
 from formats.errors import FormatError
-from formats.ros.source import Connection, MessageSource, RawBatch
+from formats.ros.source import Connection, MessageSource, RawBatch, messages_lost
 from formats.storage.location import Location, joined
 
 #: Two files' streams may alternate this far out of log order (the pipeline reorders
@@ -122,6 +122,10 @@ class MultiSource:
     @property
     def bytes_lost(self) -> int:
         return sum(s.bytes_lost for s in self._sources)
+
+    @property
+    def messages_lost(self) -> int:
+        return sum(messages_lost(s) for s in self._sources)
 
     @property
     def files(self) -> list[LogFile]:

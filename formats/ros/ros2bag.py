@@ -27,8 +27,16 @@ import numpy as np
 import yaml
 
 from formats.errors import FormatError
+from formats.ros.inflate import MAX_RATIO, ChunkError, inflate_message
 from formats.ros.mcap_source import McapSource
-from formats.ros.source import Connection, Encoding, RawBatch, SourceAccessors, normalize_msgtype
+from formats.ros.source import (
+    Connection,
+    Encoding,
+    RawBatch,
+    SourceAccessors,
+    messages_lost,
+    normalize_msgtype,
+)
 from formats.storage.location import Location, Url, as_location
 from formats.text_file import read_text
 
@@ -308,9 +316,20 @@ class Ros2BagSource(SourceAccessors):
         import zstandard
 
         dst = self._temp_dir() / src.name[: -len(".zstd")]
+        # At most what zstd can inflate this many bytes to (formats/ros/inflate.py): a
+        # small file must not fill the disk.
+        limit = src.stat().st_size * MAX_RATIO["zstd"] + (1 << 20)
+        written = 0
         try:
             with src.open("rb") as fin, dst.open("wb") as fout:
-                zstandard.ZstdDecompressor().copy_stream(fin, fout)
+                reader = zstandard.ZstdDecompressor().stream_reader(fin, read_across_frames=True)
+                while piece := reader.read(1 << 20):
+                    written += len(piece)
+                    if written > limit:
+                        raise FormatError(
+                            f"zstd file inflates to more than {limit} bytes, more than zstd"
+                            f" can encode in {src.stat().st_size} bytes (corrupt)", src)
+                    fout.write(piece)
         except (OSError, zstandard.ZstdError) as err:
             raise FormatError(f"cannot decompress zstd file ({_reason(err)})", src) from err
         if dst.stat().st_size == 0:
@@ -350,6 +369,10 @@ class Ros2BagSource(SourceAccessors):
         return self._bytes_lost + sum(f.bytes_lost for f in self._files)
 
     @property
+    def messages_lost(self) -> int:
+        return sum(messages_lost(f) for f in self._files)
+
+    @property
     def warnings(self) -> list[str]:
         out = list(self._warnings)
         for f in self._files:
@@ -366,8 +389,33 @@ class Ros2BagSource(SourceAccessors):
             for raw in f.raw_batches(ids):
                 conn = self._connections[local[raw.connection.id]]
                 if self._message_zstd:
-                    raw = _decompress_messages(raw)
+                    raw = self._decompress_messages(raw, f.path.name)
                 yield RawBatch(conn, raw.log_time_ns, raw.buffer, raw.offsets, raw.lengths)
+
+    def _decompress_messages(self, raw: RawBatch, name: str) -> RawBatch:
+        """The batch with every message zstd-decompressed (``compression_mode: MESSAGE``),
+        each within the bound of formats/ros/inflate.py; a message that does not inflate
+        is skipped and recorded as a loss."""
+        out: list[bytes] = []
+        keep: list[int] = []
+        for i in range(len(raw)):
+            t = int(raw.log_time_ns[i])
+            try:
+                out.append(inflate_message(raw.message(i), f"message at log time {t} ns"))
+                keep.append(i)
+            except ChunkError as err:
+                line = f"{name}: topic {raw.connection.topic}: {err}; message skipped"
+                if line not in self._warnings:
+                    self._warnings.append(line)
+                    self._bytes_lost += int(raw.lengths[i])
+        lengths = np.fromiter(map(len, out), np.int64, len(out))
+        return RawBatch(
+            raw.connection,
+            raw.log_time_ns[keep],
+            np.frombuffer(b"".join(out), np.uint8),
+            np.cumsum(lengths) - lengths,
+            lengths,
+        )
 
     def close(self) -> None:
         for f in self._files:
@@ -381,29 +429,6 @@ class Ros2BagSource(SourceAccessors):
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-
-def _decompress_messages(raw: RawBatch) -> RawBatch:
-    """The batch with every message zstd-decompressed (``compression_mode: MESSAGE``)."""
-    import zstandard
-
-    dec = zstandard.ZstdDecompressor()
-    out: list[bytes] = []
-    for i in range(len(raw)):
-        try:
-            out.append(dec.decompress(raw.message(i)))
-        except zstandard.ZstdError as err:
-            raise FormatError(
-                f"message {i} of topic {raw.connection.topic}: bad zstd compression ({err})"
-            ) from err
-    lengths = np.fromiter(map(len, out), np.int64, len(out))
-    return RawBatch(
-        raw.connection,
-        raw.log_time_ns,
-        np.frombuffer(b"".join(out), np.uint8),
-        np.cumsum(lengths) - lengths,
-        lengths,
-    )
 
 
 def _storage_of(p: Location) -> str | None:

@@ -84,6 +84,7 @@ class SourceAccessors:
     _end: int | None
     _warnings: list[str]
     _bytes_lost: int = 0
+    _messages_lost: int = 0
 
     @property
     def connections(self) -> list[Connection]:
@@ -104,6 +105,16 @@ class SourceAccessors:
     @property
     def bytes_lost(self) -> int:
         return self._bytes_lost
+
+    @property
+    def messages_lost(self) -> int:
+        """Messages the index counts in chunks that were lost (in ``connections`` counts)."""
+        return self._messages_lost
+
+
+def messages_lost(source: object) -> int:
+    """A source's ``messages_lost`` (0 for a source that does not count them)."""
+    return int(getattr(source, "messages_lost", 0))
 
 
 class MessageSource(Protocol):

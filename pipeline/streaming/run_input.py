@@ -10,11 +10,13 @@ nothing in a run's outputs.
 from __future__ import annotations
 
 import hashlib
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 from formats.contract import LogInfo
+from formats.errors import OutputError, SonarmapError
 from formats.storage.location import Location, Url, as_location, joined
 from pipeline.stages.metrics import sha256_of
 
@@ -92,3 +94,26 @@ def input_section(paths: Sequence[Location], info: LogInfo, start_ns: int | None
         section["files"] = files
         section["duplicates_read_once"] = info.duplicates_read_once
     return section
+
+
+@contextmanager
+def losses_named(info: Callable[[], LogInfo]) -> Iterator[None]:
+    """An error raised while mapping a damaged log also says what was lost (the loss may
+    be its cause: a lost chunk held the mounts, or most readings): its first loss, how
+    many more, and the bytes lost."""
+    try:
+        yield
+    except SonarmapError as err:
+        if isinstance(err, OutputError) or "damaged" in err.reason:
+            raise
+        try:
+            found = info()
+        except SonarmapError:
+            raise err from None
+        if not found.losses:
+            raise
+        more = f" and {len(found.losses) - 1} more" if len(found.losses) > 1 else ""
+        raise type(err)(
+            f"{err.reason}; the log is damaged, {found.bytes_lost} bytes lost"
+            f" ({found.losses[0]}{more})", err.path,
+        ) from err
