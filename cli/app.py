@@ -60,9 +60,9 @@ LogsArg = Annotated[
 
 def _locations(texts: list[str]) -> list[Location]:
     """Command-line log names as locations: URLs stay URLs (a Path would fold their //)."""
-    from formats.storage.location import as_location
+    from cli.errors import location_argument
 
-    return [as_location(t) for t in texts]
+    return [location_argument(t) for t in texts]
 
 
 def _version(value: bool) -> None:
@@ -184,10 +184,10 @@ def run(
 
       sonarmap run drifted.mcap -o out/drifted --refine-poses
     """
-    from formats.storage.location import as_location
+    from cli.errors import location_argument
     from pipeline.run import run as run_pipeline
 
-    logs, out = _locations(log), as_location(output)
+    logs, out = _locations(log), location_argument(output)
     cfg = _load(config, format=format, range_topics=range_topic, pose_topic=pose_topic,
                 method=method, resolution=resolution, refine_poses=refine_poses)
     if quiet or json_out:

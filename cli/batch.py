@@ -60,8 +60,7 @@ def split_inputs(
     inputs: list[str], manifests: list[Path]
 ) -> tuple[list[Location], list[Path]]:
     """``@FILE`` arguments are manifests; the rest are log files, directories or URLs."""
-    from cli.errors import check_path_arguments
-    from formats.storage.location import as_location
+    from cli.errors import check_path_arguments, location_argument
 
     paths: list[Location] = []
     lists = list(manifests)
@@ -69,7 +68,7 @@ def split_inputs(
         if s.startswith("@") and len(s) > 1:
             lists.append(Path(s[1:]))
         else:
-            paths.append(as_location(s))
+            paths.append(location_argument(s))
     check_path_arguments([paths, lists])  # local paths only: URLs are not checked
     return paths, lists
 
@@ -156,7 +155,7 @@ def register(app: typer.Typer) -> None:
 
           sonarmap batch logs/ -o out/ --rerun
         """
-        from formats.storage.location import as_location
+        from cli.errors import location_argument
         from pipeline.tools.batch import run_batch
 
         paths, lists = split_inputs(inputs or [], manifest or [])
@@ -165,7 +164,7 @@ def register(app: typer.Typer) -> None:
                                      param_hint="INPUTS")
         with contextlib.ExitStack() as stack:
             progress = None if quiet else stack.enter_context(_log_progress())
-            result = run_batch(paths, as_location(output), config, workers=workers, scheduler=scheduler,
+            result = run_batch(paths, location_argument(output), config, workers=workers, scheduler=scheduler,
                                rerun=rerun, progress=progress, manifests=lists,
                                memory_limit=memory_limit)
         for row in result.failures:

@@ -160,11 +160,11 @@ def emulate(
         drift_seed=drift_seed,
         raw_odometry=raw_odometry,
     )
-    from formats.storage.location import as_location
+    from cli.errors import location_argument
     from formats.storage.options import configure
 
     configure(cfg.storage)
-    result = run_emulation(as_location(laser_log), output, format, config=cfg,
+    result = run_emulation(location_argument(laser_log), output, format, config=cfg,
                            options=options)
     if quiet:
         return

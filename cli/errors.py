@@ -25,6 +25,8 @@ from formats.errors import SonarmapError
 if TYPE_CHECKING:
     from sys import UnraisableHookArgs
 
+    from formats.storage.location import Location
+
 P = ParamSpec("P")
 R = TypeVar("R")
 
@@ -197,6 +199,17 @@ def check_path_arguments(values: Iterable[object]) -> None:
         for p in (v if isinstance(v, list | tuple) else [v]):
             if isinstance(p, Path):
                 check_path_names(p)
+
+
+def location_argument(text: str) -> Location:
+    """A command-line name of a log or an output as a location (a URL stays a URL, never a
+    path with its ``//`` folded); a local path is refused like any path argument when a
+    component is too long (:func:`check_path_arguments`)."""
+    from formats.storage.location import as_location
+
+    where = as_location(text)
+    check_path_arguments([where])
+    return where
 
 
 def fail(message: str) -> typer.Exit:

@@ -77,10 +77,11 @@ def evaluate(
     """
     import contextlib
 
-    from formats.storage.location import Url, as_location
+    from cli.errors import location_argument
+    from formats.storage.location import Url
     from formats.writers.remote_output import complete_output
 
-    where = as_location(run_dir)
+    where = location_argument(run_dir)
     with contextlib.ExitStack() as stack:
         local = stack.enter_context(complete_output(where))
         _evaluate(local, truth, trajectory, tolerance, reach, truth_trajectory, rpe_delta,
@@ -240,14 +241,14 @@ def regress(
 
     import contextlib
 
-    from formats.storage.location import as_location
+    from cli.errors import location_argument
     from formats.writers.remote_output import complete_output
     from pipeline.tools.regress import load_tolerances
     from pipeline.tools.regress import regress as run_regress
 
     with contextlib.ExitStack() as stack:
-        local_run = stack.enter_context(complete_output(as_location(run_dir)))
-        local_golden = stack.enter_context(complete_output(as_location(golden), "golden"))
+        local_run = stack.enter_context(complete_output(location_argument(run_dir)))
+        local_golden = stack.enter_context(complete_output(location_argument(golden), "golden"))
         result = run_regress(local_run, local_golden, load_tolerances(tolerances))
     if json_out:
         typer.echo(json.dumps(result.to_dict(), indent=2))

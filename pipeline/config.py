@@ -484,6 +484,11 @@ _INT32 = 2**31 - 1
 # int64 nanosecond stamps (±292 years) can hold. A numeric key missing here is refused
 # by tests/pipeline/test_config.py.
 RANGES: dict[str, Range] = {
+    "storage.block_size_mib": Range(0.0625, 1024, "MiB"),
+    "storage.cache_blocks": Range(1, 1000),
+    "storage.timeout_s": above(0, 3600, "s"),
+    "storage.retries": Range(0, 1000),
+    "storage.backoff_s": Range(0, 3600, "s"),
     "mapper.sigma_d0": above(0, 1, "m"),
     "mapper.k_d": Range(0, 1),
     "mapper.c_a": above(0, 100),

@@ -34,7 +34,7 @@ def cluster(tmp: Path) -> Iterator[str]:
          "--scheduler-file", str(sched_file)],
         env=env, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
     try:
-        deadline = time.monotonic() + 60
+        deadline = time.monotonic() + 180  # a loaded 2-core machine starts slowly
         while not sched_file.exists():
             assert time.monotonic() < deadline, "the scheduler did not start"
             time.sleep(0.2)
@@ -47,8 +47,8 @@ def cluster(tmp: Path) -> Iterator[str]:
         assert address.startswith(f"tcp://{LOOPBACK}:")
         from distributed import Client
 
-        with Client(address, timeout=30) as client:
-            client.wait_for_workers(2, timeout=60)
+        with Client(address, timeout=120) as client:
+            client.wait_for_workers(2, timeout=180)
         yield address
     finally:
         for p in reversed(procs):
