@@ -533,11 +533,6 @@ RANGES: dict[str, Range] = {
                                     zero="from the log"),
     "sensors.mounts.min_range": dataclasses.replace(LIMIT_M, zero="from the log"),
     "sensors.mounts.max_range": dataclasses.replace(LIMIT_M, zero="from the log"),
-    "storage.block_size_mib": above(0, 1024, "MiB"),
-    "storage.cache_blocks": Range(1, 1_000_000),
-    "storage.timeout_s": above(0, 86_400, "s"),
-    "storage.retries": Range(0, 100),
-    "storage.backoff_s": Range(0, 3600, "s"),
     # [pose_refinement]: generous outer limits (its own rules follow in _check_ranges).
     **{f"pose_refinement.{k}": r for k, r in {
         "local_stretch_m": above(0, 1e5, "m"), "local_iterations": Range(1, 1000),
