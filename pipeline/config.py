@@ -188,6 +188,10 @@ class PoseRefinementConfig:
 
     enabled: bool = doc_field("refine the poses before mapping (also: run --refine-poses)",
                          default=False)
+    model: str = doc_field(
+        "'graph': graph SLAM on the echoes (submaps, scan-to-map matching, loop closures, a "
+        "pose graph with the odometry's scale and heading bias; pipeline/refine/slam.py); "
+        "'chain': the calibration search, compass and local corrections", default="chain")
     local_corrections: bool = doc_field(
         "after the calibration, correct the track where the surface patches its visits "
         "share say so: a rigid correction at a knot every stretch of travel from the first "
@@ -549,6 +553,8 @@ def _check_ranges(cfg: Config) -> None:
     need(math.isfinite(pr.calibration_far_range_m) and pr.calibration_far_range_m >= 0,
          "pose_refinement.calibration_far_range_m", "must be >= 0 (0 = off)",
          pr.calibration_far_range_m)
+    need(pr.model in ("graph", "chain"), "pose_refinement.model", "must be 'graph' or 'chain'",
+         pr.model)
     need(pr.calibration_scale_score in ("consistency", "surfaces"),
          "pose_refinement.calibration_scale_score", "must be 'consistency' or 'surfaces'",
          pr.calibration_scale_score)
