@@ -590,7 +590,9 @@ def _write_outputs(
         drawn_odometry = _drawn_trajectory(odometry)
         write_trajectory_png(out.path("trajectory.png"),
                              np.column_stack([drawn_odometry.x, drawn_odometry.y]), traj_xy,
-                             title=f"{metrics.input['name']} - pose refinement")
+                             title=f"{metrics.input['name']} - pose refinement",
+                             closures=np.array((metrics.pose_refinement or {}).get(
+                                 "loop_closure_edges", []), np.float64).reshape(-1, 4))
     write_map_mcap(
         out.path("map.mcap"), probability=snap.probability, grid=snap.grid,
         features=snap.features, trajectory=traj, frame_id=track.parent_frame,

@@ -7,7 +7,10 @@ evidence field (:meth:`pipeline.refine.matcher.LikelihoodField.of_points`, value
     ℓ(p) = Σ_e log(ε + max_arc f(p ⊕ e)),   ε = OUTLIER
 
 over its echoes ``e`` (an echo lies somewhere on its arc; ``ε`` is the chance that an
-echo hits nothing the reference saw). Every pose of a grid ``± window`` around the
+echo hits nothing the reference saw). Where the reference's beams never looked (outside
+the cones from its sensors to its echoes) ``f`` is the occupancy prior ½ instead: a query
+echo there is neither confirmed nor contradicted, which keeps the search from pulling new
+wall onto the reference's old wall. Every pose of a grid ``± window`` around the
 prediction is evaluated (Olson 2009: exhaustive, so no local minimum), coarse to fine:
 first on a field blurred to the coarse step with poses every coarse step, then on the
 fine field over two coarse steps around the coarse optimum. The match is the posterior
@@ -36,6 +39,7 @@ from formats.arrays import F64
 from pipeline.refine.matcher import LikelihoodField
 
 OUTLIER = 0.05  # field value an echo gets where the reference saw nothing (a floor)
+UNSEEN = 0.5  # field value where the reference's beams never looked (the occupancy prior)
 
 
 @dataclass(frozen=True)
@@ -65,7 +69,7 @@ def _coverage(fld: LikelihoodField, rx: F64, ry: F64, sx: F64, sy: F64, sigma: f
     dx, dy = rx - sx[:, None], ry - sy[:, None]
     length = np.hypot(dx, dy)
     reach = length + 2 * sigma
-    n = max(2, int(math.ceil(float(reach.max()) / (0.5 * fld.res))) + 1)
+    n = max(2, math.ceil(float(reach.max()) / (0.5 * fld.res)) + 1)
     u = np.linspace(0.0, 1.0, n)
     scale = (reach / np.maximum(length, 1e-9))[..., None] * u
     px = sx[:, None, None] + dx[..., None] * scale
@@ -103,12 +107,11 @@ def _loglik(fld: LikelihoodField, cover: np.ndarray, neutral: float, qx: F64, qy
 
 def _evidence(ref_x: F64, ref_y: F64, ref_sx: F64, ref_sy: F64, res: float, sigma: float,
               margin: float) -> tuple[LikelihoodField, np.ndarray, float]:
-    """The reference's field, the cells its beams covered, and the neutral value: the mean
-    log-likelihood of the reference's own echoes in their field."""
+    """The reference's field, the cells its beams covered, and the value of a place they
+    did not: an unobserved place is occupied with the prior probability ``UNSEEN``."""
     fld = LikelihoodField.of_points(ref_x, ref_y, res=res, sigma=sigma, margin=margin)
     cover = _coverage(fld, ref_x, ref_y, ref_sx, ref_sy, sigma)
-    own = fld.sample(ref_x, ref_y).max(axis=1)
-    return fld, cover, float(np.log(OUTLIER + own).mean())
+    return fld, cover, math.log(OUTLIER + UNSEEN)
 
 
 def _grid(half: float, step: float) -> F64:

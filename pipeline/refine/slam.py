@@ -40,14 +40,18 @@ from pipeline.config import PoseRefinementConfig
 from pipeline.drift import DriftModel, apply_drift
 from pipeline.refine.correlative import Correlation, Window, correlate
 from pipeline.refine.echoes import Echoes
-from pipeline.refine.graph import GraphOptions, MatchConstraints, Odometry, solve, sqrt_information
+from pipeline.refine.graph import (
+    GraphOptions,
+    MatchConstraints,
+    Odometry,
+    cost_at,
+    solve,
+    sqrt_information,
+)
 from pipeline.refine.submaps import Submap, build_submaps, path_length_at
 from pipeline.se2 import between, compose, inverse, transform_points
 from pipeline.stages.pose_sync import POSE_OK, PoseTrack, interpolate_poses
 
-import os
-
-_DEBUG = bool(os.environ.get("SLAM_DEBUG"))
 ARC_STRIDE = 1  # the query scores every point of an echo's arc
 CHI2_OUTLIER = 16.27  # χ² with 3 degrees of freedom at 99.9 %: a constraint the solution rejects
 CHI2_PER_DOF = 1.0  # cost (½χ²) a solution must gain per anchor coordinate it moves
@@ -179,8 +183,6 @@ def slam_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig
             loop_tried += 1
             refs = [r for r in (i - 1, i, i + 1) if 0 <= r < j]
             m = _match(g, refs, j, g.est[j], wide, cfg)
-            if _DEBUG and m is not None:
-                print("loop", i, j, round(m.score, 3), round(m.ambiguity, 3), m.pose - g.est[j])
             if m is None or m.score < cfg.min_score or m.ambiguity > cfg.max_ambiguity:
                 loop_gated += 1
                 continue
@@ -193,11 +195,9 @@ def slam_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig
     bad = chi2 > CHI2_OUTLIER
     if bad.any():
         keep = ~bad
-        _ = g.solve_upto(len(submaps) - 1, keep)
+        chi2 = g.solve_upto(len(submaps) - 1, keep)
     loop = np.array(g.loop, bool)
     mc = g.constraints(keep)
-    from pipeline.refine.graph import cost_at
-
     cost_odometry = cost_at(odo_anchor, odo, mc, opt)
     cost_solution = _cost_with(g, mc, opt)
     moved = 3 * (len(submaps) - 1) + 2
@@ -211,11 +211,13 @@ def slam_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig
         "cost_odometry": cost_odometry, "cost_final": cost_solution,
         "scale_error": g.scale, "heading_bias_deg_per_m": math.degrees(g.bias),
         "accepted": bool(accepted),
-        "anchors_odometry": odo_anchor.tolist(), "anchors_refined": g.est.tolist(),
-        "closures": [[int(a), int(b)] for a, b, k, lp in
-                     zip(g.i, g.j, keep.tolist(), g.loop, strict=True) if k and lp],
+        "loop_closure_edges": [[*g.est[a, :2].tolist(), *g.est[b, :2].tolist()] for a, b, k, lp
+                               in zip(g.i, g.j, keep.tolist(), g.loop, strict=True) if k and lp],
+        "match_chi2_mean": float(chi2[keep].mean()) if keep.any() else None,
+        "match_chi2_max": float(chi2[keep].max()) if keep.any() else None,
     })
     if not accepted:
+        metrics["loop_closure_edges"] = []  # the odometry stays: no solution to draw them on
         metrics["note"] = "the graph does not explain the echoes better than the odometry"
         return tx.copy(), ty.copy(), tyaw.copy(), metrics
     rx, ry, ryaw = _onto_poses(tt, tx, ty, tyaw, submaps, g)
