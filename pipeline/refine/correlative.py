@@ -13,7 +13,7 @@ echo there is neither confirmed nor contradicted, which keeps the search from pu
 wall onto the reference's old wall. Every pose of a grid ``± window`` around the
 prediction is evaluated (Olson 2009: exhaustive, so no local minimum), coarse to fine:
 first on a field blurred to the coarse step with poses every coarse step, then on the
-fine field over two coarse steps around the coarse optimum. The match is the posterior
+ The match is the posterior
 over the fine grid, ``w ∝ exp(ℓ − ℓ_max)``:
 
 * ``pose`` and ``cov``: the weighted mean and covariance of the grid poses (plus each
@@ -133,7 +133,10 @@ def correlate(ref_x: F64, ref_y: F64, ref_sx: F64, ref_sy: F64, qx: F64, qy: F64
     coarse, cover_c, neutral_c = _evidence(ref_x, ref_y, ref_sx, ref_sy, window.step_xy,
                                            max(sigma, window.step_xy), margin)
     dyaw_c, off_c = _grid(window.yaw, window.step_yaw), _grid(window.xy, window.step_xy)
-    ll_c = _loglik(coarse, cover_c, neutral_c, qx, qy, prediction, dyaw_c, off_c)
+    mid = qx.shape[1] // 2  # a field blurred wider than the arc: its middle point scores it
+    cx_, cy_ = ((qx[:, mid:mid + 1], qy[:, mid:mid + 1]) if window.step_xy >= 4 * res
+                else (qx, qy))
+    ll_c = _loglik(coarse, cover_c, neutral_c, cx_, cy_, prediction, dyaw_c, off_c)
     k, a, b = np.unravel_index(int(np.argmax(ll_c)), ll_c.shape)
     if k in (0, len(dyaw_c) - 1) or a in (0, len(off_c) - 1) or b in (0, len(off_c) - 1):
         return None  # the optimum lies on the window's edge: the true pose may be outside
@@ -143,13 +146,19 @@ def correlate(ref_x: F64, ref_y: F64, ref_sx: F64, ref_sy: F64, qx: F64, qy: F64
     gxy = np.hypot(off_c[:, None] - off_c[a], off_c[None, :] - off_c[b])[None] > 2 * window.step_xy
     far = np.broadcast_to(ga | gxy, ll_c.shape)
     ambiguity = float(np.exp(ll_c[far].max() - ll_c[k, a, b])) if far.any() else 0.0
-    if res >= window.step_xy:  # one level: the coarse grid is the posterior
-        fine, ll, centre, dyaw_f, off_f = coarse, ll_c, prediction, dyaw_c, off_c
-    else:
-        fine, cover, neutral = _evidence(ref_x, ref_y, ref_sx, ref_sy, res, sigma, margin)
-        dyaw_f = _grid(2 * window.step_yaw, window.step_yaw / 4)
-        off_f = _grid(2 * window.step_xy, res)
+    fine, ll, dyaw_f, off_f = coarse, ll_c, dyaw_c, off_c
+    step_xy, step_yaw = window.step_xy, window.step_yaw
+    if res >= step_xy:  # one level: the coarse grid is the posterior
+        centre = prediction
+    while res < step_xy:  # the next level: ± two steps of this one, steps a quarter as long
+        dyaw_f, off_f = _grid(2 * step_yaw, step_yaw / 4), _grid(2 * step_xy, max(res, step_xy / 4))
+        step_xy, step_yaw = max(res, step_xy / 4), step_yaw / 4
+        fine, cover, neutral = _evidence(ref_x, ref_y, ref_sx, ref_sy, step_xy,
+                                         max(sigma, step_xy), margin)
         ll = _loglik(fine, cover, neutral, qx, qy, centre, dyaw_f, off_f)
+        if res < step_xy:
+            k, a, b = np.unravel_index(int(np.argmax(ll)), ll.shape)
+            centre = centre + np.array([off_f[a], off_f[b], dyaw_f[k]])
     wts = np.exp(ll - ll.max())
     wts /= wts.sum()
     d = [np.broadcast_to(off_f[None, :, None], ll.shape), np.broadcast_to(off_f[None, None, :],

@@ -117,6 +117,13 @@ def calibrated(delta: F64, length: F64, scale: float, bias: float) -> F64:
                             delta[:, 2] - bias * length])
 
 
+def _window(xy: float, yaw_deg: float, res: float) -> Window:
+    """A search of ± ``xy`` m, ± ``yaw_deg``: its coarse level ~15 steps each side (at least
+    two field cells, one degree)."""
+    return Window(xy, math.radians(yaw_deg), max(2 * res, xy / 15),
+                  math.radians(max(1.0, yaw_deg / 10)))
+
+
 def _points(submaps: list[Submap], refs: list[int], est: F64) -> tuple[F64, F64, F64, F64]:
     """The reference submaps' arcs (echoes × arc samples) and sensors placed at ``est``."""
     parts = []
@@ -158,9 +165,8 @@ def slam_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig
                        cfg.prior_scale, math.radians(cfg.prior_bias_deg_per_m), 1.0, True)
     odo = Odometry(between(odo_anchor[:-1], odo_anchor[1:]), np.diff(anchor_path))
     g = _Graph(submaps, odo, opt, odo_anchor.copy())
-    seq = Window(cfg.search_xy_m, math.radians(cfg.search_yaw_deg), 0.1, math.radians(1.0))
-    wide = Window(cfg.loop_search_xy_m, math.radians(cfg.loop_search_yaw_deg), 0.2,
-                  math.radians(2.0))
+    seq = _window(cfg.search_xy_m, cfg.search_yaw_deg, cfg.field_resolution_m)
+    wide = _window(cfg.loop_search_xy_m, cfg.loop_search_yaw_deg, cfg.field_resolution_m)
     seq_ok = seq_bad = loop_tried = loop_gated = 0
     for j in range(1, len(submaps)):
         pred = compose(g.est[j - 1], calibrated(odo.delta[j - 1:j], odo.length[j - 1:j],
