@@ -321,7 +321,7 @@ class PoseRefinementConfig:
         "level), or, found by the consistency scan, more consistent by it and less sharp "
         "(lattices: 0.17-0.23; yaw noise's aliases: 0.035-0.057); 1e9: neither", default=0.10)
     calibrate: bool = doc_field("estimate the odometry's scale error and heading bias", default=True)
-    prior_scale: float = doc_field("σ of the scale error's prior (fraction)", default=0.03)
+    prior_scale: float = doc_field("σ of the odometry's scale error (prior, fraction)", default=0.01)
 
     @property
     def echo_reach_m(self) -> float:
