@@ -587,6 +587,8 @@ def _write_outputs(
                   title=title)
     track = sv.track
     drawn_odometry = None
+    closures = np.array((metrics.pose_refinement or {}).get("loop_closure_edges", []),
+                        np.float64).reshape(-1, 4)
     if odometry is not None:  # pose refinement: the odometry the trajectory started from
         from formats.writers.trajectory_png import write_trajectory_png
 
@@ -596,13 +598,12 @@ def _write_outputs(
         write_trajectory_png(out.path("trajectory.png"),
                              np.column_stack([drawn_odometry.x, drawn_odometry.y]), traj_xy,
                              title=f"{metrics.input['name']} - pose refinement",
-                             closures=np.array((metrics.pose_refinement or {}).get(
-                                 "loop_closure_edges", []), np.float64).reshape(-1, 4))
+                             closures=closures)
     write_map_mcap(
         out.path("map.mcap"), probability=snap.probability, grid=snap.grid,
         features=snap.features, trajectory=traj, frame_id=track.parent_frame,
         stamp_ns=int(metrics.trajectory["end_ns"]), library=f"sonarmap {__version__}",
-        odometry=drawn_odometry,
+        odometry=drawn_odometry, closures=closures,
     )
     write_features(
         out.path("features.parquet"),

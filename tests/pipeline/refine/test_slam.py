@@ -115,6 +115,11 @@ def test_the_graph_closes_the_loops_of_a_random_walk(loop_logs: tuple[Path, Path
     assert pr["loop_closures_accepted"] >= 3 and len(pr["loop_closure_edges"]) >= 3
     assert pr["heading_bias_deg_per_m"] == pytest.approx(-0.5, abs=0.15)
     assert "graph" in pr["summary"]
+    from mcap.reader import make_reader
+
+    with (tmp_path / "a" / "map.mcap").open("rb") as f:
+        topics = {c.topic: c.message_encoding for c in make_reader(f).get_summary().channels.values()}
+    assert "/loop_closures" in topics and "/odometry" in topics
 
 
 def test_the_graph_leaves_correct_poses_alone(loop_logs: tuple[Path, Path],
