@@ -50,9 +50,9 @@ from formats.writers.nav2_map import FREE, OCCUPIED, trinary_classes
 from formats.writers.trajectory_tum import Trajectory
 
 __all__ = [
+    "CLOSURES_TOPIC",
     "FEATURES_TOPIC",
     "MAP_TOPIC",
-    "CLOSURES_TOPIC",
     "ODOMETRY_TOPIC",
     "TRAJECTORY_TOPIC",
     "measured_colours",
