@@ -16,10 +16,10 @@
    odometry's scale error and heading bias as two more variables (priors
    ``prior_scale``, ``prior_bias_deg_per_m``); constraints whose χ² at the solution
    exceeds the 3-dof 99.9 % quantile are dropped and the graph solved again.
-5. **Acceptance**: the same graph's cost at the odometry (anchors where the odometry put
-   them, no calibration) against at the solution: the solution replaces the odometry only
-   when it lowers the cost by more than a χ² test with one degree of freedom per moved
-   anchor coordinate would allow by chance (``CHI2_PER_DOF``); else the odometry stays.
+5. **Acceptance** (a likelihood-ratio test): the same graph's cost at the odometry
+   against at the solution. Were the odometry right, twice the difference would be χ²
+   with one degree of freedom per anchor coordinate and calibration term the solution
+   moves; the solution replaces the odometry only beyond that χ²'s 99 % quantile.
 6. **Back onto every pose**: the odometry re-integrated with the estimated calibration,
    then each pose moved by the anchors' corrections interpolated in time.
 
@@ -54,7 +54,7 @@ from pipeline.stages.pose_sync import POSE_OK, PoseTrack, interpolate_poses
 
 ARC_STRIDE = 1  # the query scores every point of an echo's arc
 CHI2_OUTLIER = 16.27  # χ² with 3 degrees of freedom at 99.9 %: a constraint the solution rejects
-CHI2_PER_DOF = 1.0  # cost (½χ²) a solution must gain per anchor coordinate it moves
+Z99 = 2.326  # the standard normal's 99 % quantile (χ²(dof) ≈ dof + z·√(2·dof))
 
 
 @dataclass
@@ -206,8 +206,9 @@ def slam_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig
     mc = g.constraints(keep)
     cost_odometry = cost_at(odo_anchor, odo, mc, opt)
     cost_solution = _cost_with(g, mc, opt)
-    moved = 3 * (len(submaps) - 1) + 2
-    accepted = cost_solution < cost_odometry - CHI2_PER_DOF * math.sqrt(2 * moved)
+    dof = 3 * (len(submaps) - 1) + 2  # the anchors the solution moves, and the calibration
+    # likelihood ratio: were the odometry right, 2·(its cost − the solution's) would be χ²(dof)
+    accepted = 2 * (cost_odometry - cost_solution) > dof + Z99 * math.sqrt(2 * dof)
     metrics.update({
         "matches_accepted": int((keep & ~loop).sum()),
         "matches_rejected": seq_bad + int((~keep & ~loop).sum()),
