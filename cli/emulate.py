@@ -112,6 +112,22 @@ def emulate(
         float, typer.Option("--drift-yaw", help="Odometry yaw noise, rad per √rad.")
     ] = 0.0,
     drift_seed: Annotated[int, typer.Option("--drift-seed", help="Seed of the drift noise.")] = 0,
+    drift_heading_walk: Annotated[
+        float, typer.Option("--drift-heading-walk", help="Odometry heading random walk, rad per √m driven.")
+    ] = 0.0,
+    drift_slips: Annotated[
+        float, typer.Option("--drift-slips", help="Wheel slips per 100 m driven (Poisson).")
+    ] = 0.0,
+    drift_slip_yaw: Annotated[
+        float, typer.Option("--drift-slip-yaw", help="Std of one slip's heading error, degrees.")
+    ] = 0.0,
+    drift_slip_scale: Annotated[
+        float, typer.Option("--drift-slip-scale", help="Std of one slip's scale error over 0.5 m, fraction.")
+    ] = 0.0,
+    drift_wheel_odometry: Annotated[
+        bool, typer.Option("--drift-wheel-odometry", help="Set every --drift-* term left at 0 to "
+                           "typical wheel-odometry figures (docs/POSE_REFINEMENT.md).")
+    ] = False,
     raw_odometry: Annotated[
         bool,
         typer.Option("--raw-odometry", help="Log the laser log's own wheel odometry (CARMEN "
@@ -138,9 +154,11 @@ def emulate(
       sonarmap emulate intel.log -o drifted.mcap --drift-scale 0.03 --drift-heading-bias 0.8
 
       sonarmap emulate intel.log -o odometry.mcap --raw-odometry
+
+      sonarmap emulate intel.log -o walk.mcap --drift-heading-walk 0.01 --drift-scale -0.02
     """
     from pipeline.config import load_config
-    from pipeline.drift import DriftModel
+    from pipeline.drift import DriftModel, drift_model
     from pipeline.tools.emulate import EmulateOptions, run_emulation
 
     if format not in _FORMATS:
@@ -156,7 +174,9 @@ def emulate(
         laser_max_range=laser_max_range,
         map_resolution=resolution,
         compression=compression,
-        drift=DriftModel(drift_scale, drift_heading_bias, drift_xy, drift_yaw).validate(),
+        drift=drift_model(DriftModel(drift_scale, drift_heading_bias, drift_xy, drift_yaw,
+                                     drift_heading_walk, drift_slips, drift_slip_yaw,
+                                     drift_slip_scale), drift_wheel_odometry),
         drift_seed=drift_seed,
         raw_odometry=raw_odometry,
     )

@@ -198,6 +198,10 @@ class PoseRefinementConfig:
 
     enabled: bool = doc_field("refine the poses before mapping (also: run --refine-poses)",
                          default=False)
+    model: str = doc_field(
+        "'graph': graph SLAM on the echoes (submaps, scan-to-map matching, loop closures, a "
+        "pose graph with the odometry's scale and heading bias; pipeline/refine/slam.py); "
+        "'chain': the calibration search, compass and local corrections", default="chain")
     local_corrections: bool = doc_field(
         "after the calibration, correct the track where the surface patches its visits "
         "share say so: a rigid correction at a knot every stretch of travel from the first "
@@ -243,7 +247,7 @@ class PoseRefinementConfig:
                                "graph (off: measured worse on sonar, see RESULTS.md)",
                                default=False)
     submap_travel_m: float = doc_field("echoes are pooled into a submap per this much travel, m",
-                                  default=1.5)
+                                  default=8.0)
     submap_min_echoes: int = doc_field("a shorter stretch joins the next submap", default=60)
     submap_max_points: int = doc_field("points kept per submap (evenly thinned)", default=400)
     max_echo_range_m: float = doc_field("echoes farther than this are not matched, m", default=3.0)
@@ -255,18 +259,19 @@ class PoseRefinementConfig:
     field_resolution_m: float = doc_field("cell of the matching likelihood field, m", default=0.05)
     field_sigma_m: float = doc_field("σ of the likelihood field around each point, m", default=0.1)
     search_xy_m: float = doc_field("consecutive matches: search ± this around odometry, m",
-                              default=0.3)
-    search_yaw_deg: float = doc_field("consecutive matches: search ± this yaw, degrees", default=6.0)
-    min_score: float = doc_field("a match is kept when its mean field value reaches this",
-                            default=0.3)
-    max_ambiguity: float = doc_field("loop closures: a distinct pose scoring this fraction of the "
-                                "best rejects the match", default=0.9)
+                              default=0.5)
+    search_yaw_deg: float = doc_field("consecutive matches: search ± this yaw, degrees", default=8.0)
+    min_score: float = doc_field("a match is kept when its echoes' mean field value (the "
+                            "fraction of them the reference explains, 0-1) reaches this",
+                            default=0.7)
+    max_ambiguity: float = doc_field("loop closures: a distinct pose this likely relative to the "
+                                "best (likelihood ratio, 0-1) rejects the match", default=0.99)
     loop_radius_m: float = doc_field("loop closure candidates: anchors this close (estimate), m",
-                                default=2.5)
-    loop_min_path_m: float = doc_field("... and at least this much travel apart, m", default=6.0)
-    loop_search_xy_m: float = doc_field("loop closures: search ± this, m", default=1.0)
-    loop_search_yaw_deg: float = doc_field("loop closures: search ± this yaw, degrees", default=12.0)
-    loop_max_per_submap: int = doc_field("loop closures tried per submap (nearest first)", default=2)
+                                default=8.0)
+    loop_min_path_m: float = doc_field("... and at least this much travel apart, m", default=16.0)
+    loop_search_xy_m: float = doc_field("loop closures: search ± this, m", default=6.0)
+    loop_search_yaw_deg: float = doc_field("loop closures: search ± this yaw, degrees", default=40.0)
+    loop_max_per_submap: int = doc_field("loop closures tried per submap (nearest first)", default=1)
     odometry_sigma_xy: float = doc_field("odometry translation σ, m per √m", default=0.02)
     odometry_sigma_yaw_deg: float = doc_field("odometry rotation σ, degrees per √m", default=0.5)
     calibration_search: bool = doc_field("search the odometry calibration that makes the echoes "
@@ -326,7 +331,7 @@ class PoseRefinementConfig:
         "level), or, found by the consistency scan, more consistent by it and less sharp "
         "(lattices: 0.17-0.23; yaw noise's aliases: 0.035-0.057); 1e9: neither", default=0.10)
     calibrate: bool = doc_field("estimate the odometry's scale error and heading bias", default=True)
-    prior_scale: float = doc_field("σ of the scale error's prior (fraction)", default=0.1)
+    prior_scale: float = doc_field("σ of the odometry's scale error (prior, fraction)", default=0.01)
 
     @property
     def echo_reach_m(self) -> float:
@@ -636,6 +641,8 @@ def _check_ranges(cfg: Config) -> None:
     need(math.isfinite(pr.calibration_far_range_m) and pr.calibration_far_range_m >= 0,
          "pose_refinement.calibration_far_range_m", "must be >= 0 (0 = off)",
          pr.calibration_far_range_m)
+    need(pr.model in ("graph", "chain"), "pose_refinement.model", "must be 'graph' or 'chain'",
+         pr.model)
     need(pr.calibration_scale_score in ("consistency", "surfaces"),
          "pose_refinement.calibration_scale_score", "must be 'consistency' or 'surfaces'",
          pr.calibration_scale_score)

@@ -625,6 +625,8 @@ def _write_outputs(
                   title=title)
     track = sv.track
     drawn_odometry = None
+    closures = np.array((metrics.pose_refinement or {}).get("loop_closure_edges", []),
+                        np.float64).reshape(-1, 4)
     if odometry is not None:  # pose refinement: the odometry the trajectory started from
         from formats.writers.trajectory_png import write_trajectory_png
 
@@ -633,12 +635,13 @@ def _write_outputs(
         drawn_odometry = _drawn_trajectory(odometry)
         write_trajectory_png(out.path("trajectory.png"),
                              np.column_stack([drawn_odometry.x, drawn_odometry.y]), traj_xy,
-                             title=f"{metrics.input['name']} - pose refinement")
+                             title=f"{metrics.input['name']} - pose refinement",
+                             closures=closures)
     write_map_mcap(
         out.path("map.mcap"), probability=snap.probability, grid=snap.grid,
         features=snap.features, trajectory=traj, frame_id=track.parent_frame,
         stamp_ns=int(metrics.trajectory["end_ns"]), library=f"sonarmap {__version__}",
-        odometry=drawn_odometry,
+        odometry=drawn_odometry, closures=closures,
     )
     write_features(
         out.path("features.parquet"),
