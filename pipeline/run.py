@@ -275,10 +275,10 @@ def grid_for(sv: Survey, sensors: SensorTable, config: Config) -> GridSpec:
         x0, x1 = bx0 - reach, bx1 + reach
         y0, y1 = by0 - reach, by1 + reach
     # Sized in floats first: a box of 1e308 m (a mount or pose at the edge of a float)
-    # must be the same one-line refusal, not an overflow.
+    # must be the same one-line refusal, not an overflow in the grid's integer size.
     w_m, h_m = x1 - x0, y1 - y0
     cells_f = (w_m / g.resolution + 1.0) * (h_m / g.resolution + 1.0)
-    if not math.isfinite(cells_f) or cells_f > 2.0 * g.max_cells:
+    if not math.isfinite(cells_f) or cells_f > _ABSURD_CELLS:
         _too_many_cells(f"{w_m:.3g} x {h_m:.3g} m", f"{cells_f:.3g}", g.max_cells)
     grid = GridSpec.covering(x0, y0, x1, y1, g.resolution)
     cells = grid.width * grid.height
@@ -287,6 +287,9 @@ def grid_for(sv: Survey, sensors: SensorTable, config: Config) -> GridSpec:
                         f"({grid.width * g.resolution:.0f} x {grid.height * g.resolution:.0f} m)",
                         None, g.max_cells)
     return grid
+
+
+_ABSURD_CELLS = 1e18  # beyond any grid.max_cells: refused before the grid's integers exist
 
 
 def _too_many_cells(size: str, cells: str | None, max_cells: int) -> NoReturn:
