@@ -46,7 +46,6 @@ import math
 import re
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import BinaryIO
 
 import numpy as np
@@ -69,6 +68,7 @@ from formats.errors import FormatError
 from formats.options import CsvConfig, ReaderSettings
 from formats.sensor_config import BeamLimits, sensor_setup
 from formats.stamps import parse_time
+from formats.storage.location import Location, as_location
 
 CHUNK_BYTES = 4 << 20  # bytes of text per chunk (about 60 000 rows of a typical log)
 POSE_PARENT_FRAME = "odom"
@@ -88,14 +88,14 @@ _SENSORS = (("sensor", "x", "y", "yaw"), ("fov", "min_range", "max_range"))
 # --------------------------------------------------------------------------- sniffing
 
 
-def looks_like_csv(path: str | Path, config: ReaderSettings | None = None) -> bool:
+def looks_like_csv(path: str | Location, config: ReaderSettings | None = None) -> bool:
     """Whether ``path`` looks like a CSV log (content sniffing, for format detection).
 
     A file: UTF-8 text without NUL bytes whose first non-comment line splits into at
     least two fields by the configured delimiter, a comma or whitespace. A directory:
     holds the default ``ranges.csv`` and ``poses.csv``, or the configured file names.
     """
-    p = Path(path)
+    p = as_location(path)
     if p.is_dir():
         names = [("ranges.csv", "poses.csv")]
         if config is not None:
@@ -154,7 +154,7 @@ class _Table:
 
     def __init__(
         self,
-        path: Path,
+        path: Location,
         csv_cfg: CsvConfig,
         columns: tuple[tuple[str, ...], tuple[str, ...]] | None,
     ) -> None:
@@ -506,8 +506,8 @@ class CsvLogReader:
 
     format_name = "csv"
 
-    def __init__(self, path: str | Path, config: ReaderSettings) -> None:
-        self.path = Path(path)
+    def __init__(self, path: str | Location, config: ReaderSettings) -> None:
+        self.path = as_location(path)
         self.config = config
         self.csv = config.input.csv
         self.sensor_names: list[str] = []
@@ -538,9 +538,9 @@ class CsvLogReader:
         if self.layout == "set":
             folder = self.path if self.path.is_dir() else self.path.parent
             self.ranges_path = folder / c.ranges_file
-            self.poses_path: Path | None = folder / c.poses_file
+            self.poses_path: Location | None = folder / c.poses_file
             sensors = folder / c.sensors_file
-            self.sensors_path: Path | None = sensors if sensors.is_file() else None
+            self.sensors_path: Location | None = sensors if sensors.is_file() else None
             for p in (self.ranges_path, self.poses_path):
                 if not p.is_file():
                     raise FormatError(

@@ -26,6 +26,7 @@ from formats.errors import ConfigError
 from formats.map_types import DEFAULT_MAX_CELLS
 from formats.options import FOV_MAX_DEG, FOV_MIN_DEG, InputConfig, SensorsConfig, doc_field
 from formats.presets import PRESETS
+from formats.storage.options import StorageConfig
 from formats.toml_file import read_toml
 from pipeline.methods import Method
 
@@ -331,6 +332,8 @@ class PoseRefinementConfig:
 
 # Keys that set how fast a run goes, never what it computes: left out of Config.hash.
 SPEED_KEYS = (("mapper", "threads"),)
+# Sections that say how the logs are reached, never what is computed from them: left out.
+ACCESS_SECTIONS = ("storage",)
 
 
 @dataclass(frozen=True)
@@ -344,10 +347,12 @@ class Config:
     pose_refinement: PoseRefinementConfig = field(default_factory=PoseRefinementConfig)
     input: InputConfig = field(default_factory=InputConfig)
     sensors: SensorsConfig = field(default_factory=SensorsConfig)
+    storage: StorageConfig = field(default_factory=StorageConfig)
 
     def validate(self) -> Config:
         """Check cross-field rules; raise ConfigError naming the key. Returns self."""
         _check_ranges(self)
+        self.storage.check()
         return self
 
     def to_dict(self) -> dict[str, Any]:
@@ -360,6 +365,8 @@ class Config:
         plain = self.to_dict()
         for section, key in SPEED_KEYS:
             del plain[section][key]
+        for section in ACCESS_SECTIONS:
+            del plain[section]
         text = json.dumps(plain, sort_keys=True, separators=(",", ":"))
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 

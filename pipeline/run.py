@@ -34,6 +34,7 @@ from formats import open_log
 from formats.contract import LogInfo, LogReader, RangeBatch
 from formats.errors import ConfigError, InputError
 from formats.map_types import GridSpec
+from formats.storage.location import Location, as_location
 from formats.writers.trajectory_tum import Trajectory
 from pipeline import __version__
 from pipeline.config import Config, dump_config
@@ -74,7 +75,7 @@ Progress = Callable[[str, int, int | None], None]
 class RunResult:
     """What a run produced: where, its metrics and the final map."""
 
-    out_dir: Path
+    out_dir: Location
     metrics: RunMetrics
     snapshot: MapSnapshot
 
@@ -92,8 +93,8 @@ class StreamState:
 
 
 def run(
-    log_path: str | Path | Sequence[str | Path],
-    out_dir: str | Path,
+    log_path: str | Location | Sequence[str | Location],
+    out_dir: str | Location,
     config: Config,
     *,
     force: bool = False,
@@ -109,10 +110,16 @@ def run(
     ``force`` replaces a previous sonarmap output only (never the input's directory, the
     working directory or the user's files: :class:`~formats.writers.atomic.OutputDir`).
     ``on_complete(tmp_dir, metrics)`` may add files after the outputs are written and
-    before the directory is committed (a batch's resume marker)."""
-    from formats.writers.atomic import OutputDir
+    before the directory is committed (a batch's resume marker).
 
+    Logs and ``out_dir`` may be URLs (``s3://bucket/prefix``): read by ranges, written by
+    :class:`~formats.writers.remote_output.RemoteOutputDir` (marker last)."""
+    from formats.storage.options import configure
+    from formats.writers.remote_output import open_output_dir
+
+    configure(config.storage)
     paths = log_paths(log_path)
+    final = as_location(out_dir)
     label = log_label(paths)
     if compare_correction and config.mapper.method == Method.CLASSIC:
         raise ConfigError(
@@ -120,7 +127,7 @@ def run(
         )
     timer = StageTimer()
     t_start = time.perf_counter()
-    with OutputDir(Path(out_dir), force=force, protect=tuple(paths)) as out:
+    with open_output_dir(final, force=force, protect=tuple(paths)) as out:
         with timer.stage("ingest"):
             reader = open_log(paths, config)
         with reader:
@@ -184,10 +191,10 @@ def run(
                        odometry=odometry)
         if on_complete is not None:
             on_complete(out.tmp_dir, metrics)
-    return RunResult(Path(out_dir), metrics, snapshots["main"])
+    return RunResult(final, metrics, snapshots["main"])
 
 
-def _check_mcap_stamps(label: Path, track: PoseTrack) -> None:
+def _check_mcap_stamps(label: Location, track: PoseTrack) -> None:
     """Refuse (InputError naming the log), before mapping, a log whose stamps ``map.mcap``
     cannot carry: its messages are stamped at the last pose, its paths with every pose's
     stamp (refinement keeps them)."""
@@ -278,7 +285,7 @@ def grid_for(sv: Survey, sensors: SensorTable, config: Config) -> GridSpec:
     # must be the same one-line refusal, not an overflow in the grid's integer size.
     w_m, h_m = x1 - x0, y1 - y0
     cells_f = (w_m / g.resolution + 1.0) * (h_m / g.resolution + 1.0)
-    if not math.isfinite(cells_f) or cells_f > _ABSURD_CELLS:
+    if not math.isfinite(cells_f) or cells_f > 2.0**53:  # beyond exact integers
         _too_many_cells(f"{w_m:.3g} x {h_m:.3g} m", f"{cells_f:.3g}", g.max_cells)
     grid = GridSpec.covering(x0, y0, x1, y1, g.resolution)
     cells = grid.width * grid.height
@@ -287,9 +294,6 @@ def grid_for(sv: Survey, sensors: SensorTable, config: Config) -> GridSpec:
                         f"({grid.width * g.resolution:.0f} x {grid.height * g.resolution:.0f} m)",
                         None, g.max_cells)
     return grid
-
-
-_ABSURD_CELLS = 1e18  # beyond any grid.max_cells: refused before the grid's integers exist
 
 
 def _too_many_cells(size: str, cells: str | None, max_cells: int) -> NoReturn:
@@ -455,7 +459,7 @@ def _sync(
 
 
 def _metrics(
-    paths: list[Path],
+    paths: list[Location],
     info: LogInfo,
     sv: Survey,
     sensors: SensorTable,

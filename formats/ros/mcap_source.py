@@ -16,7 +16,6 @@ import struct
 import zlib
 from collections.abc import Collection, Iterator
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -32,6 +31,7 @@ from formats.ros.source import (
     SourceAccessors,
     normalize_msgtype,
 )
+from formats.storage.location import Location, as_location
 
 OP_HEADER = 0x01
 OP_FOOTER = 0x02
@@ -236,8 +236,8 @@ class McapSource(FileSource, SourceAccessors):
 
     format_name = "mcap"
 
-    def __init__(self, path: str | Path) -> None:
-        self.path = Path(path)
+    def __init__(self, path: str | Location) -> None:
+        self.path = as_location(path)
         self._warnings: list[str] = []
         self._schemas: dict[int, _Schema] = {}
         self._channels: dict[int, _Channel] = {}

@@ -32,6 +32,7 @@ from formats.errors import FormatError
 from formats.magic import ROS1_MAGIC
 from formats.options import ReaderOptions, ReaderSettings
 from formats.ros.source import Connection, FileSource, RawBatch, normalize_msgtype
+from formats.storage.location import Location, as_location
 
 if TYPE_CHECKING:
     from formats.ros.reader import RosLogReader
@@ -187,8 +188,8 @@ class Ros1BagSource(FileSource):
 
     format_name = "ros1"
 
-    def __init__(self, path: str | Path) -> None:
-        self.path = Path(path)
+    def __init__(self, path: str | Location) -> None:
+        self.path = as_location(path)
         self._warnings: list[str] = []
         self._bytes_lost = 0
         self._open_file()
