@@ -283,7 +283,7 @@ def grid_for(sv: Survey, sensors: SensorTable, config: Config) -> GridSpec:
         x0, x1 = bx0 - reach, bx1 + reach
         y0, y1 = by0 - reach, by1 + reach
     # Sized in floats first: a box of 1e308 m (a mount or pose at the edge of a float)
-    # must be the same one-line refusal, not an overflow.
+    # must be the same one-line refusal, not an overflow in the grid's integer size.
     w_m, h_m = x1 - x0, y1 - y0
     cells_f = (w_m / g.resolution + 1.0) * (h_m / g.resolution + 1.0)
     if not math.isfinite(cells_f) or cells_f > 2.0**53:  # beyond exact integers
