@@ -155,27 +155,17 @@ def register(app: typer.Typer) -> None:
 
           sonarmap batch logs/ -o out/ --rerun
         """
-<<<<<<< HEAD
         from cli.errors import location_argument
-=======
-        from cli.errors import check_path_arguments
-        from formats.storage.location import as_location
->>>>>>> hostile-a
         from pipeline.tools.batch import run_batch
 
-        out = as_location(output)
-        check_path_arguments([out])  # a local OUT: its names checked before any work
+        out = location_argument(output)  # a local OUT: its names checked before any work
         paths, lists = split_inputs(inputs or [], manifest or [])
         if not paths and not lists:
             raise typer.BadParameter("give at least one log, directory or @MANIFEST",
                                      param_hint="INPUTS")
         with contextlib.ExitStack() as stack:
             progress = None if quiet else stack.enter_context(_log_progress())
-<<<<<<< HEAD
-            result = run_batch(paths, location_argument(output), config, workers=workers, scheduler=scheduler,
-=======
             result = run_batch(paths, out, config, workers=workers, scheduler=scheduler,
->>>>>>> hostile-a
                                rerun=rerun, progress=progress, manifests=lists,
                                memory_limit=memory_limit)
         for row in result.failures:
