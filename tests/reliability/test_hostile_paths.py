@@ -128,7 +128,7 @@ def test_garbage_quaternions_and_absurd_mounts_say_one_line_without_warnings(
     tmp_path: Path,
 ) -> None:
     """numpy warnings are silenced where they arise (np.errstate), not globally; a mount at
-    the edge of a float is the grid's one-line refusal, not an OverflowError."""
+    the edge of a float is refused in one line where it is read, not an OverflowError."""
     import warnings
 
     import numpy as np
@@ -146,5 +146,5 @@ def test_garbage_quaternions_and_absurd_mounts_say_one_line_without_warnings(
     (log / "sensors.csv").write_text("\n".join(rows) + "\n")
     code, err = _cli("run", log, "-o", tmp_path / "o", "-q")
     assert code == 1
-    assert err.startswith("sonarmap: error: grid of inf x inf m (inf cells) exceeds "
-                          "grid.max_cells = 40000000")
+    assert err == (f"sonarmap: error: {log / 'sensors.csv'}: line 2: column 'x': -1e308 must"
+                   " be in [-100, 100] m\n")
