@@ -76,6 +76,8 @@ CHUNK_BYTES = 4 << 20  # bytes of text per chunk (about 60 000 rows of a typical
 # array of its chunk that wide).
 MAX_FIELD_CHARS = MAX_NAME_CHARS
 SCAN_ID = Range(-(2**63), 2**63 - 1)  # int64, as scans are numbered
+# A beam limit as a log gives it: a negative one means none (the sensor's default applies).
+LOGGED_LIMIT_M = Range(-LIMIT_M.hi, LIMIT_M.hi, "m")
 POSE_PARENT_FRAME = "odom"
 
 _TIME_DIGITS = {"s": 9, "ms": 6, "us": 3, "ns": 0}  # decimal digits of a unit below 1 ns
@@ -707,10 +709,10 @@ class CsvLogReader:
             fov = np.where(np.isnan(v), fov, v)
         if "min_range" in cols:
             v = _floats(table, chunk, "min_range", finite=False, optional=True) / self._len_div
-            lo = np.where(np.isnan(v), lo, _check_column(table, chunk, "min_range", v, LIMIT_M))
+            lo = np.where(np.isnan(v), lo, _check_column(table, chunk, "min_range", v, LOGGED_LIMIT_M))
         if "max_range" in cols:
             v = _floats(table, chunk, "max_range", finite=False, optional=True) / self._len_div
-            hi = np.where(np.isnan(v), hi, _check_column(table, chunk, "max_range", v, LIMIT_M))
+            hi = np.where(np.isnan(v), hi, _check_column(table, chunk, "max_range", v, LOGGED_LIMIT_M))
         scan = _scan_column(table, chunk) if "scan" in cols else None
         return make_range_batch(t, sid, rng, fov, lo, hi, scan_id=scan)
 
@@ -777,14 +779,14 @@ class CsvLogReader:
                 lo = (
                     _check_column(table, chunk, "min_range", _floats(
                         table, chunk, "min_range", finite=False, optional=True) / self._len_div,
-                        LIMIT_M)
+                        LOGGED_LIMIT_M)
                     if "min_range" in chunk.cols
                     else nan
                 )
                 hi = (
                     _check_column(table, chunk, "max_range", _floats(
                         table, chunk, "max_range", finite=False, optional=True) / self._len_div,
-                        LIMIT_M)
+                        LOGGED_LIMIT_M)
                     if "max_range" in chunk.cols
                     else nan
                 )

@@ -81,13 +81,15 @@ def test_a_configured_max_range_bounds_the_grid(tmp_path: Path) -> None:
     assert code == 1 and "exceeds grid.max_cells = 2000000" in err
 
 
-def test_a_logged_max_range_below_zero_is_one_line_naming_the_column(tmp_path: Path) -> None:
+def test_a_logged_max_range_below_zero_is_none_and_the_default_applies(tmp_path: Path) -> None:
     log, _ = _csv_log(tmp_path, "-5.0")
     code, err = _cli("run", log, "-o", tmp_path / "o", "-q")
     assert code == 1
-    assert err.startswith("sonarmap: error: ") and err.count("\n") == 1
-    assert err.endswith("sensors.csv: line 2: column 'max_range': -5.0 must be in [0, 1000] m\n")
-    assert not (tmp_path / "o").exists()
+    assert err == ("sonarmap: error: cannot size the grid: no sensor reports a max range > 0; "
+                   "set [grid] extent or [sensors] max_range\n")
+    (tmp_path / "c.toml").write_text("[sensors]\nmax_range = 5.0\n")
+    code, err = _cli("run", log, "-o", tmp_path / "o", "-c", tmp_path / "c.toml", "-q")
+    assert code == 0, err
 
 
 def test_negative_csv_times_fail_before_mapping_naming_the_log(tmp_path: Path) -> None:
@@ -127,7 +129,7 @@ def test_garbage_quaternions_and_absurd_mounts_say_one_line_without_warnings(
     tmp_path: Path,
 ) -> None:
     """numpy warnings are silenced where they arise (np.errstate), not globally; a mount at
-    the edge of a float is the grid's one-line refusal, not an OverflowError."""
+    the edge of a float is refused in one line where it is read, not an OverflowError."""
     import warnings
 
     import numpy as np
@@ -145,6 +147,5 @@ def test_garbage_quaternions_and_absurd_mounts_say_one_line_without_warnings(
     (log / "sensors.csv").write_text("\n".join(rows) + "\n")
     code, err = _cli("run", log, "-o", tmp_path / "o", "-q")
     assert code == 1
-    # The mount's x of -1e308 is refused where the CSV is read, before any grid is sized.
-    assert err.startswith("sonarmap: error: ") and err.count("\n") == 1
-    assert err.endswith("sensors.csv: line 2: column 'x': -1e308 must be in [-100, 100] m\n")
+    assert err == (f"sonarmap: error: {log / 'sensors.csv'}: line 2: column 'x': -1e308 must"
+                   " be in [-100, 100] m\n")
