@@ -77,7 +77,7 @@ RADISH_LOGS := $(RADISH:%=$(COMPARE_DIR)/%.mcap)
 $(COMPARE_DIR)/%.mcap: sample_logs/radish/%-corrected.log.gz | $(STAMP)
 	mkdir -p $(COMPARE_DIR)
 	rm -f $(COMPARE_DIR)/$*.mcap $(COMPARE_DIR)/$*.laser.* $(COMPARE_DIR)/$*.truth.*
-	$(BIN)/sonarmap emulate $< -o $@ --compression zstd
+	$(BIN)/sonarmap emulate $< -o $@ --compression zstd --sonar-model ideal
 
 compare: $(STAMP) $(RADISH_LOGS)
 	$(BIN)/python -m benchmarks.compare_methods --figure docs/comparison.png \
