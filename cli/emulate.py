@@ -131,6 +131,13 @@ def emulate(
                      "(repeatable; keys and units in docs/SONAR_PHYSICS.md)."),
     ] = None,
     seed: Annotated[int, typer.Option("--seed", help="Seed of the realistic sonar's noise.")] = 0,
+    firing_rate: Annotated[
+        float | None,
+        typer.Option("--firing-rate", help="Fire the whole ring at this many readings per "
+                     "second (a Pioneer: about 25) into the laser map along the trajectory "
+                     "interpolated between scans, every sonar of the ring (default: one "
+                     "reading per sonar the laser sees per laser scan)."),
+    ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary.")] = False,
 ) -> None:
     """Emulate a sonar ring from real laser scans: by default each virtual sonar reads what
@@ -152,6 +159,8 @@ def emulate(
       sonarmap emulate intel.log -o drifted.mcap --drift-scale 0.03 --drift-heading-bias 0.8
 
       sonarmap emulate intel.log -o odometry.mcap --raw-odometry
+
+      sonarmap emulate intel.log -o ring.mcap --firing-rate 25 --preset pioneer-p3dx
     """
     from pipeline.config import load_config
     from pipeline.drift import DriftModel
@@ -177,6 +186,7 @@ def emulate(
         sonar_model=check_model_name(sonar_model),
         physics=SonarPhysics().with_overrides(sonar_param or []),
         seed=seed,
+        firing_rate_hz=firing_rate,
     )
     result = run_emulation(laser_log, output, format, config=cfg, options=options)
     if quiet:

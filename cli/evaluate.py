@@ -47,6 +47,13 @@ def evaluate(
     rpe_unit: Annotated[
         str, typer.Option("--rpe-unit", help="RPE spacing unit: m (path length) or frames.")
     ] = "m",
+    oblique_deg: Annotated[
+        float | None,
+        typer.Option("--oblique-deg", help="With --trajectory: count the true walls most of "
+                     "the path's sight lines meet more than this far off their normal, degrees (smooth "
+                     "walls return no sonar echo beyond 10-30°, docs/SONAR_PHYSICS.md), and "
+                     "how many of them the map missed. 0 turns the count off."),
+    ] = 30.0,
     json_out: JsonOpt = False,
     output: Annotated[
         Path | None,
@@ -87,7 +94,8 @@ def evaluate(
             raise OutputError("exists already; use --force to replace", output)
     result = evaluate_run(run_dir, truth, trajectory=trajectory, tolerance_m=tolerance,
                           sensor_reach_m=reach, truth_trajectory=truth_trajectory,
-                          rpe_delta=rpe_delta, rpe_unit=rpe_unit)
+                          rpe_delta=rpe_delta, rpe_unit=rpe_unit,
+                          oblique_deg=oblique_deg or None)
     if output is not None:
         atomic_write_text(output, result.to_json())
     if not no_report and (run_dir / "report.html").is_file():

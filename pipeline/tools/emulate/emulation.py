@@ -55,7 +55,8 @@ class Emulation:
     """An emulated sonar log: the content to write, the per-scan readings and notes."""
 
     content: LogContent
-    ranges: F64  # (S, K) readings of the emitted sonars
+    ranges: F64  # (S, K) readings of the emitted sonars per scan; (N,) in firing order
+    # when fired at a rate (pipeline.tools.emulate.firing)
     ring: SonarRing  # the emitted sonars
     dropped: tuple[str, ...]  # sonars not emitted (outside the laser's view)
     notes: tuple[str, ...]
@@ -94,13 +95,13 @@ class Emulation:
         lo = int(np.searchsorted(t, t0, side="right")) - 1
         hi = int(np.searchsorted(t, t1, side="left")) + 1
         # The rigid motion taking the odometry's pose at the first scan onto the true one.
-        motion = compose([true.x[0], true.y[0], true.yaw[0]], inverse(_pose_at(odometry, t0)))
+        motion = compose([true.x[0], true.y[0], true.yaw[0]], inverse(pose_at(odometry, t0)))
         sl = slice(lo, hi)
         x, y, yaw = compose(motion, np.column_stack(
             [odometry.x[sl], odometry.y[sl], odometry.yaw[sl]])).T
         moved = PoseBatch(t[sl].copy(), x.copy(), y.copy(), yaw.copy(), odometry.parent_frame,
                           true.child_frame)
-        ex, ey, _ = _pose_at(moved, true.t_ns)
+        ex, ey, _ = pose_at(moved, true.t_ns)
         off = np.hypot(ex - true.x, ey - true.y)
         note = (
             f"poses: the log's raw wheel odometry ({hi - lo} poses, moved rigidly to start at "
@@ -119,7 +120,7 @@ class Emulation:
         )
 
 
-def _pose_at(poses: PoseBatch, t_ns: int | I64) -> tuple[F64, F64, F64]:
+def pose_at(poses: PoseBatch, t_ns: int | I64) -> tuple[F64, F64, F64]:
     """Poses at stamps inside the batch's span: linear in x, y and in the unwrapped yaw."""
     t = (poses.t_ns - poses.t_ns[0]).astype(np.float64)
     q = (np.asarray(t_ns, dtype=np.int64) - poses.t_ns[0]).astype(np.float64)

@@ -10,6 +10,7 @@ from formats.errors import ConfigError, InputError, OutputError
 from pipeline.config import Config
 from pipeline.drift import DriftModel
 from pipeline.tools.emulate.emulation import Emulation, emulate
+from pipeline.tools.emulate.firing import emulate_firing
 from pipeline.tools.emulate.laser_input import load_laser_log
 from pipeline.tools.emulate.laser_map import LaserMap, LaserMapOptions, laser_occupancy_map
 from pipeline.tools.emulate.ring import (
@@ -67,6 +68,9 @@ class EmulateOptions:
     sonar_model: str = "realistic"  # realistic | ideal (pipeline.tools.sonar)
     physics: SonarPhysics = field(default_factory=SonarPhysics)  # of the realistic model
     seed: int = 0  # of the realistic model's noise
+    # Readings per second of the whole ring fired into the laser map between scans
+    # (pipeline.tools.emulate.firing); None: one reading per sonar per laser scan.
+    firing_rate_hz: float | None = None
 
 
 @dataclass(frozen=True)
@@ -96,6 +100,7 @@ def run_emulation(
     if opt.raw_odometry and not opt.drift.is_zero:
         raise ConfigError("raw odometry and a drift model are exclusive: the raw odometry "
                           "drifts by itself")
+    physics = opt.physics.validate() if check_model_name(opt.sonar_model) == "realistic" else None
     # Refuse existing outputs before the (slow) reading and emulation.
     for q in (out, *output_paths(out)):
         if q.exists() or q.is_symlink():
@@ -115,9 +120,19 @@ def run_emulation(
         laser_topic=opt.laser_topic,
         laser_max_range=opt.laser_max_range,
     )
-    physics = opt.physics.validate() if check_model_name(opt.sonar_model) == "realistic" else None
-    em = emulate(log, ring, require_full_cone=opt.require_full_cone, physics=physics,
-                 seed=opt.seed)
+    lmap = laser_occupancy_map(
+        log,
+        LaserMapOptions(
+            resolution=opt.map_resolution or cfg.grid.resolution,
+            max_free_range=opt.max_free_range,
+            max_cells=cfg.grid.max_cells,
+        ),
+    )
+    if opt.firing_rate_hz is not None:
+        em = emulate_firing(log, ring, lmap, opt.firing_rate_hz, physics=physics, seed=opt.seed)
+    else:
+        em = emulate(log, ring, require_full_cone=opt.require_full_cone, physics=physics,
+                     seed=opt.seed)
     if opt.raw_odometry:
         if log.odometry is None:
             raise InputError("the log has no raw odometry apart from its scan poses (CARMEN "
@@ -127,14 +142,6 @@ def run_emulation(
         except InputError as err:
             raise InputError(err.reason, laser_path) from None
     em = em.with_drift(opt.drift, opt.drift_seed)
-    lmap = laser_occupancy_map(
-        log,
-        LaserMapOptions(
-            resolution=opt.map_resolution or cfg.grid.resolution,
-            max_free_range=opt.max_free_range,
-            max_cells=cfg.grid.max_cells,
-        ),
-    )
     paths = write_emulation(em, lmap, out, fmt, compression=opt.compression)
     return EmulationResult(
         paths=paths,

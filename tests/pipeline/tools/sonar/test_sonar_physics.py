@@ -151,3 +151,40 @@ def test_ideal_emulation_of_the_intel_sample_is_the_committed_log(tmp_path: obje
                   options=EmulateOptions(sonar_model="ideal", compression="zstd"))
     assert out.read_bytes() == (sample / "intel.mcap").read_bytes()
     assert out.with_name("intel.truth.csv").read_bytes() == (sample / "intel.truth.csv").read_bytes()
+
+
+def test_firing_at_a_rate_ray_casts_the_laser_map_along_the_trajectory() -> None:
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "emulate"))
+    from emulate_helpers import laser_log, wall_ranges
+
+    from formats.presets import PRESETS
+    from pipeline.tools.emulate import laser_occupancy_map, ring_from_mounts
+    from pipeline.tools.emulate.firing import emulate_firing
+
+    angles = np.arange(-90.0, 90.5, 1.0)
+    # 11 scans 1 s apart; the robot drives from x = 0 to 1 m towards a wall at x = 3 m.
+    xs = np.linspace(0.0, 1.0, 11)
+    log = laser_log(np.stack([wall_ranges(3.0 - x, angles) for x in xs]), angles,
+                    poses=[(x, 0.0, 0.0) for x in xs])
+    ring = ring_from_mounts(PRESETS["pioneer-p3dx"])
+    lmap = laser_occupancy_map(log)
+    em = emulate_firing(log, ring, lmap, 16.0)  # ideal: the nearest wall in the cone
+    r = em.content.ranges
+    assert len(r) == 161 and np.all(np.diff(r.t_ns) > 0)
+    assert r.sensor_id[:17].tolist() == [*range(16), 0]
+    # sonar_3 (10° left, 0.166 m ahead) fires at t = 1 + 3/16 s + k s: the robot is then
+    # at x = (3/16 + k)·0.1 m; the wall is 3 m − x − 0.166 m away along x, nearer across
+    # the cone (its edge: cos 25°... the nearest point is the normal foot, inside the cone).
+    s3 = r.sensor_id == 3
+    t = (r.t_ns[s3] - log.t_ns[0]) / 1e9
+    want = 3.0 - 0.1 * t - 0.166
+    np.testing.assert_allclose(r.range_m[s3], want, atol=0.06)
+    real = emulate_firing(log, ring, lmap, 16.0, physics=EXACT, seed=1)
+    rr = real.content.ranges
+    np.testing.assert_allclose(rr.range_m[s3], want, atol=0.06)  # head-on: heard
+    # The ±50° sonars meet the wall 40°+ off its normal beyond the 10° cut-off: silent.
+    side = (rr.sensor_id == 1) | (rr.sensor_id == 6)
+    assert np.all(rr.range_m[side] == 5.0)
