@@ -29,10 +29,10 @@ class SonarPhysics:
     """Physical parameters of the realistic sonar (units in the names' comments)."""
 
     margin_db: float = 34.0  # head-on smooth-wall echo above threshold at 0 m, dB
-    beam_half_width_deg: float = 10.0  # off-axis angle where the two-way lobe is −6 dB, deg
+    beam_half_width_deg: float = 18.0  # off-axis angle where the two-way lobe is −6 dB, deg
     absorption_db_per_m: float = 1.6  # air absorption at 50 kHz, one way, dB/m
-    critical_angle_median_deg: float = 10.0  # median specular cut-off of a surface, deg
-    critical_angle_spread: float = 0.7  # log-normal σ of the cut-off across surfaces, 1
+    critical_angle_median_deg: float = 3.0  # median specular cut-off of a surface, deg
+    critical_angle_spread: float = 1.0  # log-normal σ of the cut-off across surfaces, 1
     diffuse_loss_db: float = 40.0  # rough backscatter below a specular echo at normal, dB
     level_noise_db: float = 3.0  # echo level fluctuation (speckle), std, dB
     surface_patch_m: float = 1.0  # extent of one surface finish in emulated buildings, m

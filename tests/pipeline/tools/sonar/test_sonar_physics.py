@@ -14,9 +14,11 @@ from pipeline.tools.sonar import Fan, SonarPhysics, readings
 from pipeline.tools.sonar.surfaces import critical_angles, patch_keys
 from pipeline.tools.sonar.world_scene import world_fans
 
-# No random errors, one cut-off for every surface (10°): the geometry alone decides.
+# No random errors, one cut-off for every surface (10°), a beam audible to ±23.8°
+# (10·√(34/6)): the geometry alone decides, whatever the calibrated defaults.
 EXACT = dataclasses.replace(
-    SonarPhysics(), critical_angle_median_deg=10.0, critical_angle_spread=0.0,
+    SonarPhysics(), margin_db=34.0, beam_half_width_deg=10.0, absorption_db_per_m=1.6,
+    diffuse_loss_db=40.0, critical_angle_median_deg=10.0, critical_angle_spread=0.0,
     level_noise_db=0.0, p_miss=0.0, p_crosstalk=0.0, sigma_d0=0.0, k_d=0.0,
 )
 
