@@ -101,6 +101,8 @@ def run_emulation(
         raise ConfigError("raw odometry and a drift model are exclusive: the raw odometry "
                           "drifts by itself")
     physics = opt.physics.validate() if check_model_name(opt.sonar_model) == "realistic" else None
+    if opt.firing_rate_hz is not None and not opt.firing_rate_hz > 0:
+        raise ConfigError(f"firing rate must be > 0 readings/s, got {opt.firing_rate_hz!r}")
     # Refuse existing outputs before the (slow) reading and emulation.
     for q in (out, *output_paths(out)):
         if q.exists() or q.is_symlink():
