@@ -11,6 +11,7 @@ import pytest
 from formats.errors import ConfigError
 from pipeline.tools.simulate.world import World
 from pipeline.tools.sonar import Fan, SonarPhysics, readings
+from pipeline.tools.sonar.scan_scene import GHOST_STEP_M as GHOST_STEP
 from pipeline.tools.sonar.surfaces import critical_angles, patch_keys
 from pipeline.tools.sonar.world_scene import world_fans
 
@@ -190,3 +191,27 @@ def test_firing_at_a_rate_ray_casts_the_laser_map_along_the_trajectory() -> None
     # The ±50° sonars meet the wall 40°+ off its normal beyond the 10° cut-off: silent.
     side = (rr.sensor_id == 1) | (rr.sensor_id == 6)
     assert np.all(rr.range_m[side] == 5.0)
+
+
+def test_emulate_from_a_laser_scan_hears_the_same_ghost_as_simulate() -> None:
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "emulate"))
+    from emulate_helpers import laser_log
+
+    from formats.options import MountConfig
+    from pipeline.tools.emulate import emulate, ring_from_mounts
+    from pipeline.tools.sonar.world_scene import cast_surfaces
+
+    world = segments((1.0, -1.0, 3.0, 1.0), (1.0, 1.5, 3.0, 1.5))  # the mirror and wall B
+    angles = np.arange(-90.0, 90.5, 1.0)
+    th = np.radians(angles)
+    d, _, _, _ = cast_surfaces(world, np.zeros(th.size), np.zeros(th.size), np.cos(th), np.sin(th))
+    log = laser_log(np.where(np.isfinite(d), d, 81.83)[None, :], angles)
+    ring = ring_from_mounts([MountConfig("front", 0.0, 0.0, 0.0, 30.0, 0.1, 5.0)])
+    em = emulate(log, ring, physics=EXACT, seed=0)
+    simulated = fire(world)[0][0]
+    assert simulated == pytest.approx(3.5, abs=0.02)
+    assert em.ranges[0, 0] == pytest.approx(simulated, abs=GHOST_STEP + 0.02)
+    assert "1 multipath ghosts" in em.notes[-2]
