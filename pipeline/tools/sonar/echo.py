@@ -11,10 +11,11 @@ and, along the mirror direction from there, a second surface ``d2`` farther on
   ``2α·(d1 + d2)``. Its range is longer than the surface the ray met.
 
 Each level gets N(0, level_noise) dB; the reading is the shortest candidate at ≥ 0 dB, or
-no echo (max range). Then range noise N(0, σ0 + k·d), misses (``p_miss``: max range) and
-crosstalk (``p_crosstalk``: another sonar's pulse heard at a uniform time before the own
-echo). Below the minimum range: −inf (REP 117). Draws come from ``rng`` in a fixed order
-(levels, noise, misses, crosstalk), one block per array, so results are deterministic.
+no echo (max range). Crosstalk (``p_crosstalk``): the reading hears the echo of the sonar
+fired beside it (the fan row before or after, either with probability ½) when that one
+arrives first. Then range noise N(0, σ0 + k·d) and misses (``p_miss``: max range). Below
+the minimum range: −inf (REP 117). Draws come from ``rng`` in a fixed order (levels,
+noise, misses, crosstalk, side), one block per array, so results are deterministic.
 """
 
 from __future__ import annotations
@@ -53,7 +54,7 @@ class Echoes:
     first_echo_m: F64  # the detected echo before errors (+inf: none)
     ghost: Bools  # the detected echo is a multipath ghost
     missed: Bools  # dropped by p_miss
-    crosstalk: Bools  # replaced by another sonar's pulse
+    crosstalk: Bools  # answered by a neighbouring sonar's echo
 
 
 def incidence_loss_db(cos_inc: F64, crit: F64, physics: SonarPhysics) -> F64:
@@ -99,23 +100,24 @@ def readings(
     z = rng.standard_normal(n)
     u_miss = rng.random(n)
     u_cross = rng.random(n)
-    u_val = rng.random(n)
+    u_side = rng.random(n)
+    # Crosstalk: the reading hears the echo of the sonar fired beside it (the row before or
+    # after: the ring's neighbour in the same scan or firing sequence) when that arrives
+    # first.
+    neighbour = (np.arange(n) + np.where(u_side < 0.5, -1, 1)) % max(n, 1)
+    cross = np.less(u_cross, physics.p_crosstalk) & (first[neighbour] < first)
+    first = np.where(cross, first[neighbour], first)
     echo = first < max_range
     d_safe = np.where(echo, first, 0.0)
     noisy = np.clip(d_safe + z * (physics.sigma_d0 + physics.k_d * d_safe), min_range, max_range)
     d = np.where(echo, noisy, max_range)
     missed = np.less(u_miss, physics.p_miss)
     d = np.where(missed, max_range, d)
-    # Another sonar's pulse arrives at a time unrelated to this firing: uniform over the
-    # listening window up to this reading's own echo (or its max range).
-    cross = np.less(u_cross, physics.p_crosstalk)
-    d = np.where(cross, min_range + u_val * (d - min_range), d)
-    d = np.where(d < min_range, -np.inf, d)
-    d = np.where(echo & ~missed & ~cross & (first < min_range), -np.inf, d)
+    d = np.where(echo & ~missed & (first < min_range), -np.inf, d)
     return Echoes(
         range_m=d.astype(np.float32).astype(np.float64),
         first_echo_m=first,
-        ghost=is_ghost & echo,
+        ghost=is_ghost & echo & ~cross,
         missed=missed,
         crosstalk=cross,
     )

@@ -10,7 +10,7 @@ import pytest
 
 from formats.errors import ConfigError
 from pipeline.tools.simulate.world import World
-from pipeline.tools.sonar import Fan, SonarPhysics, readings
+from pipeline.tools.sonar import Echoes, Fan, SonarPhysics, readings
 from pipeline.tools.sonar.scan_scene import GHOST_STEP_M as GHOST_STEP
 from pipeline.tools.sonar.surfaces import critical_angles, patch_keys
 from pipeline.tools.sonar.world_scene import world_fans
@@ -80,20 +80,29 @@ def test_beam_pattern_hears_a_pole_on_axis_not_far_off_it() -> None:
 
 
 def test_misses_and_crosstalk_counts_and_determinism() -> None:
-    wall = segments((2.0, -3.0, 2.0, 3.0))
-    noisy = dataclasses.replace(EXACT, p_miss=0.1, p_crosstalk=0.2, sigma_d0=0.01, k_d=0.01)
+    # One on-axis ray per reading; the ring's readings alternate 2 m and 3 m echoes.
     n = 4000
+    d1 = np.where(np.arange(n) % 2 == 0, 2.0, 3.0)[:, None]
+    one, inf = np.ones((n, 1)), np.full((n, 1), np.inf)
+    fan = Fan(np.zeros((n, 1)), d1, one, one * math.pi / 2, inf, one, np.zeros((n, 1)))
+    noisy = dataclasses.replace(EXACT, p_miss=0.1, p_crosstalk=0.2, sigma_d0=0.01, k_d=0.01)
     z = np.zeros(n)
-    fan = world_fans(wall, z, z.copy(), z, z + 5.0, noisy, seed=0)
-    e = readings(fan, z + 0.1, z + 5.0, noisy, np.random.Generator(np.random.PCG64(7)))
+
+    def fire_fan(seed: int) -> Echoes:
+        return readings(fan, z + 0.1, z + 5.0, noisy, np.random.Generator(np.random.PCG64(seed)))
+
+    e = fire_fan(7)
     assert abs(int(e.missed.sum()) - 0.1 * n) < 4 * math.sqrt(0.09 * n)
-    assert abs(int(e.crosstalk.sum()) - 0.2 * n) < 4 * math.sqrt(0.16 * n)
-    # Crosstalk reads before the own echo (or before max range when the echo was missed).
-    assert np.all(e.range_m[e.crosstalk] <= 5.0) and np.all(e.range_m[e.crosstalk] >= 0.1)
+    # Crosstalk only shows where the neighbour's echo comes first: the 3 m readings, whose
+    # neighbours both read 2 m.
+    assert not e.crosstalk[::2].any()
+    assert abs(int(e.crosstalk.sum()) - 0.2 * n / 2) < 4 * math.sqrt(0.16 * n / 2)
+    heard = e.crosstalk & ~e.missed
+    assert np.abs(e.range_m[heard] - 2.0).max() < 5 * 0.03
     clean = ~e.missed & ~e.crosstalk
-    assert np.abs(e.range_m[clean] - 2.0).max() < 5 * 0.03
-    again = readings(fan, z + 0.1, z + 5.0, noisy, np.random.Generator(np.random.PCG64(7)))
-    other = readings(fan, z + 0.1, z + 5.0, noisy, np.random.Generator(np.random.PCG64(8)))
+    assert np.abs(e.range_m[clean] - d1[clean, 0]).max() < 5 * 0.04
+    assert np.all(e.range_m[e.missed] == 5.0)
+    again, other = fire_fan(7), fire_fan(8)
     np.testing.assert_array_equal(e.range_m, again.range_m)
     assert not np.array_equal(e.range_m, other.range_m)
 
