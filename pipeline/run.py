@@ -3,12 +3,17 @@
 1. **ingest** — open the log (:mod:`formats`), pass 1 survey (:mod:`pipeline.stages.ingest`): the
    log is read and decoded once, its readings spilled in time order for the mapping passes;
 2. **pose_sync** — each reading's robot pose and sonar geometry (:mod:`pipeline.stages.pose_sync`);
-3. **scan_building** — readings grouped into scans (:mod:`pipeline.stages.scans`);
-4. **mapping** — the mapper (:mod:`pipeline.mapper`), Andersone's method or the baseline;
-5. **outputs** — map.pgm/yaml, map.png, features.parquet, metrics.json, config.toml,
-   reports, written into a temporary directory renamed into place when complete.
+3. **pose_refinement** — with ``[pose_refinement] enabled`` (``run --refine-poses``), the pose
+   track corrected from the echoes before mapping (:mod:`pipeline.refine`);
+4. **scan_building** — readings grouped into scans (:mod:`pipeline.stages.scans`);
+5. **mapping** — the mapper (:mod:`pipeline.mapper`): the configured ``[mapper] method``
+   (the default, the paper's method ``andersone`` or the ``classic`` grid), over as many
+   passes of the spilled readings as the method needs;
+6. **outputs** — map.pgm/yaml, map.png, map.mcap, features.parquet, trajectory.csv,
+   metrics.json, config.toml, reports, written into a temporary directory renamed into
+   place when complete.
 
-Stages 2-4 run interleaved over the streamed readings; each stage's seconds are summed.
+Stages 2, 4 and 5 run interleaved over the streamed readings; each stage's seconds are summed.
 """
 
 from __future__ import annotations
