@@ -1,5 +1,8 @@
 """Simulate a sonar log: a robot drives through waypoints in a world, its ring fires.
 
+The sonar is the realistic model of :mod:`pipeline.tools.sonar` (``sonar_model``, the
+default) or the ideal one of :mod:`pipeline.tools.simulate.sonar` (one specular cut-off).
+
 ``simulate`` is pure numpy and seeded: every random draw comes from one
 ``np.random.Generator(PCG64(seed))`` in a fixed order, so the same inputs give the same
 arrays. ``write_simulation`` writes the log (any format of :mod:`formats.log_writers`)
@@ -112,7 +115,8 @@ class SimRanges:
     """Simulated readings in firing order: time (ns), sensor index, range (m).
 
     ``range_m`` is what the log carries (float32-representable, REP 117 values);
-    ``true_range_m`` the noise-free echo distance (+inf: no echo within r_max).
+    ``true_range_m`` the echo distance before range noise and misses (+inf: no echo within
+    r_max; with the realistic sonar the echo heard, a ghost or a neighbour's included).
     ``scan_id`` numbers the ring revolutions.
     """
 
