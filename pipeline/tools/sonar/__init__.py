@@ -3,7 +3,8 @@
 :mod:`.model` holds the physical parameters, :mod:`.surfaces` the per-surface specular
 cut-offs, :mod:`.echo` the echo levels and errors that turn the surfaces a beam meets into
 a reading; the scenes say which surfaces a beam meets: :mod:`.scan_scene` from a laser
-scan (``emulate``), :mod:`.world_scene` from a world's segments and circles (``simulate``).
+scan (``emulate``), :mod:`.world_scene` from a world's segments and circles (``simulate``),
+:mod:`.grid_scene` from an occupancy grid (``emulate --firing-rate``).
 """
 
 from __future__ import annotations
