@@ -4,8 +4,8 @@ An echo is heard when its level, in dB above the receiver's detection threshold,
 
     E = margin − beam(φ) − incidence(θ; θc) − 2·α·path + N(0, level_noise)
 
-``beam(φ) = 6 dB·(φ/φ6)²`` is the two-way Gaussian main lobe of a piston transducer (φ the
-angle off the beam axis, φ6 where it is 6 dB down); ``incidence`` is 0 dB up to the
+``beam(φ) = 6 dB·(φ/φ6)²`` is a two-way Gaussian lobe (φ the angle off the beam axis, φ6
+where it is 6 dB down; an effective width, side lobes included); ``incidence`` is 0 dB up to the
 surface's critical angle θc (the specular return) and ``diffuse_loss − 20·log10(cos θ)``
 beyond (Lambertian backscatter of the roughness); θc is drawn per surface from a
 log-normal (median, spread); α is the air's absorption. docs/SONAR_PHYSICS.md gives the
@@ -37,7 +37,7 @@ class SonarPhysics:
     level_noise_db: float = 3.0  # echo level fluctuation (speckle), std, dB
     surface_patch_m: float = 1.0  # extent of one surface finish in emulated buildings, m
     p_miss: float = 0.03  # readings that drop their echo (electronics), 1
-    p_crosstalk: float = 0.02  # readings that hear another sonar's pulse first, 1
+    p_crosstalk: float = 0.02  # readings that may hear the neighbouring sonar's echo, 1
     sigma_d0: float = 0.01  # range noise at 0 m, m
     k_d: float = 0.01  # range noise growth with range, 1
 
