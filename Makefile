@@ -59,9 +59,11 @@ MUTATE_SAMPLE ?= 150
 mutate: $(STAMP)
 	$(BIN)/python -m benchmarks.mutation_sample --sample $(MUTATE_SAMPLE) --children 2
 
-# Refresh the regression goldens on purpose (review `git diff sample_logs/goldens` after).
+# Refresh the regression goldens on purpose (review `git diff sample_logs/goldens` after):
+# the suite of sample_logs/goldens/suite.toml, run from the repository root.
 goldens: $(STAMP)
-	$(BIN)/python sample_logs/goldens/refresh.py
+	$(BIN)/sonarmap regress --suite sample_logs/goldens/suite.toml --goldens sample_logs/goldens \
+	  --update --workers 2
 
 # Regenerate the simulated sample logs (deterministic).
 samples: $(STAMP)

@@ -1,6 +1,6 @@
 """``python -m benchmarks``: every benchmark in one run, one table, written to RESULTS.md.
 
-Usage: ``python -m benchmarks [--quick] [--smoke] [--only readers mapper e2e batch]
+Usage: ``python -m benchmarks [--quick] [--smoke] [--only readers mapper e2e batch regress]
 [--results PATH | --no-results]``
 
 Inputs are generated deterministically (no downloads): the reader bags by
@@ -33,10 +33,11 @@ from benchmarks import (
     bench_mapper,
     bench_readers,
     bench_readers_ros2,
+    bench_regress_suite,
 )
 
 RESULTS = Path(__file__).resolve().parent / "RESULTS.md"
-SECTIONS = ("readers", "mapper", "e2e", "batch")
+SECTIONS = ("readers", "mapper", "e2e", "batch", "regress")
 NOTES_MARKER = "<!-- analysis: kept when the table above is regenerated -->"
 
 
@@ -215,6 +216,21 @@ def batch_rows(smoke: bool, quick: bool, verbose: bool) -> list[Row]:
     ]
 
 
+def regress_rows(smoke: bool, quick: bool, verbose: bool) -> list[Row]:
+    """``regress --suite`` of the sample logs beside ``batch`` of them, 2 workers each."""
+    argv = ["--smoke"] if smoke else (["--repeat", "1"] if quick else [])
+    f = _quiet(bench_regress_suite.main, argv, verbose=verbose)
+    assert isinstance(f, dict)
+    ratio = f["ratio"]
+    return [
+        Row("regress", f"sonarmap batch, {int(f['logs'])} sample logs, 2 workers", f["batch"],
+            "s wall", f"{f['batch cpu']:.1f} s CPU"),
+        Row("regress", "regress --suite, same logs (F1 with truths), 2 workers", f["suite"],
+            "s wall", f"{f['suite cpu']:.1f} s CPU ({f['cpu ratio']:.2f}x); {ratio:.2f}x batch",
+            "<= 1.2x", ratio <= 1.2 if not smoke else None),
+    ]
+
+
 def machine() -> str:
     """CPU model, cores, OS, Python and numpy versions."""
     import numpy
@@ -251,7 +267,7 @@ def main(argv: list[str] | None = None) -> list[Row]:
     ap.add_argument("-v", "--verbose", action="store_true", help="show each benchmark's output")
     args = ap.parse_args(argv)
     makers = {"readers": readers_rows, "mapper": mapper_rows, "e2e": e2e_rows,
-              "batch": batch_rows}
+              "batch": batch_rows, "regress": regress_rows}
     rows: list[Row] = []
     t0 = time.perf_counter()
     load_before = os.getloadavg()[0]

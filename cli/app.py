@@ -30,7 +30,7 @@ app = typer.Typer(
 ConfigOpt = Annotated[
     Path | None,
     typer.Option("--config", "-c", help="TOML configuration file (see `sonarmap config`).",
-                 dir_okay=False, show_default="built-in defaults"),
+                 show_default="built-in defaults"),
 ]
 FormatOpt = Annotated[
     str | None,
@@ -347,16 +347,15 @@ def config_cmd(
 
       sonarmap config --config mine.toml
     """
-    from formats.errors import OutputError
-    from formats.writers.atomic import atomic_write_text
+    from formats.writers.atomic import atomic_write_text, check_output_file
     from pipeline.config import dump_config, load_config
 
     text = dump_config(load_config(config))
     if output is None:
         typer.echo(text, nl=False)
         return
-    if output.exists():
-        raise OutputError("exists already, not overwriting", output)
+    inputs = ((config, "the configuration"),) if config is not None else ()
+    check_output_file(output, kind=None, force=False, inputs=inputs)
     atomic_write_text(output, text)
 
 

@@ -15,16 +15,16 @@ from cli.errors import EXIT_FAILURE, handle_errors
 
 
 @contextmanager
-def _log_progress() -> Iterator[Callable[[int, int], None]]:
+def _log_progress(command: str = "batch") -> Iterator[Callable[[int, int], None]]:
     """A ``(done, total)`` callback driving a rich progress bar over logs on stderr; on a
-    non-terminal (CI, cron) a plain line per finished log instead."""
+    non-terminal (CI, cron) a plain line per finished log instead, named by ``command``."""
     from rich.console import Console
 
     from cli.progress import plain_progress
 
     if not Console(stderr=True).is_terminal:
         with plain_progress("logs", sys.stderr, every_s=0.0) as plain:
-            yield lambda done, total: plain("batch", done, total)
+            yield lambda done, total: plain(command, done, total)
         return
     from rich.progress import (
         BarColumn,
@@ -55,6 +55,8 @@ def _log_progress() -> Iterator[Callable[[int, int], None]]:
 
 def split_inputs(inputs: list[str], manifests: list[Path]) -> tuple[list[Path], list[Path]]:
     """``@FILE`` arguments are manifests; the rest are log files or directories."""
+    from cli.errors import check_path_arguments
+
     paths: list[Path] = []
     lists = list(manifests)
     for s in inputs:
@@ -62,6 +64,7 @@ def split_inputs(inputs: list[str], manifests: list[Path]) -> tuple[list[Path], 
             lists.append(Path(s[1:]))
         else:
             paths.append(Path(s))
+    check_path_arguments([paths, lists])
     return paths, lists
 
 
@@ -84,14 +87,12 @@ def register(app: typer.Typer) -> None:
         ] = None,
         config: Annotated[
             Path | None,
-            typer.Option("--config", "-c", help="TOML configuration for every log.",
-                         dir_okay=False),
+            typer.Option("--config", "-c", help="TOML configuration for every log."),
         ] = None,
         manifest: Annotated[
             list[Path] | None,
             typer.Option("--manifest", help="File listing one log path per line, the files "
                          "of one recording joined by ' + ' (repeatable; same as @FILE).",
-                         dir_okay=False,
                          metavar="FILE"),
         ] = None,
         workers: Annotated[
@@ -107,7 +108,8 @@ def register(app: typer.Typer) -> None:
         memory_limit: Annotated[
             str,
             typer.Option("--memory-limit", help="Memory per local worker, e.g. 4GB "
-                         "(default auto: the machine's memory / --workers); a log that "
+                         "(default auto: the machine's memory / --workers; at least 512MB, 0 = no "
+                         "limit); a log that "
                          "needs more fails as its own row."),
         ] = "auto",
         rerun: Annotated[
@@ -159,11 +161,14 @@ def register(app: typer.Typer) -> None:
                                memory_limit=memory_limit)
         for row in result.failures:
             print(f"sonarmap: failed: {row.name}: {row.error}", file=sys.stderr)
+        for row in result.unread:
+            print(f"sonarmap: skipped: {row.path}: {row.error}", file=sys.stderr)
         if not quiet:
+            unread = f", {len(result.unread)} directories not read" if result.unread else ""
             typer.echo(
                 f"{len(result.outcomes)} logs: {result.count('ok')} mapped, "
-                f"{result.count('skipped')} skipped (unchanged), "
-                f"{result.count('failed')} failed; summary in {result.summary_md}"
+                f"{result.count('skipped') - len(result.unread)} skipped (unchanged), "
+                f"{result.count('failed')} failed{unread}; summary in {result.summary_md}"
             )
         if not result.ok:
             raise typer.Exit(EXIT_FAILURE)

@@ -48,7 +48,6 @@ def emulate(
             "--config",
             "-c",
             help="TOML configuration (sensors, grid, input sections).",
-            dir_okay=False,
         ),
     ] = None,
     max_range: Annotated[

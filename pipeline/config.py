@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any, Literal, TypeAlias
 
 from formats.errors import ConfigError
+from formats.map_types import DEFAULT_MAX_CELLS
 from formats.options import FOV_MAX_DEG, FOV_MIN_DEG, InputConfig, SensorsConfig, doc_field
 from formats.presets import PRESETS
 from formats.toml_file import read_toml
@@ -150,7 +151,7 @@ class GridConfig:
     max_cells: int = doc_field(
         "refuse grids larger than this many cells (~32 bytes each while mapping: the "
         "default keeps a run under ~1.5 GB)",
-        default=40_000_000,
+        default=DEFAULT_MAX_CELLS,
     )
 
 

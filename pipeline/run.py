@@ -26,7 +26,7 @@ from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 
@@ -128,7 +128,7 @@ def run(
                 found = None if progress is None else (lambda n: progress("reading", n, None))
                 sv, sensors = surveyed(reader, config, found)
                 info = reader.info()
-                _check_mcap_stamps(out.path("map.mcap"), sv.track)
+                _check_mcap_stamps(label, sv.track)
             odometry: PoseTrack | None = None
             refinement: dict[str, Any] | None = None
             if config.pose_refinement.enabled:
@@ -187,15 +187,19 @@ def run(
     return RunResult(Path(out_dir), metrics, snapshots["main"])
 
 
-def _check_mcap_stamps(path: Path, track: PoseTrack) -> None:
-    """Refuse, before mapping, a log whose stamps ``map.mcap`` cannot carry: its messages
-    are stamped at the last pose, its paths with every pose's stamp (refinement keeps
-    them)."""
+def _check_mcap_stamps(label: Path, track: PoseTrack) -> None:
+    """Refuse (InputError naming the log), before mapping, a log whose stamps ``map.mcap``
+    cannot carry: its messages are stamped at the last pose, its paths with every pose's
+    stamp (refinement keeps them)."""
+    from formats.errors import OutputError
     from formats.writers.map_mcap import check_stamps
 
     if len(track):
         t = np.asarray(track.t_ns)
-        check_stamps(path, int(t[-1]), int(t.min()), int(t.max()))
+        try:
+            check_stamps(Path("map.mcap"), int(t[-1]), int(t.min()), int(t.max()))
+        except OutputError as err:
+            raise InputError(f"the log's {err.reason}", label) from err
 
 
 def _refine_poses(
@@ -258,12 +262,10 @@ def grid_for(sv: Survey, sensors: SensorTable, config: Config) -> GridSpec:
     if g.extent:
         x0, y0, x1, y1 = g.extent
     else:
-        reach_candidates = [sv.ranges.max_range_m, sensors.default_max]
-        reach_candidates += [v for v in sensors.max_override.tolist() if not math.isnan(v)]
-        finite = [v for v in reach_candidates if not math.isnan(v) and math.isfinite(v)]
+        finite = [v for v in _reaches(sv, sensors) if math.isfinite(v) and v > 0]
         if not finite:
             raise InputError(
-                "cannot size the grid: no sensor reports a max range; set [grid] extent "
+                "cannot size the grid: no sensor reports a max range > 0; set [grid] extent "
                 "or [sensors] max_range"
             )
         offsets = np.hypot(sensors.mount_x, sensors.mount_y)
@@ -272,16 +274,40 @@ def grid_for(sv: Survey, sensors: SensorTable, config: Config) -> GridSpec:
         (bx0, by0, bx1, by1), _ = sv.track.bulk_bounds()
         x0, x1 = bx0 - reach, bx1 + reach
         y0, y1 = by0 - reach, by1 + reach
+    # Sized in floats first: a box of 1e308 m (a mount or pose at the edge of a float)
+    # must be the same one-line refusal, not an overflow.
+    w_m, h_m = x1 - x0, y1 - y0
+    cells_f = (w_m / g.resolution + 1.0) * (h_m / g.resolution + 1.0)
+    if not math.isfinite(cells_f) or cells_f > 2.0**53:  # beyond exact integers
+        _too_many_cells(f"{w_m:.3g} x {h_m:.3g} m", f"{cells_f:.3g}", g.max_cells)
     grid = GridSpec.covering(x0, y0, x1, y1, g.resolution)
     cells = grid.width * grid.height
     if cells > g.max_cells:
-        raise ConfigError(
-            f"grid of {grid.width}x{grid.height} = {cells} cells "
-            f"({grid.width * g.resolution:.0f} x {grid.height * g.resolution:.0f} m) exceeds "
-            f"grid.max_cells = {g.max_cells}; use a coarser grid.resolution, a [grid] extent, "
-            "or a larger grid.max_cells if the memory is there (~32 bytes a cell)"
-        )
+        _too_many_cells(f"{grid.width}x{grid.height} = {cells} cells "
+                        f"({grid.width * g.resolution:.0f} x {grid.height * g.resolution:.0f} m)",
+                        None, g.max_cells)
     return grid
+
+
+def _too_many_cells(size: str, cells: str | None, max_cells: int) -> NoReturn:
+    what = f"{size} ({cells} cells)" if cells is not None else size
+    raise ConfigError(
+        f"grid of {what} exceeds grid.max_cells = {max_cells}; use a coarser grid.resolution, "
+        "a [grid] extent, or a larger grid.max_cells if the memory is there (~32 bytes a cell)"
+    )
+
+
+def _reaches(sv: Survey, sensors: SensorTable) -> list[float]:
+    """Each sensor's r_max as the mapping uses it (:meth:`SensorTable.apply_limits`): a
+    config or preset max_range wins over what the log's readings claim, which wins over
+    the ``[sensors] max_range`` default. Sensors without readings do not widen the grid."""
+    out = []
+    for sid in sorted(sv.ranges.per_sensor):
+        override = float(sensors.max_override[sid])
+        logged = sv.ranges.max_range_by_sensor.get(sid, math.nan)
+        out.append(override if not math.isnan(override)
+                   else logged if not math.isnan(logged) else sensors.default_max)
+    return out
 
 
 def _map_stream(
@@ -406,9 +432,13 @@ def _sync(
     state.per_sensor.update(dict(zip(ids.tolist(), per.tolist(), strict=True)))
     fov, lo, hi = sensors.apply_limits(b)
     if np.isnan(fov).any():
-        bad = sorted({sensors.names[i] for i in sid[np.isnan(fov)].tolist()})
+        bad_ids = np.unique(sid[np.isnan(fov)])
+        bad = [sensors.names[i] for i in bad_ids.tolist()]
+        n_nan, n_all = int(np.isnan(fov).sum()), int(np.isin(sid, bad_ids).sum())
+        what = ("the log carries none" if n_nan == n_all else
+                f"{n_nan} of their {n_all} readings in this part of the log carry a NaN fov")
         raise InputError(
-            f"no beam width (fov) for sensor(s) {', '.join(bad)}: the log carries none; set "
+            f"no beam width (fov) for sensor(s) {', '.join(bad)}: {what}; set "
             f"fov_deg in [sensors] or [[sensors.mounts]]"
         )
     problem = beam_problem(sensors.names, sid, fov, lo, hi)

@@ -11,6 +11,7 @@ decompressed to a temporary directory; per-message zstd (``MESSAGE``) on the fly
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import sqlite3
@@ -28,11 +29,25 @@ import yaml
 from formats.errors import FormatError
 from formats.ros.mcap_source import McapSource
 from formats.ros.source import Connection, Encoding, RawBatch, SourceAccessors, normalize_msgtype
+from formats.text_file import read_text
 
 _STORAGE_SUFFIXES = {".db3": "sqlite3", ".mcap": "mcap"}
 # Rows fetched from sqlite per batch: bounded memory whatever the bag size.
 SQLITE_BATCH_ROWS = 4096
 
+
+
+def _inside_bag(bag: Path, name: str, meta: Path) -> Path:
+    """The storage file ``name`` of ``metadata.yaml``, which must lie inside the bag
+    directory (no absolute path, no ``..``, no symlink leading out): FormatError else."""
+    p = bag / name
+    try:
+        inside = not Path(name).is_absolute() and p.resolve().is_relative_to(bag.resolve())
+    except (OSError, RuntimeError, ValueError):
+        inside = False
+    if not inside:
+        raise FormatError(f"metadata names a storage file outside the bag: {name!r}", meta)
+    return p
 
 class _StorageFile(Protocol):
     path: Path
@@ -70,7 +85,7 @@ class Sqlite3File(SourceAccessors):
             raise FormatError(f"{what}, not a rosbag2 sqlite3 database", self._name)
         # Read-only and immutable: sqlite neither writes -wal/-shm files next to the user's
         # bag nor needs write access to its directory (archive mounts, read-only binds).
-        uri = f"file:{quote(str(path.resolve()))}?mode=ro&immutable=1"
+        uri = f"file:{quote(os.fsencode(path.resolve()))}?mode=ro&immutable=1"
         try:
             self._db = sqlite3.connect(uri, uri=True, check_same_thread=False)
         except sqlite3.Error as err:
@@ -203,7 +218,7 @@ class Ros2BagSource(SourceAccessors):
             meta = path / "metadata.yaml"
             if meta.is_file():
                 storage, names, compression_mode = self._read_metadata(meta)
-                files = [path / n for n in names]
+                files = [_inside_bag(path, n, meta) for n in names]
             else:
                 files = sorted(
                     (p for p in path.iterdir() if _storage_of(p) is not None),
@@ -239,14 +254,15 @@ class Ros2BagSource(SourceAccessors):
 
     def _read_metadata(self, meta: Path) -> tuple[str, list[str], str]:
         try:
-            doc = yaml.safe_load(meta.read_text("utf-8"))
+            doc = yaml.safe_load(read_text(meta, "rosbag2 metadata",
+                                           errors=(FormatError, FormatError)))
             info = doc["rosbag2_bagfile_information"]
             version = int(info["version"])
             storage = str(info.get("storage_identifier") or "sqlite3")
             names = [str(n) for n in info["relative_file_paths"]]
             mode = str(info.get("compression_mode") or "").upper()
             fmt = str(info.get("compression_format") or "")
-        except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError) as err:
+        except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError, RecursionError) as err:
             raise FormatError(f"unreadable rosbag2 metadata ({_reason(err)})", meta) from err
         if version < 1 or version > 9:
             raise FormatError(f"unsupported rosbag2 metadata version {version}", meta)

@@ -44,7 +44,10 @@ class SensorTable:
         sid = batch.sensor_id
         fov = _pick(self.fov_override[sid], batch.fov_rad, self.default_fov)
         lo = _pick(self.min_override[sid], batch.min_range_m, self.default_min)
-        hi = _pick(self.max_override[sid], batch.max_range_m, self.default_max)
+        # A logged r_max that is not > 0 is none (sensor_msgs/Range: invalid): the default.
+        with np.errstate(invalid="ignore"):
+            logged_max = np.where(batch.max_range_m > 0, batch.max_range_m, np.nan)
+        hi = _pick(self.max_override[sid], logged_max, self.default_max)
         return fov, lo, hi
 
 

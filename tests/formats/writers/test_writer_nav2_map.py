@@ -220,7 +220,7 @@ def test_bad_yaml_is_format_error(
 
 
 def test_broken_files_are_format_errors(tmp_path: Path) -> None:
-    with pytest.raises(FormatError, match=r"nope\.yaml: no such file"):
+    with pytest.raises(FormatError, match=r"nope\.yaml: map YAML not found"):
         load_nav2_map(tmp_path / "nope.yaml")
     (tmp_path / "list.yaml").write_text("- 1\n- 2\n")
     with pytest.raises(FormatError, match=r"list\.yaml: map YAML is not a mapping"):
