@@ -50,7 +50,7 @@ bench: $(STAMP)
 
 # Thousands of mutated logs per format through every reader (about 12 minutes).
 fuzz: $(STAMP)
-	$(BIN)/python -m fuzz.run_fuzz --examples 1000 --values 300
+	$(BIN)/python -m fuzz.run_fuzz --examples 1000 --values 300 --side-files 40
 
 # Mutation testing of the mapper, pose sync, scan building and nav2 maps (mutmut) on a
 # seeded sample of mutants (~30 min on 2 cores; MUTATE_SAMPLE=0 runs none, `mutmut run`

@@ -16,6 +16,7 @@ from cli.help_words import use_words
 from pipeline.methods import Method
 
 if TYPE_CHECKING:
+    from formats.storage.location import Location
     from pipeline.config import Config
 
 app = typer.Typer(
@@ -49,11 +50,19 @@ PoseTopicOpt = Annotated[
 ]
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")]
 LogsArg = Annotated[
-    list[Path],
-    typer.Argument(help="Log file or bag directory; several files are one recording (split "
+    list[str],
+    typer.Argument(help="Log file or bag directory, or its URL (s3://, gs://, az://, "
+                   "http(s)://, file://); several files are one recording (split "
                    "bags, sonar and odometry bags), read as one log in time order.",
                    show_default=False, metavar="LOG..."),
 ]
+
+
+def _locations(texts: list[str]) -> list[Location]:
+    """Command-line log names as locations: URLs stay URLs (a Path would fold their //)."""
+    from formats.storage.location import as_location
+
+    return [as_location(t) for t in texts]
 
 
 def _version(value: bool) -> None:
@@ -90,9 +99,11 @@ def _load(
     """The configuration file plus command-line overrides, validated."""
     import dataclasses
 
+    from formats.storage.options import configure
     from pipeline.config import load_config
 
     cfg = load_config(config)
+    configure(cfg.storage)  # before any URL is opened
     inp = cfg.input
     if format:
         inp = dataclasses.replace(inp, format=format)
@@ -116,7 +127,10 @@ def _load(
 @handle_errors
 def run(
     log: LogsArg,
-    output: Annotated[Path, typer.Option("--output", "-o", help="Output directory (must not exist).")],
+    output: Annotated[str, typer.Option(
+        "--output", "-o", help="Output directory (must not exist), or an object-store prefix "
+        "(s3://bucket/prefix, gs://, az://): written last of all, its .sonarmap-output "
+        "marker says the output is complete.")],
     config: ConfigOpt = None,
     format: FormatOpt = None,
     range_topic: RangeTopicOpt = None,
@@ -170,17 +184,19 @@ def run(
 
       sonarmap run drifted.mcap -o out/drifted --refine-poses
     """
+    from formats.storage.location import as_location
     from pipeline.run import run as run_pipeline
 
+    logs, out = _locations(log), as_location(output)
     cfg = _load(config, format=format, range_topics=range_topic, pose_topic=pose_topic,
                 method=method, resolution=resolution, refine_poses=refine_poses)
     if quiet or json_out:
-        result = run_pipeline(log, output, cfg, force=force, compare_correction=compare_correction)
+        result = run_pipeline(logs, out, cfg, force=force, compare_correction=compare_correction)
     else:
         from cli.progress import reading_progress
 
         with reading_progress() as progress:
-            result = run_pipeline(log, output, cfg, force=force,
+            result = run_pipeline(logs, out, cfg, force=force,
                                   compare_correction=compare_correction, progress=progress)
     m = result.metrics
     if json_out:
@@ -202,11 +218,18 @@ def run(
 
 def _run_summary(result: Any) -> dict[str, Any]:
     """``run --json``: where the outputs are and what the run found, in one object."""
+    from formats.storage.location import Url
+    from formats.writers.remote_output import remote_state
     from pipeline.stages.metrics import json_ready
 
     m = result.metrics
-    outputs = {p.name: str(p) for p in sorted(Path(result.out_dir).iterdir())
-               if p.is_file() and not p.name.startswith(".")}
+    out_dir = result.out_dir
+    if isinstance(out_dir, Url):
+        names = sorted(f for f in remote_state(out_dir).files if "/" not in f)
+        outputs = {n: str(out_dir / n) for n in names if not n.startswith(".")}
+    else:
+        outputs = {p.name: str(p) for p in sorted(out_dir.iterdir())
+                   if p.is_file() and not p.name.startswith(".")}
     summary: dict[str, Any] = json_ready({
         "out_dir": str(result.out_dir),
         "outputs": outputs,
@@ -249,7 +272,7 @@ def info(
     from formats import open_log
 
     cfg = _load(config, format=format)
-    with open_log(log, cfg) as reader:
+    with open_log(_locations(log), cfg) as reader:
         li = reader.info()
     if json_out:
         typer.echo(json.dumps(dataclasses.asdict(li) | {"duration_s": li.duration_s}, indent=2))
@@ -321,7 +344,7 @@ def validate(
     from pipeline.tools.validate import validate_log
 
     cfg = _load(config, format=format, range_topics=range_topic, pose_topic=pose_topic)
-    with open_log(log, cfg) as reader:
+    with open_log(_locations(log), cfg) as reader:
         report = validate_log(reader, cfg)
     if json_out:
         typer.echo(json.dumps(report.to_dict(), indent=2))

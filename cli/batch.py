@@ -7,11 +7,14 @@ import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from cli.errors import EXIT_FAILURE, handle_errors
+
+if TYPE_CHECKING:
+    from formats.storage.location import Location
 
 
 @contextmanager
@@ -53,18 +56,21 @@ def _log_progress(command: str = "batch") -> Iterator[Callable[[int, int], None]
         yield update
 
 
-def split_inputs(inputs: list[str], manifests: list[Path]) -> tuple[list[Path], list[Path]]:
-    """``@FILE`` arguments are manifests; the rest are log files or directories."""
+def split_inputs(
+    inputs: list[str], manifests: list[Path]
+) -> tuple[list[Location], list[Path]]:
+    """``@FILE`` arguments are manifests; the rest are log files, directories or URLs."""
     from cli.errors import check_path_arguments
+    from formats.storage.location import as_location
 
-    paths: list[Path] = []
+    paths: list[Location] = []
     lists = list(manifests)
     for s in inputs:
         if s.startswith("@") and len(s) > 1:
             lists.append(Path(s[1:]))
         else:
-            paths.append(Path(s))
-    check_path_arguments([paths, lists])
+            paths.append(as_location(s))
+    check_path_arguments([paths, lists])  # local paths only: URLs are not checked
     return paths, lists
 
 
@@ -75,7 +81,9 @@ def register(app: typer.Typer) -> None:
     @handle_errors
     def batch(
         output: Annotated[
-            Path, typer.Option("--output", "-o", help="Output directory (created if missing).")
+            str, typer.Option("--output", "-o", help="Output directory (created if missing), "
+                              "or an object-store prefix (s3://bucket/prefix) the workers "
+                              "write to directly.")
         ],
         inputs: Annotated[
             list[str] | None,
@@ -148,6 +156,7 @@ def register(app: typer.Typer) -> None:
 
           sonarmap batch logs/ -o out/ --rerun
         """
+        from formats.storage.location import as_location
         from pipeline.tools.batch import run_batch
 
         paths, lists = split_inputs(inputs or [], manifest or [])
@@ -156,7 +165,7 @@ def register(app: typer.Typer) -> None:
                                      param_hint="INPUTS")
         with contextlib.ExitStack() as stack:
             progress = None if quiet else stack.enter_context(_log_progress())
-            result = run_batch(paths, output, config, workers=workers, scheduler=scheduler,
+            result = run_batch(paths, as_location(output), config, workers=workers, scheduler=scheduler,
                                rerun=rerun, progress=progress, manifests=lists,
                                memory_limit=memory_limit)
         for row in result.failures:

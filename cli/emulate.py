@@ -21,10 +21,10 @@ def register(app: typer.Typer) -> None:
 @handle_errors
 def emulate(
     laser_log: Annotated[
-        Path,
+        str,
         typer.Argument(
             help="CARMEN log (.log/.log.gz, FLASER) or ROS 1/ROS 2/MCAP log with "
-            "sensor_msgs/LaserScan.",
+            "sensor_msgs/LaserScan, or its URL (s3://, gs://, az://, http(s)://).",
             show_default=False,
         ),
     ],
@@ -187,7 +187,12 @@ def emulate(
         seed=seed,
         firing_rate_hz=firing_rate,
     )
-    result = run_emulation(laser_log, output, format, config=cfg, options=options)
+    from formats.storage.location import as_location
+    from formats.storage.options import configure
+
+    configure(cfg.storage)
+    result = run_emulation(as_location(laser_log), output, format, config=cfg,
+                           options=options)
     if quiet:
         return
     for note in result.notes:

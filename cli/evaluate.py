@@ -12,7 +12,9 @@ import typer
 from cli.errors import EXIT_FAILURE, handle_errors
 
 RunDirArg = Annotated[
-    Path, typer.Argument(help="Run directory written by `sonarmap run`.", show_default=False)
+    str, typer.Argument(help="Run directory written by `sonarmap run`, or its object-store "
+                        "prefix (read only when complete: its .sonarmap-output marker lists "
+                        "exactly what is there).", show_default=False)
 ]
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")]
 
@@ -80,6 +82,24 @@ def evaluate(
 
       sonarmap evaluate out/drifted --truth office.truth.yaml --truth-trajectory office.truth.csv
     """
+    import contextlib
+
+    from formats.storage.location import Url, as_location
+    from formats.writers.remote_output import complete_output
+
+    where = as_location(run_dir)
+    with contextlib.ExitStack() as stack:
+        local = stack.enter_context(complete_output(where))
+        _evaluate(local, truth, trajectory, tolerance, reach, truth_trajectory, rpe_delta,
+                  rpe_unit, output, force,
+                  # a prefix's report is not rewritten: the prefix stays as it was written
+                  no_report or isinstance(where, Url), json_out)
+
+
+def _evaluate(run_dir: Path, truth: Path, trajectory: Path | None, tolerance: float,
+              reach: float | None, truth_trajectory: Path | None, rpe_delta: float,
+              rpe_unit: str, output: Path | None, force: bool, no_report: bool,
+              json_out: bool) -> None:
     from formats.writers.atomic import atomic_write_text, check_output_file
     from formats.writers.nav2_map import nav2_image_path
     from formats.writers.output_marker import written_files_in
@@ -119,14 +139,14 @@ def evaluate(
 @handle_errors
 def regress(
     run_dir: Annotated[
-        Path | None,
-        typer.Argument(help="Run directory written by `sonarmap run` (not with --suite).",
-                       show_default=False),
+        str | None,
+        typer.Argument(help="Run directory written by `sonarmap run`, or its complete "
+                       "object-store prefix (not with --suite).", show_default=False),
     ] = None,
     golden: Annotated[
-        Path | None,
-        typer.Option("--golden", "-g", help="Golden run directory to compare RUN with.",
-                     file_okay=False),
+        str | None,
+        typer.Option("--golden", "-g", help="Golden run directory (or complete object-store "
+                     "prefix) to compare RUN with."),
     ] = None,
     tolerances: Annotated[
         Path | None,
@@ -225,10 +245,18 @@ def regress(
     if run_dir is None or golden is None:
         raise typer.BadParameter("give RUN --golden DIR, or --suite FILE --goldens DIR",
                                  param_hint="RUN")
+
+    import contextlib
+
+    from formats.storage.location import as_location
+    from formats.writers.remote_output import complete_output
     from pipeline.tools.regress import load_tolerances
     from pipeline.tools.regress import regress as run_regress
 
-    result = run_regress(run_dir, golden, load_tolerances(tolerances))
+    with contextlib.ExitStack() as stack:
+        local_run = stack.enter_context(complete_output(as_location(run_dir)))
+        local_golden = stack.enter_context(complete_output(as_location(golden), "golden"))
+        result = run_regress(local_run, local_golden, load_tolerances(tolerances))
     if json_out:
         typer.echo(json.dumps(result.to_dict(), indent=2))
     elif result.ok:

@@ -13,6 +13,7 @@ import stat
 from pathlib import Path
 
 from formats.errors import FormatError, InputError, SonarmapError
+from formats.storage.location import Url
 
 __all__ = ["MAX_LIST_BYTES", "MAX_TEXT_BYTES", "read_bounded", "read_text"]
 
@@ -31,7 +32,7 @@ def _mib(n: int) -> str:
 
 
 def read_bounded(
-    path: str | Path,
+    path: str | Path | Url,
     what: str,
     max_bytes: int,
     *,
@@ -41,6 +42,8 @@ def read_bounded(
     in messages; the first of ``errors`` says "<what> not found", the second every other
     refusal (not a regular file, too large, unreadable)."""
     missing, bad = errors
+    if isinstance(path, Url):
+        return _read_bounded_url(path, what, max_bytes, errors)
     try:
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
     except FileNotFoundError as err:
@@ -74,8 +77,22 @@ def read_bounded(
     return b"".join(chunks)
 
 
+def _read_bounded_url(
+    url: Url, what: str, max_bytes: int,
+    errors: tuple[type[SonarmapError], type[SonarmapError]],
+) -> bytes:
+    """:func:`read_bounded` of an object named by URL."""
+    missing, bad = errors
+    if not url.exists():
+        raise missing(f"{what} not found", url)
+    size = url.stat().st_size
+    if size > max_bytes:
+        raise bad(f"{what} is too large ({_mib(size)}; at most {_mib(max_bytes)})", url)
+    return url.read_bytes()
+
+
 def read_text(
-    path: str | Path,
+    path: str | Path | Url,
     what: str,
     *,
     errors: tuple[type[SonarmapError], type[SonarmapError]] = (InputError, FormatError),

@@ -34,6 +34,7 @@ from formats import open_log
 from formats.contract import LogInfo, LogReader, RangeBatch
 from formats.errors import ConfigError, InputError
 from formats.map_types import GridSpec
+from formats.storage.location import Location, as_location
 from formats.writers.trajectory_tum import Trajectory
 from pipeline import __version__
 from pipeline.config import Config, dump_config
@@ -60,7 +61,7 @@ from pipeline.stages.reading_quality import REASONS
 from pipeline.stages.run_warnings import run_warnings
 from pipeline.stages.scans import ScanBuilder, ScanKeys
 from pipeline.stages.sensors import SensorTable, beam_problem, resolve_sensors
-from pipeline.streaming.run_input import input_section, log_label, log_paths
+from pipeline.streaming.run_input import input_section, log_label, log_paths, losses_named
 
 log = logging.getLogger("sonarmap")
 
@@ -74,7 +75,7 @@ Progress = Callable[[str, int, int | None], None]
 class RunResult:
     """What a run produced: where, its metrics and the final map."""
 
-    out_dir: Path
+    out_dir: Location
     metrics: RunMetrics
     snapshot: MapSnapshot
 
@@ -92,8 +93,8 @@ class StreamState:
 
 
 def run(
-    log_path: str | Path | Sequence[str | Path],
-    out_dir: str | Path,
+    log_path: str | Location | Sequence[str | Location],
+    out_dir: str | Location,
     config: Config,
     *,
     force: bool = False,
@@ -109,10 +110,16 @@ def run(
     ``force`` replaces a previous sonarmap output only (never the input's directory, the
     working directory or the user's files: :class:`~formats.writers.atomic.OutputDir`).
     ``on_complete(tmp_dir, metrics)`` may add files after the outputs are written and
-    before the directory is committed (a batch's resume marker)."""
-    from formats.writers.atomic import OutputDir
+    before the directory is committed (a batch's resume marker).
 
+    Logs and ``out_dir`` may be URLs (``s3://bucket/prefix``): read by ranges, written by
+    :class:`~formats.writers.remote_output.RemoteOutputDir` (marker last)."""
+    from formats.storage.options import configure
+    from formats.writers.remote_output import open_output_dir
+
+    configure(config.storage)
     paths = log_paths(log_path)
+    final = as_location(out_dir)
     label = log_label(paths)
     if compare_correction and config.mapper.method == Method.CLASSIC:
         raise ConfigError(
@@ -120,10 +127,10 @@ def run(
         )
     timer = StageTimer()
     t_start = time.perf_counter()
-    with OutputDir(Path(out_dir), force=force, protect=tuple(paths)) as out:
+    with open_output_dir(final, force=force, protect=tuple(paths)) as out:
         with timer.stage("ingest"):
             reader = open_log(paths, config)
-        with reader:
+        with reader, losses_named(reader.info):
             with timer.stage("ingest"):
                 found = None if progress is None else (lambda n: progress("reading", n, None))
                 sv, sensors = surveyed(reader, config, found)
@@ -178,16 +185,17 @@ def run(
         metrics = _metrics(paths, info, sv, sensors, mappers, snapshots, state, config)
         metrics.pose_refinement = refinement
         # A map of (almost) nothing is an error, not an empty result with exit 0.
-        check_mapped_share(label, metrics.counts, metrics.dropped, state.max_pose_gap_s,
-                           state.median_pose_interval_s, config)
+        with losses_named(lambda: info):
+            check_mapped_share(label, metrics.counts, metrics.dropped, state.max_pose_gap_s,
+                               state.median_pose_interval_s, config)
         _write_outputs(out, config, sv, drawn, snapshots, metrics, timer, t_start,
                        odometry=odometry)
         if on_complete is not None:
             on_complete(out.tmp_dir, metrics)
-    return RunResult(Path(out_dir), metrics, snapshots["main"])
+    return RunResult(final, metrics, snapshots["main"])
 
 
-def _check_mcap_stamps(label: Path, track: PoseTrack) -> None:
+def _check_mcap_stamps(label: Location, track: PoseTrack) -> None:
     """Refuse (InputError naming the log), before mapping, a log whose stamps ``map.mcap``
     cannot carry: its messages are stamped at the last pose, its paths with every pose's
     stamp (refinement keeps them)."""
@@ -452,7 +460,7 @@ def _sync(
 
 
 def _metrics(
-    paths: list[Path],
+    paths: list[Location],
     info: LogInfo,
     sv: Survey,
     sensors: SensorTable,

@@ -29,6 +29,7 @@ import yaml
 from formats.arrays import F64
 from formats.errors import FormatError
 from formats.map_types import DEFAULT_MAX_CELLS, GridSpec
+from formats.ranges import CELL_M, COORD_M, Range
 from formats.text_file import read_bounded, read_text
 from formats.writers.atomic import atomic_write_bytes, atomic_write_text
 
@@ -249,6 +250,14 @@ def _get_number(doc: dict[str, Any], key: str, path: Path) -> float:
     return float(value)
 
 
+THRESHOLD = Range(-1e6, 1e6)
+
+
+def _check_range(value: float, rng: Range, key: str, path: Path) -> None:
+    if not rng.holds(value):
+        raise FormatError(f"map YAML '{key}' {rng.rule()}, got {value!r}", path)
+
+
 def _read_yaml(yaml_path: Path) -> dict[str, Any]:
     text = read_text(yaml_path, "map YAML", errors=(FormatError, FormatError),
                      max_bytes=MAX_YAML_BYTES)
@@ -284,8 +293,7 @@ def load_nav2_map(yaml_path: Path, max_cells: int = DEFAULT_MAX_CELLS) -> Nav2Ma
     doc = _read_yaml(yaml_path)
     image_path = _image_path(yaml_path, doc)
     resolution = _get_number(doc, "resolution", yaml_path)
-    if not (resolution > 0 and math.isfinite(resolution)):
-        raise FormatError(f"map YAML 'resolution' must be positive, got {resolution}", yaml_path)
+    _check_range(resolution, CELL_M, "resolution", yaml_path)
     origin = doc.get("origin")
     if not isinstance(origin, list) or len(origin) != 3:
         raise FormatError(
@@ -295,10 +303,18 @@ def load_nav2_map(yaml_path: Path, max_cells: int = DEFAULT_MAX_CELLS) -> Nav2Ma
         ox, oy, yaw = (float(v) for v in origin)
     except (TypeError, ValueError) as err:
         raise FormatError(f"map YAML 'origin' has a non-number: {origin!r}", yaml_path) from err
+    _check_range(ox, COORD_M, "origin[0]", yaml_path)
+    _check_range(oy, COORD_M, "origin[1]", yaml_path)
     if yaw != 0.0:
         raise FormatError(f"map origin yaw {yaw} rad is not supported (only 0)", yaml_path)
     occ_th = _get_number(doc, "occupied_thresh", yaml_path)
     free_th = _get_number(doc, "free_thresh", yaml_path)
+    # Thresholds beyond [0, 1] are allowed (map_server's "nothing occupied"), not NaN.
+    _check_range(occ_th, THRESHOLD, "occupied_thresh", yaml_path)
+    _check_range(free_th, THRESHOLD, "free_thresh", yaml_path)
+    if not free_th < occ_th:
+        raise FormatError(f"map YAML 'free_thresh' must be < occupied_thresh, got {free_th}"
+                          f" and {occ_th}", yaml_path)
     mode = doc.get("mode", "trinary")
     if mode not in ("trinary", "scale", "raw"):
         raise FormatError(f"map YAML 'mode' must be trinary, scale or raw, got {mode!r}", yaml_path)

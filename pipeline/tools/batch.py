@@ -43,7 +43,15 @@ from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from formats.errors import ConfigError, FormatError, InputError, OutputError, SonarmapError
+from formats.errors import (
+    ConfigError,
+    FormatError,
+    InputError,
+    OutputError,
+    SonarmapError,
+)
+from formats.storage.location import Location, Url, as_location
+from formats.storage.urls import is_url
 from formats.tables import markdown_table
 from formats.text_file import MAX_LIST_BYTES, read_bounded, read_text
 from formats.writers.output_marker import SUMMARY_MD_TITLE
@@ -84,7 +92,7 @@ WORKER_PRELOAD = "pipeline.tools.batch_warm"
 BatchProgress = Callable[[int, int], None]  # (logs finished, logs total)
 # A log: a file or bag directory, or the files of one recording (a manifest line
 # ``a.bag + b.bag``, as sonarmap names such a recording: run_input.log_label).
-LogInput = Path | tuple[Path, ...]
+LogInput = Location | tuple[Location, ...]
 # What separates the files of one recording on a manifest line: a '+' with a blank (or the
 # line's end) on each side.
 _SEPARATOR = re.compile(r"(?:^|\s)\+(?:\s|$)")
@@ -134,10 +142,10 @@ class LogOutcome:
 class BatchResult:
     """What a batch did: one outcome per log (sorted by path) and where the summary is."""
 
-    out_dir: Path
+    out_dir: Location
     outcomes: list[LogOutcome]
-    summary_parquet: Path
-    summary_md: Path
+    summary_parquet: Location
+    summary_md: Location
 
     def count(self, status: str) -> int:
         return sum(o.status == status for o in self.outcomes)
@@ -180,12 +188,14 @@ def read_manifest(path: Path) -> list[LogInput]:
     return out
 
 
-def _manifest_path(manifest: Path, text: str) -> Path:
+def _manifest_path(manifest: Path, text: str) -> Location:
+    if is_url(text):
+        return as_location(text)
     p = Path(text).expanduser()
     return p if p.is_absolute() else Path(manifest).parent / p
 
 
-def log_files(log_input: LogInput) -> tuple[Path, ...]:
+def log_files(log_input: LogInput) -> tuple[Location, ...]:
     """The file(s) of a log."""
     return log_input if isinstance(log_input, tuple) else (log_input,)
 
@@ -289,11 +299,11 @@ def _resolved(p: Path) -> Path:
 
 
 def find_logs(
-    inputs: Sequence[Path],
+    inputs: Sequence[Location],
     config: Config,
     *,
     manifests: Sequence[Path] = (),
-    exclude: Sequence[Path] = (),
+    exclude: Sequence[Location] = (),
     unread: list[Unread] | None = None,
 ) -> list[LogInput]:
     """The logs a batch maps, deduplicated and sorted by absolute path.
@@ -305,19 +315,22 @@ def find_logs(
     files, the files sonarmap wrote and ``exclude`` are skipped. Directories that cannot be
     listed are appended to ``unread``.
     """
-    skip = {_resolved(Path(p)) for p in exclude}
-    named: list[LogInput] = [Path(p) for p in inputs]
+    skip = {_resolved(Path(p)) for p in exclude if isinstance(p, Path)}
+    named: list[LogInput] = [as_location(p) for p in inputs]
     for m in manifests:
         named += read_manifest(Path(m))
-    found: dict[Path | tuple[Path, ...], LogInput] = {}
+    found: dict[Location | tuple[Location, ...], LogInput] = {}
     seen: set[tuple[int, int]] = set()
     unread = [] if unread is None else unread
     for p in named:
         if isinstance(p, tuple):
             # In path order: a recording is read in time order whatever order names it,
             # so its name and row do not depend on it either.
-            files = tuple(sorted((Path(os.path.abspath(f)) for f in p), key=str))
-            found.setdefault(tuple(sorted((_resolved(f) for f in files), key=str)), files)
+            files = tuple(sorted((_absolute(f) for f in p), key=str))
+            found.setdefault(tuple(sorted((_key(f) for f in files), key=str)), files)
+            continue
+        if isinstance(p, Url):  # taken as it is: a URL is not searched
+            found.setdefault(p, p)
             continue
         ap = Path(os.path.abspath(p))
         if os.path.isdir(ap) and not _is_log_dir(ap, config):  # False on any OSError
@@ -328,6 +341,23 @@ def find_logs(
     return sorted(found.values(), key=log_text)
 
 
+def _absolute(f: Location) -> Location:
+    return f if isinstance(f, Url) else Path(os.path.abspath(f))
+
+
+def _key(f: Location) -> Location:
+    """What tells two logs apart: a path resolved, a URL as it is."""
+    return f if isinstance(f, Url) else _resolved(f)
+
+
+def _base_name(f: Location) -> str:
+    """A log's output name: a file's stem, a directory's name (a URL's without asking the
+    server: its stem when it has a suffix and no trailing '/')."""
+    if isinstance(f, Url):
+        return f.stem if f.suffix and not f.text.endswith("/") else f.name
+    return f.name if os.path.isdir(f) else f.stem
+
+
 def output_names(paths: Sequence[LogInput]) -> dict[LogInput, str]:
     """Output directory name of each log: the file stem (or directory name), the stems
     joined by ``+`` for a recording in several files; names that collide
@@ -335,9 +365,7 @@ def output_names(paths: Sequence[LogInput]) -> dict[LogInput, str]:
     path>``, so a name depends only on its own path and its peers; a name longer than
     MAX_NAME_BYTES is cut and gets the same suffix (its output directory and the temporary
     sibling must fit the file system's 255-byte limit)."""
-    base = {p: "+".join((f.name if os.path.isdir(f) else f.stem) or "log"
-                        for f in log_files(p))
-            for p in paths}
+    base = {p: "+".join(_base_name(f) or "log" for f in log_files(p)) for p in paths}
     counts: dict[str, int] = {}
     for n in base.values():
         counts[n.casefold()] = counts.get(n.casefold(), 0) + 1
@@ -370,10 +398,10 @@ def _map_one(
     exceptions.
     """
     t0 = time.perf_counter()
-    files = tuple(Path(p) for p in ([path] if isinstance(path, str) else path))
+    files = tuple(as_location(p) for p in ([path] if isinstance(path, str) else path))
     label = log_text(files)
     try:
-        row = _map_one_checked(files, Path(out_dir), name, config, rerun)
+        row = _map_one_checked(files, as_location(out_dir), name, config, rerun)
     except SonarmapError as err:
         row = LogOutcome(label, name, "failed", error=str(err))
     except Exception as err:  # a bug or an unforeseen library error: record, go on
@@ -386,14 +414,18 @@ def _map_one(
 
 
 def _map_one_checked(
-    files: tuple[Path, ...], out_dir: Path, name: str, config: dict[str, Any], rerun: bool
+    files: tuple[Location, ...], out_dir: Location, name: str, config: dict[str, Any],
+    rerun: bool
 ) -> LogOutcome:
+    from formats.storage.options import configure
     from pipeline.run import run
     from pipeline.streaming.run_input import files_sha256, hashes_sha256
 
     cfg = config_from_dict(config)
+    configure(cfg.storage)  # this worker reaches URLs with the batch's options
     for f in files:
-        if not os.path.lexists(f):  # False on any OSError (a name too long: run says why)
+        # False on any OSError (a name too long: run says why); a URL asks its server
+        if not (f.exists() if isinstance(f, Url) else os.path.lexists(f)):
             raise InputError("no such file or directory", f)
     path = log_text(files)
     final = out_dir / name
@@ -450,8 +482,15 @@ def _map_one_checked(
     return outcome[0]
 
 
-def read_marker(run_dir: Path) -> dict[str, Any] | None:
-    """The resume marker of a finished log's output directory, or None (absent/unreadable)."""
+def read_marker(run_dir: Location) -> dict[str, Any] | None:
+    """The resume marker of a finished log's output directory, or None (absent/unreadable;
+    under a URL prefix also when the prefix is incomplete: an interrupted upload is never
+    taken as done)."""
+    if isinstance(run_dir, Url):
+        from formats.writers.remote_output import remote_state
+
+        if not remote_state(run_dir).complete:
+            return None
     try:
         data = json.loads(read_bounded(run_dir / MARKER, "resume marker", MAX_MARKER_BYTES))
     except (SonarmapError, ValueError, RecursionError):
@@ -554,8 +593,8 @@ def _client_inner(
 
 
 def run_batch(
-    inputs: list[Path],
-    out_dir: Path,
+    inputs: Sequence[Location],
+    out_dir: Location,
     config_path: Path | None,
     *,
     workers: int | None = None,
@@ -571,11 +610,14 @@ def run_batch(
     Raises SonarmapError only for problems of the whole batch (bad configuration, no logs
     found, unreachable scheduler, unwritable output directory); a log's failure is a row.
     """
+    from formats.storage.options import configure
+
     cfg = load_config(config_path)
+    configure(cfg.storage)
     if scheduler is None:
         memory_limit = parse_memory_limit(memory_limit)
-    out_dir = Path(os.path.abspath(out_dir))
-    if out_dir.exists() and not out_dir.is_dir():
+    out_dir = _absolute(out_dir)
+    if isinstance(out_dir, Path) and out_dir.exists() and not out_dir.is_dir():
         raise OutputError("exists and is not a directory", out_dir)
     check_summary_replaceable(out_dir)
     unread: list[Unread] = []
@@ -586,15 +628,17 @@ def run_batch(
         where = ", ".join(str(p) for p in [*inputs, *manifests]) or "(no inputs)"
         also = f" ({unread[0].path}: {unread[0].reason})" if unread else ""
         raise InputError(f"no logs found in {where}{also}")
-    try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise OutputError(f"cannot create output directory: {err.strerror or err}", out_dir) from err
-    from formats.writers.atomic import clean_stale_entries
+    if isinstance(out_dir, Path):
+        try:
+            out_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise OutputError(f"cannot create output directory: {err.strerror or err}",
+                              out_dir) from err
+        from formats.writers.atomic import clean_stale_entries
 
-    # Staging left by interrupted batches (their processes are dead), whatever log it
-    # was for; a concurrent batch's live staging stays.
-    clean_stale_entries(out_dir)
+        # Staging left by interrupted batches (their processes are dead), whatever log it
+        # was for; a concurrent batch's live staging stays.
+        clean_stale_entries(out_dir)
     names = output_names(logs)
     # One thread per worker (mapper.threads = 1): the workers already share the cores.
     cfg_dict = cfg.replace(mapper=dataclasses.replace(cfg.mapper, threads=1)).to_dict()
@@ -604,7 +648,8 @@ def run_batch(
         progress(0, total)
     with _client(workers, scheduler, memory_limit) as client:
         futures = {
-            client.submit(_map_one, [str(f) for f in log_files(p)], str(out_dir), names[p],
+            # URLs travel as given (a worker needs their credentials); never printed.
+            client.submit(_map_one, [_wire(f) for f in log_files(p)], _wire(out_dir), names[p],
                           cfg_dict, rerun, pure=False,
                           key=f"sonarmap-{_utf8(names[p])}-{secrets.token_hex(4)}"): p
             for p in logs
@@ -623,6 +668,10 @@ def run_batch(
     rows.sort(key=lambda r: r.path)
     pq_path, md_path = write_summary(out_dir, rows)
     return BatchResult(out_dir, rows, pq_path, md_path)
+
+
+def _wire(where: Location) -> str:
+    return where.text if isinstance(where, Url) else str(where)
 
 
 def _finished(client: Any, futures: list[Any]) -> Iterator[tuple[Any, str | None]]:
@@ -724,11 +773,21 @@ def _utf8(v: Any) -> Any:
     return v
 
 
-def check_summary_replaceable(out_dir: Path) -> None:
+def check_summary_replaceable(out_dir: Location) -> None:
     """Refuse (OutputError, before any work) a ``summary.md`` or ``summary.parquet`` in
-    ``out_dir`` that sonarmap did not write: a batch replaces only its own summaries."""
-    from formats.writers.output_marker import not_replaceable_file_reason
+    ``out_dir`` that sonarmap did not write: a batch replaces only its own summaries (under
+    a URL prefix: judged by the same rule, :func:`output_marker.stamped`, on its bytes)."""
+    from formats.writers.output_marker import not_replaceable_file_reason, stamped
 
+    if isinstance(out_dir, Url):
+        from formats.writers.remote_output import url_reader
+
+        for name, kind in ((SUMMARY_MD, "summary_md"), (SUMMARY_PARQUET, "summary_parquet")):
+            if (out_dir / name).exists() and not stamped(kind, name, url_reader(out_dir)):
+                raise OutputError("exists and sonarmap did not write it; not replacing it "
+                                  "with the batch summary, choose another output prefix",
+                                  out_dir / name)
+        return
     for name, kind in ((SUMMARY_MD, "summary_md"), (SUMMARY_PARQUET, "summary_parquet")):
         p = out_dir / name
         if p.exists() or p.is_symlink():
@@ -738,10 +797,11 @@ def check_summary_replaceable(out_dir: Path) -> None:
                                   "choose another output directory", p)
 
 
-def write_summary(out_dir: Path, rows: Sequence[LogOutcome]) -> tuple[Path, Path]:
-    """Write ``summary.parquet`` and ``summary.md`` atomically; return their paths. Only
-    summaries sonarmap wrote are replaced (:func:`check_summary_replaceable`, again: a
-    file may have appeared while the logs were mapped)."""
+def write_summary(out_dir: Location, rows: Sequence[LogOutcome]) -> tuple[Location, Location]:
+    """Write ``summary.parquet`` and ``summary.md`` atomically (under a URL prefix: each
+    object appears whole or not at all); return their locations. Only summaries sonarmap
+    wrote are replaced (:func:`check_summary_replaceable`, again: a file may have appeared
+    while the logs were mapped)."""
     import pyarrow.parquet as pq
 
     from formats.writers.atomic import atomic_write_bytes, atomic_write_text
@@ -749,6 +809,17 @@ def write_summary(out_dir: Path, rows: Sequence[LogOutcome]) -> tuple[Path, Path
     check_summary_replaceable(out_dir)
     buf = io.BytesIO()
     pq.write_table(summary_table(rows), buf, compression="zstd")
+    if isinstance(out_dir, Url):
+        fs = out_dir.fs
+        for name, data in ((SUMMARY_PARQUET, buf.getvalue()),
+                           (SUMMARY_MD, summary_markdown(rows).encode())):
+            target = out_dir / name
+
+            def put(t: Url = target, d: bytes = data) -> None:
+                fs.pipe_file(t.fs_path, d)
+
+            target.call("cannot upload", put)
+        return out_dir / SUMMARY_PARQUET, out_dir / SUMMARY_MD
     pq_path, md_path = out_dir / SUMMARY_PARQUET, out_dir / SUMMARY_MD
     atomic_write_bytes(pq_path, buf.getvalue())
     atomic_write_text(md_path, summary_markdown(rows))

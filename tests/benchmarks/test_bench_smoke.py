@@ -34,7 +34,7 @@ def test_runner_smoke_prints_every_section(tmp_path: Path) -> None:
     rows = [line.split("|")[1:-1] for line in out.splitlines() if line.startswith("| ")]
     rows = [[c.strip() for c in r] for r in rows if r[0].strip() != "section"]
     sections = {r[0] for r in rows}
-    assert sections == {"readers", "mapper", "e2e", "scaling", "batch", "regress"}
+    assert sections == {"readers", "mapper", "e2e", "scaling", "batch", "regress", "storage"}
     by_case = {r[1]: r for r in rows}
     # Readers: 6 s ROS 1 bags (16 × 10 Hz + 50 Hz odometry) and the 5k-message ROS 2 bag.
     assert "ros1 lz4: 1260 msgs, sonarmap" in by_case

@@ -199,7 +199,7 @@ def test_mode_defaults_to_trinary_and_absolute_image(tmp_path: Path) -> None:
     [
         ({"image": None}, "has no 'image'"),
         ({"resolution": "fine"}, "'resolution' is not a number"),
-        ({"resolution": 0}, "'resolution' must be positive"),
+        ({"resolution": 0}, r"'resolution' must be in \[0.001, 100\] m, got 0"),
         ({"origin": [0, 0]}, "'origin' must be a list of 3 numbers"),
         ({"origin": [0, 0, 0.5]}, "yaw 0.5 rad is not supported"),
         ({"mode": "fancy"}, "'mode' must be trinary, scale or raw"),
