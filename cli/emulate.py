@@ -134,10 +134,30 @@ def emulate(
                      "ODOM lines) as the robot's poses instead of the corrected scan poses: "
                      "real drift; the truth trajectory keeps the corrected poses."),
     ] = False,
+    sonar_model: Annotated[
+        str,
+        typer.Option("--sonar-model", help="realistic: the sonar physics model (beam pattern, "
+                     "specular loss per surface, multipath, misses, crosstalk, range noise; "
+                     "docs/SONAR_PHYSICS.md); ideal: the shortest laser return in the cone."),
+    ] = "realistic",
+    sonar_param: Annotated[
+        list[str] | None,
+        typer.Option("--sonar-param", help="Override a realistic-model parameter, KEY=VALUE "
+                     "(repeatable; keys and units in docs/SONAR_PHYSICS.md)."),
+    ] = None,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the realistic sonar's noise.")] = 0,
+    firing_rate: Annotated[
+        float | None,
+        typer.Option("--firing-rate", help="Fire the whole ring at this many readings per "
+                     "second (a Pioneer: about 25) into the laser map along the trajectory "
+                     "interpolated between scans, every sonar of the ring (default: one "
+                     "reading per sonar the laser sees per laser scan)."),
+    ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary.")] = False,
 ) -> None:
-    """Emulate a sonar ring from real laser scans: each virtual sonar reads the shortest
-    laser return inside its cone (its max range when none). Writes the sonar log, the
+    """Emulate a sonar ring from real laser scans: by default each virtual sonar reads what
+    the sonar physics model hears from the laser's surfaces in its beam (--sonar-model
+    ideal: the shortest laser return inside its cone, its max range when none). Writes the sonar log, the
     laser occupancy map <stem>.laser.yaml/.pgm (the reference) and the trajectory
     <stem>.truth.csv beside it. Sonars outside the laser's view are not emitted.
     The --drift-* options drift the logged odometry (seeded; the truth trajectory keeps
@@ -156,10 +176,13 @@ def emulate(
       sonarmap emulate intel.log -o odometry.mcap --raw-odometry
 
       sonarmap emulate intel.log -o walk.mcap --drift-heading-walk 0.01 --drift-scale -0.02
+
+      sonarmap emulate intel.log -o ring.mcap --firing-rate 25 --preset pioneer-p3dx
     """
     from pipeline.config import load_config
     from pipeline.drift import DriftModel, drift_model
     from pipeline.tools.emulate import EmulateOptions, run_emulation
+    from pipeline.tools.sonar import SonarPhysics, check_model_name
 
     if format not in _FORMATS:
         raise typer.BadParameter(f"must be one of {', '.join(_FORMATS)}", param_hint="--format")
@@ -179,6 +202,10 @@ def emulate(
                                      drift_slip_scale), drift_wheel_odometry),
         drift_seed=drift_seed,
         raw_odometry=raw_odometry,
+        sonar_model=check_model_name(sonar_model),
+        physics=SonarPhysics().with_overrides(sonar_param or []),
+        seed=seed,
+        firing_rate_hz=firing_rate,
     )
     from cli.errors import location_argument
     from formats.storage.options import configure

@@ -48,6 +48,13 @@ def evaluate(
     rpe_unit: Annotated[
         str, typer.Option("--rpe-unit", help="RPE spacing unit: m (path length) or frames.")
     ] = "m",
+    oblique_deg: Annotated[
+        float | None,
+        typer.Option("--oblique-deg", help="With --trajectory: count the true walls most of "
+                     "the path's sight lines meet more than this far off their normal, degrees (smooth "
+                     "walls return no sonar echo beyond 10-30°, docs/SONAR_PHYSICS.md), and "
+                     "how many of them the map missed. 0 turns the count off."),
+    ] = 30.0,
     json_out: JsonOpt = False,
     output: Annotated[
         Path | None,
@@ -85,15 +92,15 @@ def evaluate(
     with contextlib.ExitStack() as stack:
         local = stack.enter_context(complete_output(where))
         _evaluate(local, truth, trajectory, tolerance, reach, truth_trajectory, rpe_delta,
-                  rpe_unit, output, force,
+                  rpe_unit, output, force, oblique_deg or None,
                   # a prefix's report is not rewritten: the prefix stays as it was written
                   no_report or isinstance(where, Url), json_out)
 
 
 def _evaluate(run_dir: Path, truth: Path, trajectory: Path | None, tolerance: float,
               reach: float | None, truth_trajectory: Path | None, rpe_delta: float,
-              rpe_unit: str, output: Path | None, force: bool, no_report: bool,
-              json_out: bool) -> None:
+              rpe_unit: str, output: Path | None, force: bool, oblique_deg: float | None,
+              no_report: bool, json_out: bool) -> None:
     from formats.writers.atomic import atomic_write_text, check_output_file
     from formats.writers.nav2_map import nav2_image_path
     from formats.writers.output_marker import written_files_in
@@ -114,7 +121,8 @@ def _evaluate(run_dir: Path, truth: Path, trajectory: Path | None, tolerance: fl
     check_output()
     result = evaluate_run(run_dir, truth, trajectory=trajectory, tolerance_m=tolerance,
                           sensor_reach_m=reach, truth_trajectory=truth_trajectory,
-                          rpe_delta=rpe_delta, rpe_unit=rpe_unit)
+                          rpe_delta=rpe_delta, rpe_unit=rpe_unit,
+                          oblique_deg=oblique_deg)
     if output is not None:
         check_output()
         atomic_write_text(output, result.to_json())

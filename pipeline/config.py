@@ -538,12 +538,6 @@ RANGES: dict[str, Range] = {
                                     zero="from the log"),
     "sensors.mounts.min_range": dataclasses.replace(LIMIT_M, zero="from the log"),
     "sensors.mounts.max_range": dataclasses.replace(LIMIT_M, zero="from the log"),
-    # [storage]: as StorageConfig.check states them.
-    "storage.block_size_mib": Range(0.0625, 1024, "MiB"),
-    "storage.cache_blocks": Range(1, 1000),
-    "storage.retries": Range(0, 1000),
-    "storage.timeout_s": above(0, 3600, "s"),
-    "storage.backoff_s": Range(0, 3600, "s"),
     # [pose_refinement]: generous outer limits (its own rules follow in _check_ranges).
     **{f"pose_refinement.{k}": r for k, r in {
         "local_stretch_m": above(0, 1e5, "m"), "local_iterations": Range(1, 1000),

@@ -119,6 +119,9 @@ class Evaluation:
     # Why the map is wrong (cell counts; see :func:`error_breakdown`).
     false_occupied: dict[str, int] = field(default_factory=dict)
     missed: dict[str, int] = field(default_factory=dict)
+    # True walls the path mostly saw beyond ``incidence_deg`` off their normal, and how
+    # many of them the map missed (cell counts; :mod:`pipeline.tools.oblique_walls`).
+    oblique: dict[str, float] = field(default_factory=dict)
     # ATE/RPE of the run's trajectory.csv against --truth-trajectory (pipeline.tools.trajectory_error)
     trajectory_error: dict[str, Any] | None = None
     # The map scored again after the trajectory's SE(2) alignment (module docstring):
@@ -145,7 +148,8 @@ class Evaluation:
         if not isinstance(data, dict):
             raise FormatError("evaluation is not a JSON object", source)
         names = [f.name for f in fields(cls)]
-        optional = ("notes", "false_occupied", "missed", "trajectory_error", "aligned")
+        optional = ("notes", "false_occupied", "missed", "oblique", "trajectory_error",
+                    "aligned")
         missing = [n for n in names if n not in data and n not in optional]
         if missing:
             raise FormatError(f"evaluation has no {', '.join(missing)}", source)
@@ -156,6 +160,11 @@ class Evaluation:
             if not isinstance(part, dict) or not all(isinstance(v, int) for v in part.values()):
                 raise FormatError(f"evaluation '{n}' is not a table of cell counts", source)
             kwargs[n] = {str(k): int(v) for k, v in part.items()}
+        part = data.get("oblique", {})
+        if not isinstance(part, dict) or not all(
+                isinstance(v, int | float) and not isinstance(v, bool) for v in part.values()):
+            raise FormatError("evaluation 'oblique' is not a table of numbers", source)
+        kwargs["oblique"] = {str(k): float(v) for k, v in part.items()}
         for n in ("precision", "recall", "f1", "tolerance_m"):
             v = kwargs[n]
             if isinstance(v, bool) or not isinstance(v, int | float):
@@ -203,6 +212,12 @@ class Evaluation:
                 rows.append((title, ", ".join(
                     f"{k.replace('_', ' ')} {v} ({pct(v / total) if total else 'n/a'})"
                     for k, v in part.items())))
+        if self.oblique:
+            o = self.oblique
+            rows.append((f"seen obliquely (> {o['incidence_deg']:g}°)",
+                         f"{o['walls']:.0f} of {self.truth_occupied_in_scope} true wall cells "
+                         f"in scope; {o['missed']:.0f} of them missed, "
+                         f"{o['missed_seen_free']:.0f} seen free"))
         if self.trajectory_error is not None:
             from pipeline.tools.trajectory_error import TrajectoryError
 
@@ -410,8 +425,10 @@ def evaluate_maps(
     reach_m: float | None,
     feature_xy: F64,
     max_cells: int = DEFAULT_MAX_CELLS,
+    oblique_deg: float | None = None,
 ) -> tuple[dict[str, Any], tuple[str, ...]]:
-    """The map and feature scores (the numeric fields of :class:`Evaluation`) and notes.
+    """The map and feature scores (the numeric fields of :class:`Evaluation`) and notes;
+    with ``oblique_deg`` and a trajectory also the obliquely seen walls (``oblique``).
     ConfigError when the grid covering both maps (at the truth's resolution) would have
     more than ``max_cells`` cells."""
     notes: list[str] = []
@@ -468,6 +485,16 @@ def evaluate_maps(
     false_occupied, missed = error_breakdown(
         r_occ, run, t_occ & scope, truth_classes, dist_truth, dist_run, tolerance_m
     )
+    oblique: dict[str, float] = {}
+    if oblique_deg is not None and poses_xy is not None and reach_m is not None:
+        from pipeline.tools.oblique_walls import seen_obliquely
+
+        obl = seen_obliquely(t_occ, truth_grid, t_scope, poses_xy, reach_m, oblique_deg)
+        miss = t_scope & ~_within(dist_run, tolerance_m)
+        free_miss = miss & ~_within(dist_run, NEAR_M) & (run == FREE)
+        oblique = {"incidence_deg": float(oblique_deg), "walls": int(obl.sum()),
+                   "missed": int((obl & miss).sum()),
+                   "missed_seen_free": int((obl & free_miss).sum())}
     mean_d: float | None = None
     median_d: float | None = None
     if feature_xy.shape[0] and t_occ.any():
@@ -507,6 +534,7 @@ def evaluate_maps(
         "feature_distance_median_m": median_d,
         "false_occupied": false_occupied,
         "missed": missed,
+        "oblique": oblique,
     }
     return values, tuple(notes)
 
@@ -558,6 +586,7 @@ def evaluate_run(
     truth_trajectory: str | Path | None = None,
     rpe_delta: float = 1.0,
     rpe_unit: str = "m",
+    oblique_deg: float | None = None,
 ) -> Evaluation:
     """Score the run in ``run_dir`` against the nav2 ground-truth map ``truth_yaml``.
 
@@ -566,6 +595,8 @@ def evaluate_run(
     of it. ``sensor_reach_m`` overrides the run's own largest sensor range (m).
     ``truth_trajectory``: CSV of the true poses; adds the ATE and RPE (per ``rpe_delta``
     ``rpe_unit``) of the run's ``trajectory.csv`` against it (:mod:`pipeline.tools.trajectory_error`).
+    ``oblique_deg`` (with ``trajectory``): count the true walls the path mostly saw more
+    than this many degrees off their normal (:mod:`pipeline.tools.oblique_walls`).
     InputError for a run directory missing files, FormatError for unreadable ones.
     """
     from formats.writers.features_parquet import read_features
@@ -599,6 +630,7 @@ def evaluate_run(
         run_map.classes, run_map.grid, truth.classes, truth.grid,
         tolerance_m=tolerance_m, poses_xy=poses, reach_m=reach,
         feature_xy=np.column_stack([features.x, features.y]), max_cells=max_cells,
+        oblique_deg=oblique_deg,
     )
     traj_err = aligned = None
     if truth_trajectory is not None:

@@ -97,3 +97,38 @@ def test_raw_odometry_flag(tmp_path: Path) -> None:
     assert res.exit_code == 1
     assert "raw odometry and a drift model are exclusive" in res.output
     assert not (tmp_path / "b.mcap").exists()
+
+
+def test_sonar_model_param_seed_and_firing_rate(tmp_path: Path) -> None:
+    from formats import open_log
+    from formats.contract import RangeBatch
+
+    def ranges(path: Path) -> RangeBatch:
+        with open_log(path) as reader:
+            return RangeBatch.concat([b for b in reader.batches() if isinstance(b, RangeBatch)])
+
+    base = ["emulate", str(INTEL), "--max-scans", "40", "-q"]
+    runs = {
+        "ideal": ["--sonar-model", "ideal"],
+        "real": [],
+        "real_again": [],
+        "real_seed": ["--seed", "5"],
+        "rate": ["--firing-rate", "25"],
+    }
+    for name, extra in runs.items():
+        res = CliRunner().invoke(app(), [*base, "-o", str(tmp_path / f"{name}.mcap"), *extra])
+        assert res.exit_code == 0, res.output
+    r = {name: ranges(tmp_path / f"{name}.mcap") for name in runs}
+    assert len(r["ideal"]) == len(r["real"]) == 320
+    assert (r["real"].range_m == r["real_again"].range_m).all()  # seeded
+    assert (r["real"].range_m != r["real_seed"].range_m).any()
+    # The realistic sonar loses oblique walls: more max-range readings than the ideal one.
+    assert (r["real"].range_m >= 5.0).sum() > (r["ideal"].range_m >= 5.0).sum()
+    # 25 readings/s over the 40 scans' span, every sonar of the 16-sonar ring in turn.
+    span = (r["ideal"].t_ns[-1] - r["ideal"].t_ns[0]) / 1e9
+    assert abs(len(r["rate"]) - 25 * span) <= 1
+    assert r["rate"].sensor_id[:17].tolist() == [*range(16), 0]
+    bad = CliRunner().invoke(app(), [*base, "-o", str(tmp_path / "x.mcap"),
+                                     "--sonar-param", "margin_db=-3"])
+    assert bad.exit_code == 1 and "'margin_db' must be in [0, 200]" in bad.output
+    assert not (tmp_path / "x.mcap").exists()

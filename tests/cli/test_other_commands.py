@@ -114,3 +114,17 @@ def test_info_prints_exact_nanosecond_stamps(runner):
     frac = start.split(".")[1][:9]
     assert start.rstrip(")").endswith(frac)
     assert "609 msgs" in result.output
+
+
+def test_simulate_ideal_sonar_is_the_sample_log_and_realistic_is_the_default(runner, tmp_path):
+    # sample_logs/regenerate.sh's office run, with the ideal sonar: the committed bytes.
+    common = ["simulate", str(SAMPLES / "worlds" / "office.toml"), "--speed", "0.5",
+              "--ring-rate", "5", "--seed", "1", "-f", "mcap", "--compression", "zstd"]
+    ideal = tmp_path / "ideal.mcap"
+    assert runner.invoke(app, [*common, "-o", str(ideal), "--sonar-model", "ideal"]).exit_code == 0
+    assert ideal.read_bytes() == (SAMPLES / "office" / "office.mcap").read_bytes()
+    real = tmp_path / "real.mcap"
+    assert runner.invoke(app, [*common, "-o", str(real)]).exit_code == 0
+    assert real.read_bytes() != ideal.read_bytes()
+    bad = runner.invoke(app, [*common, "-o", str(tmp_path / "x.mcap"), "--sonar-param", "k_d=7"])
+    assert bad.exit_code == 1 and "'k_d' must be in [0, 1]" in bad.output

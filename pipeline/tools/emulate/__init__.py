@@ -1,12 +1,15 @@
 """Emulate a sonar ring from real laser scans (``sonarmap emulate``).
 
-Each virtual sonar of a ring reads, per laser scan, the **shortest laser return inside its
-cone**: laser endpoints are put in the robot base frame, and those whose bearing from the
-sonar's origin is within ±β/2 of its axis give the reading (their minimum distance from
-the sonar). No return inside the cone closer than the sonar's maximum range reads the
-maximum range (the mapper's "no echo"); a return closer than the sonar's minimum range
-reads −inf (REP 117, too close). Laser readings at or above the laser's maximum, below its
-minimum, or not finite are not echoes.
+Each virtual sonar of a ring reads, per laser scan, what the sonar physics model hears
+from the laser's surfaces in its beam (``sonar_model="realistic"``, the default:
+:mod:`pipeline.tools.sonar`, docs/SONAR_PHYSICS.md), or with the ideal sonar the
+**shortest laser return inside its cone**: laser endpoints are put in the robot base
+frame, and those whose bearing from the sonar's origin is within ±β/2 of its axis give the
+reading (their minimum distance from the sonar). No echo reads the maximum range (the
+mapper's "no echo"); an echo closer than the sonar's minimum range reads −inf (REP 117,
+too close). Laser readings at or above the laser's maximum, below its minimum, or not
+finite are not echoes. ``firing_rate_hz`` fires the ring at its real rate into the laser
+map instead (:mod:`.firing`).
 
 Only sonars the laser can see for are emitted: a sonar whose beam axis, followed to its
 maximum range, lies outside the laser's field of view is dropped (with a Pioneer ring and a

@@ -18,6 +18,8 @@ from formats.log_writers import LogContent
 from pipeline.drift import DriftModel, apply_drift
 from pipeline.se2 import compose, inverse
 from pipeline.tools.emulate.ring import cone_coverage, laser_view
+from pipeline.tools.sonar.model import SonarPhysics
+from pipeline.tools.sonar.scan_scene import scan_readings
 from pipeline.tools.sonar_ring import SonarRing
 
 CHUNK_CELLS = 2_000_000  # bound on (scan × beam × sonar) and ray samples held at once
@@ -53,7 +55,8 @@ class Emulation:
     """An emulated sonar log: the content to write, the per-scan readings and notes."""
 
     content: LogContent
-    ranges: F64  # (S, K) readings of the emitted sonars
+    ranges: F64  # (S, K) readings of the emitted sonars per scan; (N,) in firing order
+    # when fired at a rate (pipeline.tools.emulate.firing)
     ring: SonarRing  # the emitted sonars
     dropped: tuple[str, ...]  # sonars not emitted (outside the laser's view)
     notes: tuple[str, ...]
@@ -92,13 +95,13 @@ class Emulation:
         lo = int(np.searchsorted(t, t0, side="right")) - 1
         hi = int(np.searchsorted(t, t1, side="left")) + 1
         # The rigid motion taking the odometry's pose at the first scan onto the true one.
-        motion = compose([true.x[0], true.y[0], true.yaw[0]], inverse(_pose_at(odometry, t0)))
+        motion = compose([true.x[0], true.y[0], true.yaw[0]], inverse(pose_at(odometry, t0)))
         sl = slice(lo, hi)
         x, y, yaw = compose(motion, np.column_stack(
             [odometry.x[sl], odometry.y[sl], odometry.yaw[sl]])).T
         moved = PoseBatch(t[sl].copy(), x.copy(), y.copy(), yaw.copy(), odometry.parent_frame,
                           true.child_frame)
-        ex, ey, _ = _pose_at(moved, true.t_ns)
+        ex, ey, _ = pose_at(moved, true.t_ns)
         off = np.hypot(ex - true.x, ey - true.y)
         note = (
             f"poses: the log's raw wheel odometry ({hi - lo} poses, moved rigidly to start at "
@@ -117,7 +120,7 @@ class Emulation:
         )
 
 
-def _pose_at(poses: PoseBatch, t_ns: int | I64) -> tuple[F64, F64, F64]:
+def pose_at(poses: PoseBatch, t_ns: int | I64) -> tuple[F64, F64, F64]:
     """Poses at stamps inside the batch's span: linear in x, y and in the unwrapped yaw."""
     t = (poses.t_ns - poses.t_ns[0]).astype(np.float64)
     q = (np.asarray(t_ns, dtype=np.int64) - poses.t_ns[0]).astype(np.float64)
@@ -130,8 +133,17 @@ def _span_s(t_ns: I64) -> str:
     return f"{t_ns[0] / 1e9:.3f}…{t_ns[-1] / 1e9:.3f} s"
 
 
-def emulate(log: LaserLog, ring: SonarRing, *, require_full_cone: bool = False) -> Emulation:
-    """Emulate the ring's sonars the laser can see for over every scan of ``log``."""
+def emulate(
+    log: LaserLog,
+    ring: SonarRing,
+    *,
+    require_full_cone: bool = False,
+    physics: SonarPhysics | None = None,
+    seed: int = 0,
+) -> Emulation:
+    """Emulate the ring's sonars the laser can see for over every scan of ``log``: with
+    ``physics`` the realistic sonar (:mod:`pipeline.tools.sonar`, noise from
+    ``PCG64(seed)``), without it the ideal one (the shortest laser return in the cone)."""
     if len(log) == 0:
         raise InputError("no laser scans to emulate from")
     view = laser_view(log)
@@ -156,7 +168,14 @@ def emulate(log: LaserLog, ring: SonarRing, *, require_full_cone: bool = False) 
     if idx.size == 0:
         raise InputError("no sonar of the ring lies inside the laser's field of view; " + notes[-1])
     sub = ring.take(idx)
-    ranges = emulate_ranges(log, sub)
+    if physics is None:
+        ranges = emulate_ranges(log, sub)
+    else:
+        ranges, counts = scan_readings(log, sub, physics, seed)
+        notes.append(
+            f"realistic sonar (seed {seed}): {counts['ghost']} multipath ghosts, "
+            f"{counts['missed']} missed echoes, {counts['crosstalk']} crosstalk readings"
+        )
     s_n, k_n = ranges.shape
     t = np.repeat(log.t_ns, k_n)
     sid = np.tile(np.arange(k_n, dtype=np.int32), s_n)

@@ -11,6 +11,7 @@ from formats.storage.location import Location
 from pipeline.config import Config
 from pipeline.drift import DriftModel
 from pipeline.tools.emulate.emulation import Emulation, emulate
+from pipeline.tools.emulate.firing import emulate_firing
 from pipeline.tools.emulate.laser_input import load_laser_log
 from pipeline.tools.emulate.laser_map import LaserMap, LaserMapOptions, laser_occupancy_map
 from pipeline.tools.emulate.ring import (
@@ -20,6 +21,7 @@ from pipeline.tools.emulate.ring import (
     ring_from_mounts,
 )
 from pipeline.tools.log_with_reference import reference_paths, write_log_with_reference
+from pipeline.tools.sonar.model import SonarPhysics, check_model_name
 
 
 def output_paths(out_path: Path) -> tuple[Path, Path, Path]:
@@ -64,6 +66,12 @@ class EmulateOptions:
     drift: DriftModel = field(default_factory=DriftModel)  # odometry drift (pipeline.drift)
     drift_seed: int = 0
     raw_odometry: bool = False  # log the laser log's own wheel odometry (real drift)
+    sonar_model: str = "realistic"  # realistic | ideal (pipeline.tools.sonar)
+    physics: SonarPhysics = field(default_factory=SonarPhysics)  # of the realistic model
+    seed: int = 0  # of the realistic model's noise
+    # Readings per second of the whole ring fired into the laser map between scans
+    # (pipeline.tools.emulate.firing); None: one reading per sonar per laser scan.
+    firing_rate_hz: float | None = None
 
 
 @dataclass(frozen=True)
@@ -93,6 +101,9 @@ def run_emulation(
     if opt.raw_odometry and not opt.drift.is_zero:
         raise ConfigError("raw odometry and a drift model are exclusive: the raw odometry "
                           "drifts by itself")
+    physics = opt.physics.validate() if check_model_name(opt.sonar_model) == "realistic" else None
+    if opt.firing_rate_hz is not None and not opt.firing_rate_hz > 0:
+        raise ConfigError(f"firing rate must be > 0 readings/s, got {opt.firing_rate_hz!r}")
     # Refuse existing outputs before the (slow) reading and emulation.
     for q in (out, *output_paths(out)):
         if q.exists() or q.is_symlink():
@@ -112,7 +123,19 @@ def run_emulation(
         laser_topic=opt.laser_topic,
         laser_max_range=opt.laser_max_range,
     )
-    em = emulate(log, ring, require_full_cone=opt.require_full_cone)
+    lmap = laser_occupancy_map(
+        log,
+        LaserMapOptions(
+            resolution=opt.map_resolution or cfg.grid.resolution,
+            max_free_range=opt.max_free_range,
+            max_cells=cfg.grid.max_cells,
+        ),
+    )
+    if opt.firing_rate_hz is not None:
+        em = emulate_firing(log, ring, lmap, opt.firing_rate_hz, physics=physics, seed=opt.seed)
+    else:
+        em = emulate(log, ring, require_full_cone=opt.require_full_cone, physics=physics,
+                     seed=opt.seed)
     if opt.raw_odometry:
         if log.odometry is None:
             raise InputError("the log has no raw odometry apart from its scan poses (CARMEN "
@@ -122,14 +145,6 @@ def run_emulation(
         except InputError as err:
             raise InputError(err.reason, laser_path) from None
     em = em.with_drift(opt.drift, opt.drift_seed)
-    lmap = laser_occupancy_map(
-        log,
-        LaserMapOptions(
-            resolution=opt.map_resolution or cfg.grid.resolution,
-            max_free_range=opt.max_free_range,
-            max_cells=cfg.grid.max_cells,
-        ),
-    )
     paths = write_emulation(em, lmap, out, fmt, compression=opt.compression)
     return EmulationResult(
         paths=paths,

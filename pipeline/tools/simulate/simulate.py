@@ -1,5 +1,8 @@
 """Simulate a sonar log: a robot drives through waypoints in a world, its ring fires.
 
+The sonar is the realistic model of :mod:`pipeline.tools.sonar` (``sonar_model``, the
+default) or the ideal one of :mod:`pipeline.tools.simulate.sonar` (one specular cut-off).
+
 ``simulate`` is pure numpy and seeded: every random draw comes from one
 ``np.random.Generator(PCG64(seed))`` in a fixed order, so the same inputs give the same
 arrays. ``write_simulation`` writes the log (any format of :mod:`formats.log_writers`)
@@ -35,6 +38,9 @@ from pipeline.tools.log_with_reference import reference_paths, write_log_with_re
 from pipeline.tools.simulate.sonar import add_sensor_errors, firing_schedule, true_ranges
 from pipeline.tools.simulate.trajectory import load_waypoints, plan_motion, sample_trajectory
 from pipeline.tools.simulate.world import World, load_world
+from pipeline.tools.sonar.echo import readings
+from pipeline.tools.sonar.model import SonarPhysics, check_model_name
+from pipeline.tools.sonar.world_scene import world_fans
 from pipeline.tools.sonar_ring import SonarRing
 
 _MAPPER = MapperConfig()
@@ -66,6 +72,10 @@ class SimOptions:
     drift_slip_yaw_deg: float = 0.0  # std of one slip's heading error, deg
     drift_slip_scale: float = 0.0  # std of one slip's scale error, fraction
     truth_resolution: float = 0.05  # m, cell size of the ground-truth map
+    # The sonar: "realistic" (pipeline.tools.sonar with ``physics``) or "ideal" (the
+    # closest echo under one specular cut-off, with the noise, misses and crosstalk above).
+    sonar_model: str = "realistic"
+    physics: SonarPhysics = field(default_factory=SonarPhysics)
 
     @property
     def drift(self) -> DriftModel:
@@ -108,6 +118,8 @@ class SimOptions:
             (self.truth_resolution > 0, "truth_resolution", "> 0"),
         ]
         self.drift.validate()
+        check_model_name(self.sonar_model)
+        self.physics.validate()
         for ok, key, rule in checks:
             if not ok:
                 raise ConfigError(
@@ -121,7 +133,8 @@ class SimRanges:
     """Simulated readings in firing order: time (ns), sensor index, range (m).
 
     ``range_m`` is what the log carries (float32-representable, REP 117 values);
-    ``true_range_m`` the noise-free echo distance (+inf: no echo within r_max).
+    ``true_range_m`` the echo distance before range noise and misses (+inf: no echo within
+    r_max; with the realistic sonar the echo heard, a ghost or a neighbour's included).
     ``scan_id`` numbers the ring revolutions.
     """
 
@@ -194,26 +207,34 @@ def simulate(
     ox = px + c * mx - s * my
     oy = py + s * mx + c * my
     alpha = pyaw + ring.yaw[sensor]
-    d_true = true_ranges(
-        world,
-        ox,
-        oy,
-        alpha,
-        ring.fov[sensor],
-        ring.max_range[sensor],
-        ray_step_rad=math.radians(opt.ray_step_deg),
-        specular_cutoff_rad=math.radians(opt.specular_cutoff_deg),
-    )
-    measured = add_sensor_errors(
-        d_true,
-        ring.min_range[sensor],
-        ring.max_range[sensor],
-        rng,
-        sigma_d0=opt.sigma_d0,
-        k_d=opt.k_d,
-        p_miss=opt.p_miss,
-        p_crosstalk=opt.p_crosstalk,
-    )
+    if opt.sonar_model == "realistic":
+        fan = world_fans(world, ox, oy, alpha, ring.max_range[sensor], opt.physics, opt.seed,
+                         ray_step_rad=math.radians(opt.ray_step_deg))
+        echoes = readings(fan, ring.min_range[sensor], ring.max_range[sensor], opt.physics, rng)
+        measured = echoes.range_m
+        first = echoes.first_echo_m
+        d_true = np.where(first < ring.max_range[sensor], first, np.inf)
+    else:
+        d_true = true_ranges(
+            world,
+            ox,
+            oy,
+            alpha,
+            ring.fov[sensor],
+            ring.max_range[sensor],
+            ray_step_rad=math.radians(opt.ray_step_deg),
+            specular_cutoff_rad=math.radians(opt.specular_cutoff_deg),
+        )
+        measured = add_sensor_errors(
+            d_true,
+            ring.min_range[sensor],
+            ring.max_range[sensor],
+            rng,
+            sigma_d0=opt.sigma_d0,
+            k_d=opt.k_d,
+            p_miss=opt.p_miss,
+            p_crosstalk=opt.p_crosstalk,
+        )
     ox_, oy_, oyaw = apply_drift(truth.x, truth.y, truth.yaw, opt.drift, rng)
     logged = Trajectory(truth.t_ns.copy(), ox_, oy_, oyaw)
     ranges = SimRanges(
