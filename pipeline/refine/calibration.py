@@ -9,39 +9,7 @@ determined by all the echoes at once than by any local match. A candidate scale 
 re-integrated under it (:mod:`pipeline.refine.scores`: their *sharpness* and their
 *echo consistency*); this module searches the candidates and decides what is applied.
 
-1. **Heading bias: sharpness.** A heading error rotates whole stretches of the run
-   against each other and blurs every wall, so sharpness peaks at the right bias. The
-   search scans a grid over ``±max_bias`` (steps that turn the heading by at most 4°
-   over the whole path) with ``k = 0`` on a quarter of the echoes, binned in ``2σ`` bins
-   instead of blurred (cheap however far a wrong bias spreads them), then evaluates the
-   best ±2 steps on all and refines twice (steps / 4, ±2 of them). A bias that sharpens the
-   echoes by less than ``min_gain`` (1 % by default) is not applied: measured, the best
-   bias on true poses gains ≤ 0.2 % (office, corridor, four buildings; it still moves the
-   poses of a large building by 0.1 m and costs up to 0.11 F1), on odometry with 0.8°/m of
-   bias 7-77 %. Sharpness rewards any alignment, a lattice's aliases too (the orchard's
-   true poses: +3.7 % under +0.23°/m), so the bias must also make the echoes more
-   consistent than none by ``min_gain``, and its value is the most consistent
-   near the sharpest (:func:`_consistency_gain`, :func:`_most_consistent`). A coarse
-   scan of the consistency over the whole range checks the finding
-   (:func:`_consistent_bias`): where sharpness applies none, or a bias beyond the scan's
-   peak that is less consistent than it, the scan's bias is taken — in repeating
-   structure (shelving, a hall of pillars) the right bias can be *less* sharp than none,
-   and seen by 8 sonars an alias passes both gates, while the right one is the most
-   consistent on every log measured. Where the two scores disagree, the one in the
-   bias's favour must gain ``strong_gain`` (:func:`bias_accepted`,
-   :func:`consistent_bias_accepted`), and the value applied must pass by its own gains.
-2. **Scale** (``max_scale > 0``, the default 0.05), by ``scale_score``: ``"surfaces"`` (the
-   default, :mod:`pipeline.refine.surfaces`: echoes of one plane must agree on its offset;
-   applied only when its standard error establishes it, with the heading bias searched
-   again at the scale found, see :func:`_surface_calibration`; where the offset-only
-   patches establish none, patches with their orientation fitted too, if the two models
-   agree, :func:`_patch_models`) or ``"consistency"``: the bias again, jointly with the
-   scale, near the first answer, by echo consistency (sharpness is biased in scale: a
-   too-short scale packs a wall into fewer cells; the consistency's ratio is not), a grid
-   over ``±max_scale`` in 1 % steps × the bias ± 2 of its coarse steps, refined twice
-   (steps / 4).
-
-Everything is deterministic (no random draws; echoes are thinned evenly).
+Design notes and the measurements behind them: docs/POSE_REFINEMENT.md, "calibration.py".
 """
 
 from __future__ import annotations

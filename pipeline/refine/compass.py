@@ -32,55 +32,7 @@ whole run shares without a single revisit, so the lever arm is the run's length.
   ``c``'s standard error is the larger of the weighted model's and a sandwich over the
   residuals with neighbouring windows correlated (Newey-West, ``HAC_LAG``).
 
-**The wall spectrum** (:func:`wall_spectrum`, :func:`spectrum_turn`): the windows reach
-``max_bias``; a calibration that took an alias of the bias (MIT's Infinite Corridor
-drifted by 0.8°/m, calibrated to −2.81°/m: its track curled into circles) leaves a turning
-no 20 m window can follow. The whole run's chords then say it at once: the lattice's
-strength ``R(c) = |Σ w·e^{4i(θ − c·s)}| / Σ w`` over drifts ``c`` (a Fourier transform over
-travel, frequency ``4c``) peaks where the turn is taken out (the Infinite Corridor: 0.04 at
-the calibration's bias, 0.93 turned by +3.62°/m, which lands at 0.78°/m per reported metre
-for a truth of 0.8 / 1.03). A turn beyond ``max_bias`` is taken as established where the
-turned lattice passes the Rayleigh test (``n·R² ≥ ln(candidates / SPECTRUM_ALPHA)``, no
-lattice at all being the null) and holds at least ``SPECTRUM_MIN_STRENGTH`` of the chords'
-weight (a Manhattan building, not merely directions that are not uniform), the track's own
-lattice is at most ``SPECTRUM_MAX_RATIO`` of it, and the turn tightens each window's own
-lattice by at least half what a drift that size spreads a window by
-(:func:`window_strength`; two parts of a building 40-45° apart, visited one after the
-other, align under a drift of 0.2-0.33°/m that spreads every window instead).
-:func:`pipeline.refine.refine.refine_track` then calibrates again within ``max_bias`` of
-the walls' bias, so that the scale is found under the right heading, and keeps the first
-calibration where no bias there passes the echo scores' gates (the walls propose, the
-echoes accept). On the eight other buildings' drifted, true and real-odometry tracks the
-peak lies within 0.02°/m of the calibration's (``R`` level to 1 %), Acapulco's at its
-−0.074°/m.
-
-**Gate.** The correction is applied where the windows share a lattice (their robust
-scatter about it under ``MAX_WALL_SIGMA_DEG``, half of the 26° that directions with none
-scatter modulo 90°: on true poses the buildings scatter 0.45-4.7°, the Freiburg campus
-outdoors 2.4°; MIT's Infinite Corridor, curled into circles by an alias of its heading bias,
-35°, its "drift" the curl's), the fitted ``c`` stays within ``max_bias`` (the turn a round
-building's walls take is not the odometry's), and ``c`` stands as far from 0 as ``min_z``
-errors would with the error known: Student's t over the windows the robust weights keep
-(the drifted Freiburg 101's six windows gave −0.082°/m at z 3.1 for a drift near 0; six
-windows need 17, twenty 5.2). The odometry is then re-integrated with its heading turned by
-``−c`` per metre (:func:`pipeline.drift.apply_drift`'s heading bias; the start pose, the
-frame, is kept). Where it is applied, the calibration's scale is found again under the
-heading the walls establish (given, not searched: Acapulco's +3.7 % under the capped
-grid's 0.88°/m, +3.1 % under the walls' 0.80°/m, for a drift of 3 % and 0.8°/m).
-
-Measured (``python -m benchmarks.buildings``, benchmarks/RESULTS.md, twenty-seventh
-session, the calibration's bias grid capped): Acapulco drifted by 3 % and 0.8°/m,
-calibrated to 0.88°/m, gives ``c`` =
-−0.074 ± 0.003°/m (z 24): refined F1 0.18 → 0.49 of true poses, ATE 8.35 → 0.33 m; the
-Freiburg campus 0.06 → 0.16. On the true poses and real odometry of nine buildings and on
-every true-pose run of ``drift_variety``, ``held_out`` and ``make compare``, z ≤ 1.9
-(nothing applied). Tried and not kept: the echoes' consistency as a second gate
-(Acapulco's correct heading makes them 3.4 % *less* consistent: that score's flat
-landscape is why the calibration missed), and a random walk of heading on top of the
-drift, its σ by REML (Acapulco's true poses: the walls' own 5-17° bends taken for heading,
-ATE 0 → 1.9 m).
-
-Deterministic: no random draws.
+Design notes and the measurements behind them: docs/POSE_REFINEMENT.md, "compass.py".
 """
 
 from __future__ import annotations

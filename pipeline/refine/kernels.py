@@ -2,52 +2,7 @@
 they release the GIL, so candidate calibrations score on parallel threads); the numpy
 versions in :mod:`pipeline.refine.scores` stay as the reference the tests compare with.
 
-* :func:`consistency_score` — the echo consistency (``Consistency``). The numpy version
-  builds every free-cone sample as an array (echoes × arc points × steps along each ray),
-  shares each hit and free sample bilinearly among the four cells around it (cloud in
-  cell), and reads the Gaussian-blurred densities at each arc point's own position (the
-  weights at its offsets from the cells over ±4σ, normalised): 15-50 ms per candidate
-  calibration, ~150 candidates per scale search. The kernel does the same in two passes
-  without the sample arrays, sums in another order, and makes each point's weights
-  (:func:`gaussian_at`) with two exponentials and a recurrence instead of one
-  exponential per cell (those were half its time: 2.4 → 1.2 ms per candidate of the
-  wide scan on Freiburg 079): scores agree with the reference to ~1e-12. Counting into
-  the nearest cell and reading a cell's value made the score a
-  step function of the calibration (10 cm cells, 10 cm blur): under grid orientations a
-  degree apart its peak over the heading bias moved by ±0.005°/m on Örebro, the whole
-  precision a 60 m building needs (benchmarks/RESULTS.md, fourteenth session).
-  :func:`consistency_placed` places the echoes' arcs and sonars at their poses in the
-  loop; a ray's free samples are placed in a loop the compiler vectorises, and the
-  blurred densities read two rows at a time (:func:`blurred_pair`) — the same operations
-  in the same order: 2.3 → 1.9 ms a call on the drifted Örebro, the same bits.
-* :func:`binned_sharpness` — the wide heading-bias scan's score (``BinnedSharpness``):
-  points counted per bin in an array over their box (or a hash table where that box is
-  large) instead of sorted by ``numpy.unique``; the counts are integers, so the score is
-  the reference's bit for bit
-  (:func:`binned_sharpness_placed`: of the echoes' arcs placed at their poses in the loop).
-* :func:`poses_at` — the odometry re-integrated under many calibrations, read at the
-  echoes' poses (``Placed.poses_many``): :meth:`pipeline.drift.Steps.drifted_many`'s
-  poses to ~1e-11 m without its (calibrations × poses) arrays. A heading bias turns each
-  step by the bias times the travel before it, so the steps are summed per segment of
-  travel once (:func:`step_segments`: Taylor moments in the travel) and each calibration
-  costs a cosine and a sine per segment instead of per step; calibrations that share a
-  bias per reported metre (the surfaces' scale candidates) share one sum, scaled apart.
-  Measured on the Intel lab's real odometry: the wide scan's 401 biases over 12,939
-  poses 0.15 → 0.05 s, the surfaces' candidates 0.28 → 0.07 s.
-* :func:`structure_tensor_at`, :func:`free_samples` — the surface
-  association's (:meth:`pipeline.refine.surfaces.SurfaceScale._associate`): the structure
-  tensor filtered at the hits' cells only instead of three whole-grid filters (of numpy's
-  gradient, scipy's symmetric sums in their order: bit for bit), and the free cones
-  counted per cell without their samples' arrays (numpy's arithmetic per sample: the same
-  counts). Measured, an association 45 → 9 ms on the drifted Örebro (1,523 echoes),
-  23 → 15 ms on the drifted Intel lab (6,484; benchmarks/RESULTS.md, twelfth session).
-
-* :func:`gaussian_blur` — the densities' blur (the sharpness, the surface association,
-  the matcher's field): ``scipy.ndimage.gaussian_filter``'s constant-mode sums bit for bit,
-  each pass along whole rows. It spares a refined run scipy.ndimage's import (with
-  scipy.special, 0.06-0.15 s of a whole run).
-
-All are deterministic (no parallel reductions).
+Design notes and the measurements behind them: docs/POSE_REFINEMENT.md, "kernels.py".
 """
 
 from __future__ import annotations

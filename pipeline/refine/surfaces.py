@@ -11,60 +11,7 @@ only slide along a wall carry no information and no bias.
 
 One evaluation ``f(k₀)``, from the echoes alone:
 
-1. the echoes placed under ``k₀`` (the heading bias held per reported metre); the blurred
-   densities of their whole-cone arcs (``H``) and free cones (``F``, sampled along the
-   cone's edges and axis, weighted as the whole cone) on 10 cm cells (σ = 0.1 m: one
-   cell; measured against 5 cm cells on the twelve true and drifted logs: the leans on
-   true poses +0.2 … +5.2 % → −1.0 … +0.7 %, the drifted Freiburg +3.5 → +3.2 %, the
-   slopes lower, a third to a half less time);
-2. each echo's hit: the arc point of the best ``H / (H + F)`` (as the consistency score);
-   its normal: the structure tensor of ``H`` there (gradients smoothed over 15 cm),
-   turned towards the sonar;
-3. patches: hits binned in 0.3 m cells × 16 normal directions × stretches of ``window_m``
-   (30 m) of travel, a patch's normal the mean of its echoes'; patches of fewer than 3
-   echoes dropped. The travel window keeps the links between echoes the odometry placed
-   from positions not far apart along the path: its random error grows with the travel
-   between two echoes (``σ_xy·√travel``: 11 cm over 30 m at the configured 0.02 m/√m, more
-   than a 3 % scale's signal over 2 m of range), and the long links lean the answer and
-   the association's pull (Intel's true poses +0.68 % without the window, +0.26 % with
-   it; Intel with 0.02 m/√m of noise per step +4.6 % → +3.75 % of 3 %; the slope on the
-   drifted Intel 0.60 → 0.51);
-4. ``c`` per patch eliminated (its mean) and, with ``tilt`` (``calibration_scale_tilt``:
-   by default the fallback where the offset alone establishes no scale,
-   :func:`pipeline.refine.calibration._patch_models`; ``benchmarks/RESULTS.md``, twentieth
-   and twenty-first sessions, has what it gains and costs), the patch's orientation too:
-   the residuals' linear trend along the patch (the hits' position across its normal)
-   removed, in patches of 4 echoes or more. A normal from the density off by ``δ``
-   leaves ``δ ×`` that position in every residual,
-   which the scale absorbs where the robot drives along a wall (the side sonars' hits
-   move with it); fitted, the estimate no longer depends on the normal's error. Measured
-   (one fixed point, the bias of ``k = 0``) on the true poses of seven real buildings
-   emulated: the lean falls on five (Freiburg 079 +1.64 → +1.11 %, ACES +1.50 → +0.60 %,
-   CSAIL +0.88 → +0.53 %), rises on Edmonton (+0.26 → +1.43 %) and FHW (+0.16 → −0.54 %);
-   the standard error falls by up to a third. Then the Cauchy loss of the residuals is
-   scanned over ``k`` (0.5 % steps within ±5 % of ``k₀``); its minimum, placed by a
-   parabola, is ``f(k₀)``.
-
-The association (steps 1-3) is made under ``k₀`` and pulls the answer towards it: ``f(k₀)
-≈ a + c·k₀`` with ``c`` = 0.4-0.95 measured. Half of the pull (on the office run) is the
-hits' rays — which ray of a 30° cone made an echo is chosen where the echoes agree under
-``k₀``, and ``1 − cos γ`` reaches 3.4 %, the size of the scale's effect — and half the
-patches themselves. The estimate is the fixed point ``a / (1 − c)`` of the line through ``f`` at
-``k₀`` = −4 … +4 % (:data:`K0S`, symmetric: a scale error has either sign; ``f`` bends
-away from the truth, and with a line through −2 … +6 % the calibration put a −3 % drift
-on the Intel at −4.0 %, with this one at −3.2 %); ``c`` near 1 means the data hardly move
-the answer. The scale the gates judge is not extrapolated (``recentre``,
-``[pose_refinement] calibration_scale_recentre``): where its fixed point lies beyond the
-``k₀`` the line was fitted to, the window moves 2 % towards it (``f`` evaluated at the
-new end) and the line is fitted again, up to a window about ±4 % (the scale applied is at
-most ±5 %). The bend is what a line through −4 … +4 % reads wrongly there: the Intel lab
-with −4 % (and −0.5°/m) was found at −4.7 % (F1 0.89 of true poses), through −6 … +2 % at
-−4.0 % (0.99); Freiburg 101 −4.8 → −3.9 % (0.85 → 0.96), FHW −4.9 → −4.7 % (0.80 → 0.87);
-a fixed point within ±4 % is found as before (benchmarks/RESULTS.md, thirtieth session).
-Its standard error is the cluster-robust sandwich error of ``f`` (patches as clusters)
-amplified by ``1 / (1 − c)``; the calibration applies the scale only when it stands
-``min_z`` errors clear of 0 (:func:`pipeline.refine.calibration._surface_calibration`).
-Deterministic: no random draws.
+Design notes and the measurements behind them: docs/POSE_REFINEMENT.md, "surfaces.py".
 """
 
 from __future__ import annotations
