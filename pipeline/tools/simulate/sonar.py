@@ -16,7 +16,7 @@ import numpy as np
 
 from formats.arrays import F64, I32, I64
 from formats.errors import ConfigError
-from pipeline.tools.simulate.world import World
+from pipeline.tools.simulate.world import World, segment_distances
 
 # Upper bound on ray×obstacle pairs evaluated at once (memory ≈ 8 B × a few arrays each).
 _MAX_PAIRS = 1 << 21
@@ -52,18 +52,12 @@ def cast_rays(world: World, ox: F64, oy: F64, theta: F64) -> tuple[F64, F64]:
         ax, ay = seg[None, :, 0], seg[None, :, 1]
         ex, ey = seg[None, :, 2] - ax, seg[None, :, 3] - ay
         elen = np.hypot(ex, ey)
-        wx, wy = ax - ox[:, None], ay - oy[:, None]
-        denom = ux[:, None] * ey - uy[:, None] * ex
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (wx * ey - wy * ex) / denom
-            s = (wx * uy[:, None] - wy * ux[:, None]) / denom
-        ok = (denom != 0) & (t > 0) & (s >= 0) & (s <= 1)
-        t = np.where(ok, t, np.inf)
+        t = segment_distances(seg, ox, oy, ux, uy)
         j = np.argmin(t, axis=1)
         rows = np.arange(t.shape[0])
         best = t[rows, j]
         # cos(incidence) = |u · n| with n the unit normal of the segment = |u × e| / |e|.
-        cos_inc = np.abs(denom[rows, j]) / elen[0, j]
+        cos_inc = np.abs(ux * ey[0, j] - uy * ex[0, j]) / elen[0, j]
     cir = world.circles
     if cir.shape[0]:
         fx, fy = ox[:, None] - cir[None, :, 0], oy[:, None] - cir[None, :, 1]

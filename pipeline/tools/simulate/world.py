@@ -109,6 +109,20 @@ class World:
         return out
 
 
+
+def segment_distances(seg: F64, ox: F64, oy: F64, ux: F64, uy: F64) -> F64:
+    """(N, M) distance along each of N rays (origin ``ox, oy``, unit direction ``ux, uy``)
+    to each of M segments ``seg`` (x0, y0, x1, y1); inf where the ray misses it."""
+    ax, ay = seg[None, :, 0], seg[None, :, 1]
+    ex, ey = seg[None, :, 2] - ax, seg[None, :, 3] - ay
+    wx, wy = ax - ox[:, None], ay - oy[:, None]
+    denom = ux[:, None] * ey - uy[:, None] * ex
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (wx * ey - wy * ex) / denom
+        s = (wx * uy[:, None] - wy * ux[:, None]) / denom
+    ok = (denom != 0) & (t > 0) & (s >= 0) & (s <= 1)
+    return np.where(ok, t, np.inf)
+
 def _mark(out: F32, grid: GridSpec, px: F64, py: F64) -> None:
     col = np.floor((px - grid.origin_x) / grid.resolution).astype(np.int64)
     row = np.floor((py - grid.origin_y) / grid.resolution).astype(np.int64)

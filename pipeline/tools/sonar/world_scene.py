@@ -14,7 +14,7 @@ import math
 import numpy as np
 
 from formats.arrays import F64, I64
-from pipeline.tools.simulate.world import World
+from pipeline.tools.simulate.world import World, segment_distances
 from pipeline.tools.sonar.echo import Fan
 from pipeline.tools.sonar.model import SonarPhysics
 from pipeline.tools.sonar.surfaces import critical_angles
@@ -36,13 +36,7 @@ def cast_surfaces(world: World, ox: F64, oy: F64, ux: F64, uy: F64) -> tuple[F64
     if seg.shape[0]:
         ax, ay = seg[None, :, 0], seg[None, :, 1]
         ex, ey = seg[None, :, 2] - ax, seg[None, :, 3] - ay
-        wx, wy = ax - ox[:, None], ay - oy[:, None]
-        denom = ux[:, None] * ey - uy[:, None] * ex
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (wx * ey - wy * ex) / denom
-            s = (wx * uy[:, None] - wy * ux[:, None]) / denom
-        ok = (denom != 0) & (t > 0) & (s >= 0) & (s <= 1)
-        t = np.where(ok, t, np.inf)
+        t = segment_distances(seg, ox, oy, ux, uy)
         j = np.argmin(t, axis=1)
         best = t[rows, j]
         elen = np.hypot(ex[0, j], ey[0, j])
