@@ -125,6 +125,23 @@ class MapperConfig:
         "attributed weight per cell",
         default=0.35,
     )
+    spec_critical_angle_deg: float = doc_field(
+        "specular (§10): median critical angle of a smooth surface, deg: beyond this "
+        "incidence from its normal a surface returns no echo",
+        default=17.0,
+    )
+    spec_critical_spread: float = doc_field(
+        "specular (§10): log-normal spread of the critical angle across surfaces, 1",
+        default=0.35,
+    )
+    spec_normal_radius_m: float = doc_field(
+        "specular (§10): radius over which echo bearings are pooled into a surface normal, m",
+        default=0.1,
+    )
+    spec_normal_source: str = doc_field("x", default="hits")
+    spec_consistency: str = doc_field("x", default="one")
+    spec_max_range_free: bool = doc_field("x", default=False)
+    spec_unknown_visibility: float = doc_field("x", default=1.0)
     seed: int = doc_field("seed of the particle generator (runs are reproducible)", default=0)
     threads: int = doc_field(
         "threads the default method may use: 2 runs the paper's features on a second "

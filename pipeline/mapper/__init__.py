@@ -29,6 +29,10 @@ __all__ = ["AndersoneMapper", "AttributionMapper", "ClassicMapper", "Mapper", "m
 
 def make_mapper(config: MapperConfig, grid: GridSpec) -> Mapper:
     """The mapper named by ``config.method`` (a :class:`~pipeline.methods.Method`)."""
+    if config.method == Method.SPECULAR:
+        from pipeline.mapper.specular import SpecularMapper
+
+        return SpecularMapper(config, grid)
     if config.method == Method.ATTRIBUTION:
         return AttributionMapper(config, grid)
     if config.method == Method.CLASSIC:
