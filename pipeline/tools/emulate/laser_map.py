@@ -1,5 +1,13 @@
 """The reference map of an emulated log: the laser's own occupancy grid, every beam
-ray-cast from the laser pose (log-odds, nav2 trinary when written)."""
+ray-cast from the laser pose (log-odds, nav2 trinary when written).
+
+A cell is a wall only when the laser hits it consistently: at least ``min_hits`` (2) hits,
+and hits more than ``min_hit_share`` (0.25) of the beams that reach it (hits + passes):
+GMapping's occupancy rule (hits / visits over its ``occ_thresh``, 0.25). One stray hit from
+range noise or pose jitter no longer thickens a wall. Cells that fail the rule but whose
+log-odds lean occupied are unknown, not free. The measured effect on wall thickness is in
+docs/EVALUATION.md.
+"""
 
 from __future__ import annotations
 
@@ -25,6 +33,8 @@ class LaserMapOptions:
     p_occ: float = 0.9  # inverse sensor model at the endpoint cell
     p_free: float = 0.4  # ... and along the beam
     max_cells: int = 50_000_000
+    min_hits: int = 2  # a wall cell is hit at least this often ...
+    min_hit_share: float = 0.25  # ... and by more than this share of the beams reaching it
 
 
 @dataclass(frozen=True)
@@ -41,7 +51,8 @@ def laser_occupancy_map(log: LaserLog, options: LaserMapOptions | None = None) -
     """Log-odds map of every beam cast from the laser pose (vectorised sampling at half a
     cell): each beam counts once per cell it crosses as free, its endpoint cell (a return
     below the laser max) as occupied; L = hits·logit(p_occ) + passes·logit(p_free), summed
-    without clamping so the map does not depend on the scan order."""
+    without clamping so the map does not depend on the scan order. Cells that are not walls
+    by the module's rule (consistent hits) but lean occupied get p = 0.5 (unknown)."""
     opt = options if options is not None else LaserMapOptions()
     res = opt.resolution
     if not res > 0:
@@ -114,6 +125,8 @@ def laser_occupancy_map(log: LaserLog, options: LaserMapOptions | None = None) -
     with np.errstate(over="ignore"):  # a cell passed thousands of times: exp → inf, prob 0
         prob = 1.0 / (1.0 + np.exp(-logodds))
     prob[(hits + passes) == 0] = np.nan
+    wall = (hits >= opt.min_hits) & (hits > opt.min_hit_share * (hits + passes))
+    prob[~wall & (prob > 0.5)] = 0.5  # leans occupied without consistent hits: unknown
     shape = grid.shape
     return LaserMap(
         prob.reshape(shape).astype(np.float32),

@@ -85,3 +85,62 @@ def test_written_nav2_map_has_the_three_classes(tmp_path: Path) -> None:
 def test_bad_resolution() -> None:
     with pytest.raises(ConfigError, match=r"laser map resolution must be > 0"):
         laser_occupancy_map(beam_log(), LaserMapOptions(resolution=0.0))
+
+
+def _room_ranges(poses: list[tuple[float, float, float]], angles_deg: np.ndarray,
+                 half: float) -> np.ndarray:
+    """Noiseless ranges from each pose to the walls of the square room |x|, |y| = half."""
+    out = np.empty((len(poses), angles_deg.size))
+    for i, (x, y, yaw) in enumerate(poses):
+        th = yaw + np.radians(angles_deg)
+        c, s = np.cos(th), np.sin(th)
+        with np.errstate(divide="ignore"):
+            tx = np.where(c > 0, (half - x) / c, np.where(c < 0, (-half - x) / c, np.inf))
+            ty = np.where(s > 0, (half - y) / s, np.where(s < 0, (-half - y) / s, np.inf))
+        out[i] = np.minimum(tx, ty)
+    return out
+
+
+def test_noiseless_room_walls_are_one_or_two_cells_thick() -> None:
+    half = 1.98
+    angles = np.arange(-180.0, 180.0, 0.5)
+    rng = np.random.default_rng(5)
+    poses = [(float(x), float(y), float(t)) for x, y, t in
+             zip(rng.uniform(-1.2, 1.2, 40), rng.uniform(-1.2, 1.2, 40),
+                 rng.uniform(-np.pi, np.pi, 40), strict=True)]
+    log = laser_log(_room_ranges(poses, angles, half), angles, poses=poses)
+    m = laser_occupancy_map(log)
+    g = m.grid
+    wall = m.probability > 0.65
+    xs = g.origin_x + (np.arange(g.width) + 0.5) * g.resolution
+    ys = g.origin_y + (np.arange(g.height) + 0.5) * g.resolution
+    inner = (np.abs(xs) < half - 0.3)
+    # Across each wall, along every row/column away from the corners: 1 or 2 wall cells.
+    for side in (-1, 1):
+        band_x = np.abs(xs - side * half) < 0.3  # columns around the wall x = ±half
+        band_y = np.abs(ys - side * half) < 0.3
+        across_x = wall[np.ix_(np.abs(ys) < half - 0.3, band_x)].sum(axis=1)
+        across_y = wall[np.ix_(band_y, inner)].sum(axis=0)
+        assert set(across_x.tolist()) <= {1, 2} and across_x.min() == 1
+        assert set(across_y.tolist()) <= {1, 2}
+    # Nothing inside the room is a wall.
+    assert not wall[np.ix_(np.abs(ys) < half - 0.3, inner)].any()
+
+
+def test_a_wall_needs_two_hits_and_a_fair_share_of_the_beams() -> None:
+    # One beam ends in a cell once: not a wall (one stray hit), but not free either.
+    one = laser_occupancy_map(laser_log([[1.025]], [0.0], poses=[(0.0, 0.025, 0.0)]))
+    end = cell(one, 1.025, 0.025)
+    assert one.hits[end] == 1 and one.probability[end] == 0.5
+    # Three hits, but 11 beams pass through: log-odds say occupied (p 0.89), the share
+    # (3 of 14 beams, under 0.25) says the laser does not hit it consistently.
+    ranges = [[1.025, 1.5]] * 3 + [[1.5, 1.5]] * 4
+    m = laser_occupancy_map(laser_log(ranges, [0.0, 0.0], poses=[(0.0, 0.025, 0.0)] * 7))
+    c = cell(m, 1.025, 0.025)
+    assert m.hits[c] == 3 and m.passes[c] == 11
+    assert m.probability[c] == 0.5
+    ranges = [[1.025, 1.025]] * 2 + [[1.5, 1.5]] * 2
+    m = laser_occupancy_map(laser_log(ranges, [0.0, 0.0], poses=[(0.0, 0.025, 0.0)] * 4))
+    c = cell(m, 1.025, 0.025)
+    assert m.hits[c] == 4 and m.passes[c] == 4
+    assert m.probability[c] > 0.65  # half the beams end there: a wall
