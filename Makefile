@@ -69,24 +69,47 @@ samples: $(STAMP)
 
 # The method comparison on every log with a ground truth, OctoMap beside (README "Results"):
 # the simulated office, corridor and orchard, and five real buildings (the Intel lab and the
-# four Radish logs, sonar emulated from their laser scans into build/compare/).
+# four Radish logs, sonar emulated from their laser scans into build/compare/), each with the
+# ideal sonar (the sample logs; emulate --sonar-model ideal) and with the realistic one
+# (docs/SONAR_PHYSICS.md: simulated and emulated again into build/compare/<name>-realistic).
 COMPARE_DIR := build/compare
 RADISH := freiburg-101 orebro fhw belgioioso
+WORLDS := office corridor orchard
 RADISH_LOGS := $(RADISH:%=$(COMPARE_DIR)/%.mcap)
+REALISTIC := intel $(RADISH) $(WORLDS)
+REALISTIC_LOGS := $(REALISTIC:%=$(COMPARE_DIR)/%-realistic.mcap)
 
 $(COMPARE_DIR)/%.mcap: sample_logs/radish/%-corrected.log.gz | $(STAMP)
 	mkdir -p $(COMPARE_DIR)
 	rm -f $(COMPARE_DIR)/$*.mcap $(COMPARE_DIR)/$*.laser.* $(COMPARE_DIR)/$*.truth.*
-	$(BIN)/sonarmap emulate $< -o $@ --compression zstd
+	$(BIN)/sonarmap emulate $< -o $@ --compression zstd --sonar-model ideal
 
-compare: $(STAMP) $(RADISH_LOGS)
+$(COMPARE_DIR)/%-realistic.mcap: sample_logs/radish/%-corrected.log.gz | $(STAMP)
+	mkdir -p $(COMPARE_DIR)
+	rm -f $(COMPARE_DIR)/$*-realistic.*
+	$(BIN)/sonarmap emulate $< -o $@ --compression zstd --sonar-model realistic
+
+$(COMPARE_DIR)/intel-realistic.mcap: sample_logs/intel-lab/intel-corrected.log.gz | $(STAMP)
+	mkdir -p $(COMPARE_DIR)
+	rm -f $(COMPARE_DIR)/intel-realistic.*
+	$(BIN)/sonarmap emulate $< -o $@ --compression zstd --sonar-model realistic
+
+# The sample logs' simulation (sample_logs/regenerate.sh) with the realistic sonar.
+$(COMPARE_DIR)/%-realistic.mcap: sample_logs/worlds/%.toml | $(STAMP)
+	mkdir -p $(COMPARE_DIR)
+	rm -f $(COMPARE_DIR)/$*-realistic.*
+	$(BIN)/sonarmap simulate $< -o $@ --compression zstd --speed 0.5 --ring-rate 5 --seed 1 \
+	  --sonar-model realistic >/dev/null
+
+compare: $(STAMP) $(RADISH_LOGS) $(REALISTIC_LOGS)
 	$(BIN)/python -m benchmarks.compare_methods --figure docs/comparison.png \
 	  --summary benchmarks/compare_summary.md --logs \
-	  sample_logs/office/office.mcap sample_logs/office/office.truth.yaml \
-	  sample_logs/corridor/corridor.mcap sample_logs/corridor/corridor.truth.yaml \
-	  sample_logs/orchard/orchard.mcap sample_logs/orchard/orchard.truth.yaml \
+	  $(foreach w,$(WORLDS),sample_logs/$(w)/$(w).mcap sample_logs/$(w)/$(w).truth.yaml \
+	    $(COMPARE_DIR)/$(w)-realistic.mcap $(COMPARE_DIR)/$(w)-realistic.truth.yaml) \
 	  sample_logs/intel-lab/intel.mcap sample_logs/intel-lab/intel.laser.yaml \
-	  $(foreach b,$(RADISH),$(COMPARE_DIR)/$(b).mcap $(COMPARE_DIR)/$(b).laser.yaml)
+	  $(COMPARE_DIR)/intel-realistic.mcap $(COMPARE_DIR)/intel-realistic.laser.yaml \
+	  $(foreach b,$(RADISH),$(COMPARE_DIR)/$(b).mcap $(COMPARE_DIR)/$(b).laser.yaml \
+	    $(COMPARE_DIR)/$(b)-realistic.mcap $(COMPARE_DIR)/$(b)-realistic.laser.yaml)
 	$(BIN)/python -m benchmarks.compare_methods --drifted
 	$(BIN)/python -m benchmarks.drift_variety
 

@@ -74,11 +74,11 @@ def simulate_log(spec: LogSpec, path: Path) -> int:
     # The tour and back again is a closed loop through doors only; drive it until the
     # log is long enough, then cut it at exactly ``seconds``.
     loop = np.vstack([wp, wp[-2::-1]])
-    one = simulate(world, loop, SimOptions(seed=spec.seed, ring_rate_hz=RING_HZ))
+    one = simulate(world, loop, SimOptions(seed=spec.seed, ring_rate_hz=RING_HZ, sonar_model="ideal"))
     loop_s = (one.poses.t_ns[-1] - one.poses.t_ns[0]) / 1e9
     laps = int(spec.seconds // loop_s) + 1
     tour = np.vstack([loop[:-1]] * laps + [loop[-1:]])
-    opt = SimOptions(seed=spec.seed, ring_rate_hz=RING_HZ)
+    opt = SimOptions(seed=spec.seed, ring_rate_hz=RING_HZ, sonar_model="ideal")
     sim = simulate(world, tour, opt)
     end = opt.start_ns + round(spec.seconds * 1e9)
     r = sim.ranges

@@ -49,7 +49,8 @@ def make_log(path: Path, seconds: float, speed: float = 0.5) -> float:
     leg = float(np.hypot(*(route[1] - route[0]))) / speed  # s from one end to the other
     legs = max(1, round(seconds / leg))
     wp = route[np.arange(legs + 1) % 2]  # back and forth over the same ground
-    sim = simulate(load_world(WORLD), wp, SimOptions(seed=1, speed=speed, ring_rate_hz=5))
+    sim = simulate(load_world(WORLD), wp, SimOptions(seed=1, speed=speed, ring_rate_hz=5,
+                                                          sonar_model="ideal"))
     content = sim.to_content()
     write_log(content, path, "mcap", compression="zstd")
     t = content.ranges.t_ns

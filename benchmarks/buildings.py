@@ -50,12 +50,12 @@ def building_cases(log: Path, work: Path, odometry: bool = True
     clean = work / name / f"{name}.mcap"
     if not clean.exists():
         clean.parent.mkdir(parents=True, exist_ok=True)
-        run_emulation(log, clean, "mcap")
+        run_emulation(log, clean, "mcap", options=EmulateOptions(sonar_model="ideal"))
     truth, traj = clean.with_name(f"{name}.laser.yaml"), clean.with_name(f"{name}.truth.csv")
     variants = [("drifted", EmulateOptions(drift=DriftModel(DRIFT_SCALE, DRIFT_BIAS_DEG_PER_M),
-                                           drift_seed=0))]
+                                           drift_seed=0, sonar_model="ideal"))]
     if odometry:
-        variants.append(("odometry", EmulateOptions(raw_odometry=True)))
+        variants.append(("odometry", EmulateOptions(raw_odometry=True, sonar_model="ideal")))
     cases = []
     for kind, options in variants:
         log_out = clean.with_name(f"{name}-{kind}.mcap")

@@ -16,7 +16,9 @@ against the truth map, with recall restricted to walls within sensor reach of th
 trajectory (``<stem>.truth.csv`` beside the truth, when present). Prints one Markdown
 table per log (F1, precision, recall, mean feature variance (m²), features, readings/s)
 and, at the end, one summary table of F1 for every log and method with the default's
-margin over OctoMap (``--summary`` also writes it to a file). ``--figure`` writes the
+margin over OctoMap (``--summary`` also writes it to a file); logs named
+``<name>-realistic.*`` (the realistic sonar, docs/SONAR_PHYSICS.md) get a second table
+beside the ideal ``<name>.*``: default and OctoMap with either sonar. ``--figure`` writes the
 maps side by side (one row per log) with labels.
 
 Defaults: every simulated log under ``sample_logs/`` with a ``<stem>.truth.yaml`` beside
@@ -295,10 +297,37 @@ def summary(results: list[tuple[list[Row], str]]) -> str:
         on, off = by["with_correction"].mean_variance, by["without_correction"].mean_variance
         cells.append("–" if on is None or off is None else f"{on:.2e} / {off:.2e}")
         lines.append("| " + " | ".join(cells) + " |")
+    lines += ["", sonar_models(results)]
     lines += ["", "OctoMap's best variant per log: " + "; ".join(
         f"{caption.split(' vs ')[0]}: {r.note}" for rows, caption in results
         for r in rows if r.key == "octomap"), "", thickness(results)]
     return "\n".join(lines)
+
+
+REALISTIC_SUFFIX = "-realistic"
+
+
+def sonar_models(results: list[tuple[list[Row], str]]) -> str:
+    """The default's and OctoMap's F1 with the ideal and the realistic sonar of the same
+    building or world side by side: a log ``<name>-realistic.*`` (``--sonar-model
+    realistic``, docs/SONAR_PHYSICS.md) pairs with the log named ``<name>.*``."""
+    by_name = {caption.split(" vs ")[0].split(".")[0]: {r.key: r for r in rows}
+               for rows, caption in results}
+    lines = ["| log | default, ideal sonar | OctoMap, ideal | lead, ideal "
+             "| default, realistic sonar | OctoMap, realistic | lead, realistic |",
+             "|---|---:|---:|---:|---:|---:|---:|"]
+    for name, real in by_name.items():
+        if not name.endswith(REALISTIC_SUFFIX):
+            continue
+        base = name.removesuffix(REALISTIC_SUFFIX)
+        ideal = by_name.get(base, {})
+        cells = [base]
+        for rows in (ideal, real):
+            d, o = rows.get("attribution"), rows.get("octomap")
+            cells += ["–" if d is None else f"{d.f1:.3f}", "–" if o is None else f"{o.f1:.3f}",
+                      "–" if d is None or o is None else f"{d.f1 - o.f1:+.3f}"]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) if len(lines) > 2 else ""
 
 
 def thickness(results: list[tuple[list[Row], str]]) -> str:
@@ -443,7 +472,7 @@ def drifted_case(case: str, drifted: Path, drift: DriftModel, drift_seed: int = 
         from formats.presets import PRESETS
 
         clean = REPO / "sample_logs" / name / f"{name}.mcap"
-        sim = SimOptions(seed=1, speed=0.5, ring_rate_hz=5.0)
+        sim = SimOptions(seed=1, speed=0.5, ring_rate_hz=5.0, sonar_model="ideal")
         if preset is not None:  # the world's sonars as that preset's ring
             sim = dataclasses.replace(sim, mounts=PRESETS[preset])
             clean = drifted.with_name(f"{name}-{preset}.mcap")
@@ -468,7 +497,7 @@ def drifted_case(case: str, drifted: Path, drift: DriftModel, drift_seed: int = 
         clean = REPO / "build" / "compare" / f"{name}.mcap"
         if not clean.exists():
             clean.parent.mkdir(parents=True, exist_ok=True)
-            run_emulation(src, clean, "mcap")
+            run_emulation(src, clean, "mcap", options=EmulateOptions(sonar_model="ideal"))
         truth = clean.with_name(f"{name}.laser.yaml")
         traj = clean.with_name(f"{name}.truth.csv")
     else:
@@ -476,12 +505,14 @@ def drifted_case(case: str, drifted: Path, drift: DriftModel, drift_seed: int = 
     if preset is not None:
         clean = drifted.with_name(f"{name}-{preset}.mcap")
         if not clean.exists():
-            run_emulation(src, clean, "mcap", options=EmulateOptions(preset=preset))
+            run_emulation(src, clean, "mcap",
+                          options=EmulateOptions(preset=preset, sonar_model="ideal"))
         truth = clean.with_name(f"{clean.stem}.laser.yaml")
         traj = clean.with_name(f"{clean.stem}.truth.csv")
     if not drifted.exists():
-        opts = (EmulateOptions(raw_odometry=True, preset=preset) if real
-                else EmulateOptions(drift=drift, drift_seed=drift_seed, preset=preset))
+        opts = (EmulateOptions(raw_odometry=True, preset=preset, sonar_model="ideal") if real
+                else EmulateOptions(drift=drift, drift_seed=drift_seed, preset=preset,
+                                    sonar_model="ideal"))
         run_emulation(src, drifted, "mcap", options=opts)
     return clean, truth, traj
 

@@ -118,7 +118,8 @@ def main(argv: list[str] | None = None) -> None:
         world = world_file(spec, work)
         for preset in args.presets:
             sim = SimOptions(seed=args.seed, speed=args.speed, ring_rate_hz=args.ring_rate,
-                             pose_rate_hz=args.pose_rate, turn_rate=args.turn_rate)
+                             pose_rate_hz=args.pose_rate, turn_rate=args.turn_rate,
+                             sonar_model="ideal")
             if preset != "ring16":
                 sim = dataclasses.replace(sim, mounts=PRESETS[preset])
             stem = f"{spec.replace('@', '-')}-{preset}"

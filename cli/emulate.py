@@ -119,10 +119,23 @@ def emulate(
                      "ODOM lines) as the robot's poses instead of the corrected scan poses: "
                      "real drift; the truth trajectory keeps the corrected poses."),
     ] = False,
+    sonar_model: Annotated[
+        str,
+        typer.Option("--sonar-model", help="realistic: the sonar physics model (beam pattern, "
+                     "specular loss per surface, multipath, misses, crosstalk, range noise; "
+                     "docs/SONAR_PHYSICS.md); ideal: the shortest laser return in the cone."),
+    ] = "realistic",
+    sonar_param: Annotated[
+        list[str] | None,
+        typer.Option("--sonar-param", help="Override a realistic-model parameter, KEY=VALUE "
+                     "(repeatable; keys and units in docs/SONAR_PHYSICS.md)."),
+    ] = None,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the realistic sonar's noise.")] = 0,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No summary.")] = False,
 ) -> None:
-    """Emulate a sonar ring from real laser scans: each virtual sonar reads the shortest
-    laser return inside its cone (its max range when none). Writes the sonar log, the
+    """Emulate a sonar ring from real laser scans: by default each virtual sonar reads what
+    the sonar physics model hears from the laser's surfaces in its beam (--sonar-model
+    ideal: the shortest laser return inside its cone, its max range when none). Writes the sonar log, the
     laser occupancy map <stem>.laser.yaml/.pgm (the reference) and the trajectory
     <stem>.truth.csv beside it. Sonars outside the laser's view are not emitted.
     The --drift-* options drift the logged odometry (seeded; the truth trajectory keeps
@@ -143,6 +156,7 @@ def emulate(
     from pipeline.config import load_config
     from pipeline.drift import DriftModel
     from pipeline.tools.emulate import EmulateOptions, run_emulation
+    from pipeline.tools.sonar import SonarPhysics, check_model_name
 
     if format not in _FORMATS:
         raise typer.BadParameter(f"must be one of {', '.join(_FORMATS)}", param_hint="--format")
@@ -160,6 +174,9 @@ def emulate(
         drift=DriftModel(drift_scale, drift_heading_bias, drift_xy, drift_yaw).validate(),
         drift_seed=drift_seed,
         raw_odometry=raw_odometry,
+        sonar_model=check_model_name(sonar_model),
+        physics=SonarPhysics().with_overrides(sonar_param or []),
+        seed=seed,
     )
     result = run_emulation(laser_log, output, format, config=cfg, options=options)
     if quiet:

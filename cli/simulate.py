@@ -34,9 +34,28 @@ def register(app: typer.Typer) -> None:
         speed: Annotated[float, typer.Option(help="Robot speed, m/s.")] = 0.3,
         pose_rate: Annotated[float, typer.Option(help="Odometry rate, Hz.")] = 20.0,
         ring_rate: Annotated[float, typer.Option(help="Full sonar ring revolutions per second.")] = 10.0,
-        specular_cutoff: Annotated[float, typer.Option(help="Incidence cut-off, degrees.")] = 60.0,
-        p_miss: Annotated[float, typer.Option(help="Fraction of missed echoes.")] = 0.02,
-        p_crosstalk: Annotated[float, typer.Option(help="Fraction of crosstalk readings.")] = 0.01,
+        sonar_model: Annotated[
+            str,
+            typer.Option(help="realistic: the sonar physics model (docs/SONAR_PHYSICS.md); "
+                         "ideal: the closest echo under one specular cut-off."),
+        ] = "realistic",
+        sonar_param: Annotated[
+            list[str] | None,
+            typer.Option(help="Override a realistic-model parameter, KEY=VALUE (repeatable; "
+                         "keys and units in docs/SONAR_PHYSICS.md)."),
+        ] = None,
+        specular_cutoff: Annotated[
+            float, typer.Option(help="Ideal model: incidence cut-off, degrees.")
+        ] = 60.0,
+        p_miss: Annotated[
+            float | None,
+            typer.Option(help="Fraction of missed echoes (default: 0.02 ideal, 0.03 realistic)."),
+        ] = None,
+        p_crosstalk: Annotated[
+            float | None,
+            typer.Option(help="Fraction of crosstalk readings (default: 0.01 ideal, 0.02 "
+                         "realistic)."),
+        ] = None,
         drift_xy: Annotated[float, typer.Option(help="Odometry position drift, m per √m.")] = 0.0,
         drift_yaw: Annotated[float, typer.Option(help="Odometry yaw drift, rad per √rad.")] = 0.0,
         drift_scale: Annotated[
@@ -63,12 +82,21 @@ def register(app: typer.Typer) -> None:
         from formats.presets import PRESETS
         from pipeline.config import load_config
         from pipeline.tools.simulate.simulate import SimOptions, run_simulation
+        from pipeline.tools.sonar import SonarPhysics, check_model_name
 
         cfg = load_config(config)
         mounts = cfg.sensors.mounts or PRESETS[cfg.sensors.preset or "pioneer-p3dx"]
+        physics = SonarPhysics().with_overrides(
+            [*(sonar_param or []),
+             *([f"p_miss={p_miss}"] if p_miss is not None else []),
+             *([f"p_crosstalk={p_crosstalk}"] if p_crosstalk is not None else [])]
+        )
         opts = SimOptions(
             seed=seed, speed=speed, pose_rate_hz=pose_rate, ring_rate_hz=ring_rate,
-            specular_cutoff_deg=specular_cutoff, p_miss=p_miss, p_crosstalk=p_crosstalk,
+            specular_cutoff_deg=specular_cutoff,
+            p_miss=0.02 if p_miss is None else p_miss,
+            p_crosstalk=0.01 if p_crosstalk is None else p_crosstalk,
+            sonar_model=check_model_name(sonar_model), physics=physics,
             drift_xy=drift_xy, drift_yaw=drift_yaw, drift_scale=drift_scale,
             drift_heading_bias_deg_per_m=drift_heading_bias, mounts=mounts,
         ).validate()

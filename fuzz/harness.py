@@ -202,7 +202,7 @@ def _simulated_content() -> object:
          "circle": [{"center": [2, 1.5], "radius": 0.2}]}
     )
     sim = simulate(world, np.array([[1.0, 1.0], [3.0, 1.0], [3.0, 2.0]]),
-                   SimOptions(seed=3, ring_rate_hz=2))
+                   SimOptions(seed=3, ring_rate_hz=2, sonar_model="ideal"))
     return sim.to_content()
 
 

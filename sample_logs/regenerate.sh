@@ -7,7 +7,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 SM=${SONARMAP:-.venv/bin/sonarmap}
-COMMON=(--speed 0.5 --ring-rate 5 --seed 1)
+COMMON=(--speed 0.5 --ring-rate 5 --seed 1 --sonar-model ideal)
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 

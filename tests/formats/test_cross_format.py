@@ -41,7 +41,7 @@ def content():
                      {"from": [6, 4], "to": [0, 4]}, {"from": [0, 4], "to": [0, 0]}],
          "circle": [{"center": [3, 2], "radius": 0.3}]}
     )
-    sim = simulate(world, np.array([[1.0, 1.0], [5.0, 1.0], [5.0, 3.0]]), SimOptions(seed=3, ring_rate_hz=5))
+    sim = simulate(world, np.array([[1.0, 1.0], [5.0, 1.0], [5.0, 3.0]]), SimOptions(sonar_model="ideal", seed=3, ring_rate_hz=5))
     return sim.to_content()
 
 

@@ -329,7 +329,7 @@ def test_simulated_log_to_content_round_trip(tmp_path: Path) -> None:
         np.array([[-1, -1, 3, -1], [3, -1, 3, 2], [3, 2, -1, 2], [-1, 2, -1, -1]], dtype=float),
         np.empty((0, 3)),
     )
-    sim = simulate(world, np.array([[0.0, 0.0], [1.0, 0.5]]), SimOptions(seed=4))
+    sim = simulate(world, np.array([[0.0, 0.0], [1.0, 0.5]]), SimOptions(sonar_model="ideal", seed=4))
     c = sim.to_content()
     assert len(c.ranges) == len(sim.ranges) and len(c.poses) == len(sim.poses)
     assert sorted(c.mounts) == sorted(sim.sensor_names)

@@ -74,8 +74,8 @@ def test_simulate_drifts_the_log_and_keeps_the_truth() -> None:
 
     world = world_from_dict({"polygon": [{"points": [[0, 0], [8, 0], [8, 4], [0, 4]]}]})
     wp = [[1.0, 2.0], [7.0, 2.0]]
-    clean = simulate(world, wp, SimOptions(seed=3))
-    drifted = simulate(world, wp, SimOptions(seed=3, drift_scale=0.03,
+    clean = simulate(world, wp, SimOptions(sonar_model="ideal", seed=3))
+    drifted = simulate(world, wp, SimOptions(sonar_model="ideal", seed=3, drift_scale=0.03,
                                              drift_heading_bias_deg_per_m=0.8))
     for a in ("t_ns", "x", "y", "yaw"):
         assert np.array_equal(getattr(clean.true_poses, a), getattr(drifted.true_poses, a))
@@ -85,7 +85,7 @@ def test_simulate_drifts_the_log_and_keeps_the_truth() -> None:
     assert travelled == pytest.approx(6.0 * 1.03, rel=2e-3)
     assert math.degrees(drifted.poses.yaw[-1]) == pytest.approx(4.8, abs=0.05)
     with pytest.raises(ConfigError, match="scale_error"):
-        SimOptions(drift_scale=0.9).validate()
+        SimOptions(sonar_model="ideal", drift_scale=0.9).validate()
 
 
 def test_emulation_with_drift_keeps_the_poses_as_truth() -> None:

@@ -18,6 +18,8 @@ from formats.log_writers import LogContent
 from pipeline.drift import DriftModel, apply_drift
 from pipeline.se2 import compose, inverse
 from pipeline.tools.emulate.ring import cone_coverage, laser_view
+from pipeline.tools.sonar.model import SonarPhysics
+from pipeline.tools.sonar.scan_scene import scan_readings
 from pipeline.tools.sonar_ring import SonarRing
 
 CHUNK_CELLS = 2_000_000  # bound on (scan × beam × sonar) and ray samples held at once
@@ -130,8 +132,17 @@ def _span_s(t_ns: I64) -> str:
     return f"{t_ns[0] / 1e9:.3f}…{t_ns[-1] / 1e9:.3f} s"
 
 
-def emulate(log: LaserLog, ring: SonarRing, *, require_full_cone: bool = False) -> Emulation:
-    """Emulate the ring's sonars the laser can see for over every scan of ``log``."""
+def emulate(
+    log: LaserLog,
+    ring: SonarRing,
+    *,
+    require_full_cone: bool = False,
+    physics: SonarPhysics | None = None,
+    seed: int = 0,
+) -> Emulation:
+    """Emulate the ring's sonars the laser can see for over every scan of ``log``: with
+    ``physics`` the realistic sonar (:mod:`pipeline.tools.sonar`, noise from
+    ``PCG64(seed)``), without it the ideal one (the shortest laser return in the cone)."""
     if len(log) == 0:
         raise InputError("no laser scans to emulate from")
     view = laser_view(log)
@@ -156,7 +167,14 @@ def emulate(log: LaserLog, ring: SonarRing, *, require_full_cone: bool = False) 
     if idx.size == 0:
         raise InputError("no sonar of the ring lies inside the laser's field of view; " + notes[-1])
     sub = ring.take(idx)
-    ranges = emulate_ranges(log, sub)
+    if physics is None:
+        ranges = emulate_ranges(log, sub)
+    else:
+        ranges, counts = scan_readings(log, sub, physics, seed)
+        notes.append(
+            f"realistic sonar (seed {seed}): {counts['ghost']} multipath ghosts, "
+            f"{counts['missed']} missed echoes, {counts['crosstalk']} crosstalk readings"
+        )
     s_n, k_n = ranges.shape
     t = np.repeat(log.t_ns, k_n)
     sid = np.tile(np.arange(k_n, dtype=np.int32), s_n)

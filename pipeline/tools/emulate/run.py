@@ -19,6 +19,7 @@ from pipeline.tools.emulate.ring import (
     ring_from_mounts,
 )
 from pipeline.tools.log_with_reference import reference_paths, write_log_with_reference
+from pipeline.tools.sonar.model import SonarPhysics, check_model_name
 
 
 def output_paths(out_path: Path) -> tuple[Path, Path, Path]:
@@ -63,6 +64,9 @@ class EmulateOptions:
     drift: DriftModel = field(default_factory=DriftModel)  # odometry drift (pipeline.drift)
     drift_seed: int = 0
     raw_odometry: bool = False  # log the laser log's own wheel odometry (real drift)
+    sonar_model: str = "realistic"  # realistic | ideal (pipeline.tools.sonar)
+    physics: SonarPhysics = field(default_factory=SonarPhysics)  # of the realistic model
+    seed: int = 0  # of the realistic model's noise
 
 
 @dataclass(frozen=True)
@@ -111,7 +115,9 @@ def run_emulation(
         laser_topic=opt.laser_topic,
         laser_max_range=opt.laser_max_range,
     )
-    em = emulate(log, ring, require_full_cone=opt.require_full_cone)
+    physics = opt.physics.validate() if check_model_name(opt.sonar_model) == "realistic" else None
+    em = emulate(log, ring, require_full_cone=opt.require_full_cone, physics=physics,
+                 seed=opt.seed)
     if opt.raw_odometry:
         if log.odometry is None:
             raise InputError("the log has no raw odometry apart from its scan poses (CARMEN "

@@ -34,6 +34,9 @@ from pipeline.tools.log_with_reference import reference_paths, write_log_with_re
 from pipeline.tools.simulate.sonar import add_sensor_errors, firing_schedule, true_ranges
 from pipeline.tools.simulate.trajectory import load_waypoints, plan_motion, sample_trajectory
 from pipeline.tools.simulate.world import World, load_world
+from pipeline.tools.sonar.echo import readings
+from pipeline.tools.sonar.model import SonarPhysics, check_model_name
+from pipeline.tools.sonar.world_scene import world_fans
 from pipeline.tools.sonar_ring import SonarRing
 
 _MAPPER = MapperConfig()
@@ -61,6 +64,10 @@ class SimOptions:
     drift_scale: float = 0.0  # odometry scale error (0.03: 3 % too long), see pipeline.drift
     drift_heading_bias_deg_per_m: float = 0.0  # odometry heading bias, deg per metre driven
     truth_resolution: float = 0.05  # m, cell size of the ground-truth map
+    # The sonar: "realistic" (pipeline.tools.sonar with ``physics``) or "ideal" (the
+    # closest echo under one specular cut-off, with the noise, misses and crosstalk above).
+    sonar_model: str = "realistic"
+    physics: SonarPhysics = field(default_factory=SonarPhysics)
 
     @property
     def drift(self) -> DriftModel:
@@ -90,6 +97,8 @@ class SimOptions:
             (self.truth_resolution > 0, "truth_resolution", "> 0"),
         ]
         self.drift.validate()
+        check_model_name(self.sonar_model)
+        self.physics.validate()
         for ok, key, rule in checks:
             if not ok:
                 raise ConfigError(
@@ -176,26 +185,34 @@ def simulate(
     ox = px + c * mx - s * my
     oy = py + s * mx + c * my
     alpha = pyaw + ring.yaw[sensor]
-    d_true = true_ranges(
-        world,
-        ox,
-        oy,
-        alpha,
-        ring.fov[sensor],
-        ring.max_range[sensor],
-        ray_step_rad=math.radians(opt.ray_step_deg),
-        specular_cutoff_rad=math.radians(opt.specular_cutoff_deg),
-    )
-    measured = add_sensor_errors(
-        d_true,
-        ring.min_range[sensor],
-        ring.max_range[sensor],
-        rng,
-        sigma_d0=opt.sigma_d0,
-        k_d=opt.k_d,
-        p_miss=opt.p_miss,
-        p_crosstalk=opt.p_crosstalk,
-    )
+    if opt.sonar_model == "realistic":
+        fan = world_fans(world, ox, oy, alpha, ring.max_range[sensor], opt.physics, opt.seed,
+                         ray_step_rad=math.radians(opt.ray_step_deg))
+        echoes = readings(fan, ring.min_range[sensor], ring.max_range[sensor], opt.physics, rng)
+        measured = echoes.range_m
+        first = echoes.first_echo_m
+        d_true = np.where(first < ring.max_range[sensor], first, np.inf)
+    else:
+        d_true = true_ranges(
+            world,
+            ox,
+            oy,
+            alpha,
+            ring.fov[sensor],
+            ring.max_range[sensor],
+            ray_step_rad=math.radians(opt.ray_step_deg),
+            specular_cutoff_rad=math.radians(opt.specular_cutoff_deg),
+        )
+        measured = add_sensor_errors(
+            d_true,
+            ring.min_range[sensor],
+            ring.max_range[sensor],
+            rng,
+            sigma_d0=opt.sigma_d0,
+            k_d=opt.k_d,
+            p_miss=opt.p_miss,
+            p_crosstalk=opt.p_crosstalk,
+        )
     ox_, oy_, oyaw = apply_drift(truth.x, truth.y, truth.yaw, opt.drift, rng)
     logged = Trajectory(truth.t_ns.copy(), ox_, oy_, oyaw)
     ranges = SimRanges(

@@ -117,7 +117,7 @@ def pillar_hall(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[obj
     runs = {}
     for name, scale, bias, mounts in (("true", 0.0, 0.0, None), ("drifted", 0.03, 0.8, None),
                                       ("drifted, 8 sonars", 0.03, 0.8, PRESETS["udacity-8sonar"])):
-        sim = simulate(world, route, SimOptions(seed=1, speed=0.5, ring_rate_hz=5.0,
+        sim = simulate(world, route, SimOptions(sonar_model="ideal", seed=1, speed=0.5, ring_rate_hz=5.0,
                                                 drift_scale=scale,
                                                 drift_heading_bias_deg_per_m=bias,
                                                 **({"mounts": mounts} if mounts else {})))
@@ -375,7 +375,7 @@ def test_a_strongly_sharper_bias_is_applied_where_the_consistency_stays_level(
 
     src = Path(__file__).resolve().parents[3] / "sample_logs" / "radish" / "belgioioso-corrected.log.gz"
     log = tmp_path / "belgioioso.mcap"
-    run_emulation(src, log, "mcap", options=EmulateOptions(drift=DriftModel(0.03, 0.8)))
+    run_emulation(src, log, "mcap", options=EmulateOptions(sonar_model="ideal", drift=DriftModel(0.03, 0.8)))
     pr = Config().pose_refinement
     gap = round(pose_gap_limit_s(0, 1.0) * 1e9)  # the scans 1 s apart (the log has no time)
     track, echoes = log_echoes(log, pr.echo_reach_m, gap)
@@ -408,7 +408,7 @@ def test_yaw_noise_alone_gets_no_heading_bias(tmp_path: Path, building: str) -> 
     src = (Path(__file__).resolve().parents[3] / "sample_logs" / "radish"
            / f"{building}-corrected.log.gz")
     log = tmp_path / f"{building}.mcap"
-    run_emulation(src, log, "mcap", options=EmulateOptions(drift=DriftModel(noise_yaw=0.01)))
+    run_emulation(src, log, "mcap", options=EmulateOptions(sonar_model="ideal", drift=DriftModel(noise_yaw=0.01)))
     pr = Config().pose_refinement
     track, echoes = log_echoes(log, pr.echo_reach_m, round(pose_gap_limit_s(0, 1.0) * 1e9))
     cal = configured_calibration(*track, echoes, pr)
@@ -452,7 +452,7 @@ def _scripted_refinement(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
     tmp_path.mkdir(parents=True, exist_ok=True)
     src = Path(__file__).resolve().parents[3] / "sample_logs" / "radish" / "orebro-corrected.log.gz"
     log = tmp_path / "orebro.mcap"
-    run_emulation(src, log, "mcap", options=EmulateOptions(drift=DriftModel(0.03, 0.8)))
+    run_emulation(src, log, "mcap", options=EmulateOptions(sonar_model="ideal", drift=DriftModel(0.03, 0.8)))
     cfg = Config()
     refine = Config(pose_refinement=dataclasses.replace(cfg.pose_refinement, enabled=True,
                                                         calibration_scale_tilt="off"))
@@ -507,7 +507,7 @@ def test_front_sonars_near_scale_misled_in_shelving_gives_way_to_the_far_one(
 
     world = Path(__file__).resolve().parents[3] / "sample_logs" / "worlds" / "warehouse.toml"
     log = tmp_path / "warehouse.mcap"
-    run_simulation(world, log, "mcap", options=SimOptions(
+    run_simulation(world, log, "mcap", options=SimOptions(sonar_model="ideal",
         seed=1, speed=0.5, ring_rate_hz=5.0, mounts=PRESETS["pioneer-p3dx-front"],
         drift_scale=0.03, drift_heading_bias_deg_per_m=0.8))
     cfg = Config()

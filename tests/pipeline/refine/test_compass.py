@@ -204,7 +204,7 @@ def test_a_round_hall_is_no_compass(tmp_path):
     waypoints = ring(7.0, 24) * 4
     log = tmp_path / "round.mcap"
     write_simulation(simulate(world, [*waypoints, waypoints[0]],
-                              SimOptions(seed=3, speed=0.5, ring_rate_hz=5.0)), log, "mcap")
+                              SimOptions(sonar_model="ideal", seed=3, speed=0.5, ring_rate_hz=5.0)), log, "mcap")
     (t, x, y, yaw), echoes = log_echoes(log, 3.0)
     dx, dy, dyaw = apply_drift(x, y, yaw, DriftModel(heading_bias_deg_per_m=0.05))
     out = _correction(t, dx, dy, dyaw, echoes.on_track(t, dx, dy, dyaw),

@@ -29,7 +29,7 @@ WAYPOINTS = [[1.5, 1.5], [8.5, 3.0], [8.5, 4.8], [1.5, 4.8], [1.5, 1.5], [8.5, 3
 def drifted_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("drift") / "room.mcap"
     sim = simulate(world_from_dict(WORLD), WAYPOINTS,
-                   SimOptions(seed=2, speed=0.5, ring_rate_hz=5.0, drift_scale=0.03,
+                   SimOptions(sonar_model="ideal", seed=2, speed=0.5, ring_rate_hz=5.0, drift_scale=0.03,
                               drift_heading_bias_deg_per_m=0.8))
     write_simulation(sim, out, "mcap")
     return out
@@ -109,7 +109,7 @@ def test_refinement_on_true_poses_barely_moves_them(tmp_path: Path) -> None:
     from pipeline.run import run
 
     out = tmp_path / "clean.mcap"
-    sim = simulate(world_from_dict(WORLD), WAYPOINTS, SimOptions(seed=2, speed=0.5,
+    sim = simulate(world_from_dict(WORLD), WAYPOINTS, SimOptions(sonar_model="ideal", seed=2, speed=0.5,
                                                                  ring_rate_hz=5.0))
     write_simulation(sim, out, "mcap")
     cfg = Config(pose_refinement=PoseRefinementConfig(enabled=True))

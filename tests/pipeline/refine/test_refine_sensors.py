@@ -48,7 +48,7 @@ def drifted_run(layout: str, tmp: Path, drift: bool = True, laps: int = 1
 
     mounts, rate = LAYOUTS[layout]
     sim = simulate(world_from_dict(WORLD), WAYPOINTS + WAYPOINTS[1:] * (laps - 1),
-                   SimOptions(seed=3, speed=0.4, ring_rate_hz=rate, mounts=mounts,
+                   SimOptions(sonar_model="ideal", seed=3, speed=0.4, ring_rate_hz=rate, mounts=mounts,
                               drift_scale=0.03 if drift else 0.0,
                               drift_heading_bias_deg_per_m=0.8 if drift else 0.0))
     tmp.mkdir(parents=True, exist_ok=True)

@@ -33,7 +33,7 @@ WAYPOINTS = [[1.5, 1.5], [8.5, 3.0], [8.5, 4.8], [1.5, 4.8], [1.5, 1.5], [8.5, 3
 def true_run(tmp_path_factory: pytest.TempPathFactory) -> Run:
     """A room driven by a Pioneer's 16 sonars: its true poses and echoes (whole cones)."""
     sim = simulate(world_from_dict(WORLD), WAYPOINTS,
-                   SimOptions(seed=3, speed=0.4, ring_rate_hz=5.0,
+                   SimOptions(sonar_model="ideal", seed=3, speed=0.4, ring_rate_hz=5.0,
                               mounts=PRESETS["pioneer-p3dx"]))
     log = tmp_path_factory.mktemp("cal") / "room.mcap"
     write_simulation(sim, log, "mcap")

@@ -32,7 +32,7 @@ def true_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[tuple[np.ndarray
     from pipeline.run import prepare
 
     sim = simulate(world_from_dict(WORLD), LOOP * 3 + [LOOP[0]],
-                   SimOptions(seed=5, speed=0.5, ring_rate_hz=5.0))
+                   SimOptions(sonar_model="ideal", seed=5, speed=0.5, ring_rate_hz=5.0))
     log = tmp_path_factory.mktemp("stretches") / "loops.mcap"
     write_simulation(sim, log, "mcap")
     cfg = Config()
@@ -143,7 +143,7 @@ def test_true_poses_the_patches_loss_would_move_are_kept_by_the_echoes_consisten
 
     worlds = Path(__file__).resolve().parents[3] / "sample_logs" / "worlds"
     sim = simulate(load_world(worlds / "rooms.toml"), load_waypoints(worlds / "rooms.waypoints.csv"),
-                   SimOptions(seed=3, speed=0.5, ring_rate_hz=5.0, mounts=PRESETS["udacity-8sonar"]))
+                   SimOptions(sonar_model="ideal", seed=3, speed=0.5, ring_rate_hz=5.0, mounts=PRESETS["udacity-8sonar"]))
     write_simulation(sim, tmp_path / "rooms.mcap", "mcap")
     cfg = Config()
     with open_log(tmp_path / "rooms.mcap", cfg) as reader:

@@ -47,7 +47,7 @@ def test_intel_log_copy_counts() -> None:
 
 
 def test_first_50_scans_emulate_write_and_read_back(tmp_path: Path) -> None:
-    opts = EmulateOptions(max_scans=50)
+    opts = EmulateOptions(sonar_model="ideal", max_scans=50)
     res = run_emulation(INTEL, tmp_path / "intel.mcap", "mcap", options=opts)
     assert [p.name for p in res.paths] == [
         "intel.mcap",
@@ -84,7 +84,7 @@ def test_first_50_scans_emulate_write_and_read_back(tmp_path: Path) -> None:
 
 
 def test_csv_output_reads_back(tmp_path: Path) -> None:
-    run_emulation(INTEL, tmp_path / "intel.csv", "csv", options=EmulateOptions(max_scans=10))
+    run_emulation(INTEL, tmp_path / "intel.csv", "csv", options=EmulateOptions(sonar_model="ideal", max_scans=10))
     ranges, poses, _ = read_back(tmp_path / "intel.csv")
     assert len(ranges) == 80
     assert poses == 10

@@ -81,7 +81,7 @@ def test_odometry_that_does_not_cover_the_scans_is_refused() -> None:
 
 
 def test_intel_raw_odometry_drifts_from_the_corrected_poses(tmp_path: Path) -> None:
-    opts = EmulateOptions(max_scans=200, raw_odometry=True)
+    opts = EmulateOptions(sonar_model="ideal", max_scans=200, raw_odometry=True)
     res = run_emulation(INTEL, tmp_path / "odo.mcap", "mcap", options=opts)
     note = next(n for n in res.notes if n.startswith("poses: the log's raw wheel odometry"))
     truth = read_trajectory(tmp_path / "odo.truth.csv")
@@ -93,11 +93,11 @@ def test_intel_raw_odometry_drifts_from_the_corrected_poses(tmp_path: Path) -> N
 
 def test_raw_odometry_refusals(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="raw odometry and a drift model are exclusive"):
-        run_emulation(INTEL, tmp_path / "a.mcap", "mcap", options=EmulateOptions(
+        run_emulation(INTEL, tmp_path / "a.mcap", "mcap", options=EmulateOptions(sonar_model="ideal",
             raw_odometry=True, drift=DriftModel(scale_error=0.03)))
     with pytest.raises(InputError, match=r"orebro-corrected\.log\.gz: the log has no raw odometry"):
         run_emulation(OREBRO, tmp_path / "b.mcap", "mcap",
-                      options=EmulateOptions(raw_odometry=True))
+                      options=EmulateOptions(sonar_model="ideal", raw_odometry=True))
     assert not list(tmp_path.iterdir())  # nothing half-written
 
 

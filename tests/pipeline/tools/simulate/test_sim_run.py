@@ -75,7 +75,7 @@ def test_sampled_trajectory_rate_and_wrapped_yaw() -> None:
 
 
 def _opts(**kw: object) -> SimOptions:
-    return SimOptions(**kw)  # type: ignore[arg-type]
+    return SimOptions(**{"sonar_model": "ideal", **kw})  # type: ignore[arg-type]
 
 
 def test_simulation_shapes_order_and_echoes() -> None:
@@ -172,7 +172,7 @@ def test_write_simulation_truth_files(tmp_path: Path) -> None:
 
 
 def test_run_simulation_with_shipped_world(tmp_path: Path) -> None:
-    opts = SimOptions(seed=3)
+    opts = SimOptions(sonar_model="ideal", seed=3)
     paths = run_simulation(WORLDS / "corridor.toml", tmp_path / "c.mcap", "mcap", options=opts)
     assert [p.name for p in paths] == ["c.mcap", "c.truth.yaml", "c.truth.pgm", "c.truth.csv"]
     assert all(p.is_file() for p in paths)
