@@ -38,9 +38,10 @@ class MapperConfig:
     """Parameters of the mapping method (ALGORITHM.md), with its documented defaults."""
 
     method: Method = doc_field(  # noqa: RUF009 - doc_field is dataclasses.field with a doc
-        "mapping method: 'attribution' (echo attribution, §9; the default), 'andersone' "
-        "(the paper's, §1-5) or 'classic' (log-odds baseline, §8)",
-        default=Method.ATTRIBUTION,
+        "mapping method: 'specular' (echo attribution with specular surfaces, §10; the "
+        "default), 'attribution' (echo attribution, §9), 'andersone' (the paper's, §1-5) or "
+        "'classic' (log-odds baseline, §8)",
+        default=Method.SPECULAR,
     )
     sigma_d0: float = doc_field("σ_d0, distance uncertainty at zero range, m (eq. 2)", default=0.01)
     k_d: float = doc_field("k_d, growth of distance uncertainty with range (eq. 2)", default=0.01)
@@ -126,22 +127,24 @@ class MapperConfig:
         default=0.35,
     )
     spec_critical_angle_deg: float = doc_field(
-        "specular (§10): median critical angle of a smooth surface, deg: beyond this "
-        "incidence from its normal a surface returns no echo",
-        default=17.0,
+        "specular (§10): median critical angle of a surface, deg: a ray that meets a smooth "
+        "surface farther than this from its normal is reflected away and returns no echo",
+        default=25.0,
     )
     spec_critical_spread: float = doc_field(
-        "specular (§10): log-normal spread of the critical angle across surfaces, 1",
+        "specular (§10): spread of the critical angle across surfaces (σ of its logarithm), 1",
         default=0.35,
     )
     spec_normal_radius_m: float = doc_field(
-        "specular (§10): radius over which echo bearings are pooled into a surface normal, m",
+        "specular (§10): radius over which the bearings of the echo arcs covering a cell are "
+        "pooled into its surface normal, m",
         default=0.1,
     )
-    spec_normal_source: str = doc_field("x", default="hits")
-    spec_consistency: str = doc_field("x", default="one")
-    spec_max_range_free: bool = doc_field("x", default=False)
-    spec_unknown_visibility: float = doc_field("x", default=1.0)
+    spec_max_range_free: bool = doc_field(
+        "specular (§10): readings with no echo are free evidence out to r_max, weighted like "
+        "any ray by the chance that a surface there would have answered",
+        default=True,
+    )
     seed: int = doc_field("seed of the particle generator (runs are reproducible)", default=0)
     threads: int = doc_field(
         "threads the default method may use: 2 runs the paper's features on a second "

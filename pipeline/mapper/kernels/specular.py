@@ -1,20 +1,19 @@
-"""Compiled per-reading loops of the specular method (ALGORITHM.md §10): echo attribution
-with the map's surfaces in the way.
+"""Compiled per-reading loop of the specular method (ALGORITHM.md §10).
 
-One reading's cone out to ``r_out`` (the far edge of its echo's arc) is visited cell by
-cell. A cell the current map holds occupied, with surface normal line at angle ``psi``,
-is *seen* by the reading's ray to it with probability ``visible(θ)`` (θ the incidence,
-between the ray and the normal line; :func:`visible`); where that is below one half the
-wall is silent to the ray and reflects it away, so the ray stops there: cells farther along
-the same bearing (within the wall cell's angular width) get no free evidence and cannot
-have produced the echo. Free evidence of an unoccluded cell closer than ``r_free`` is 1,
-or ``visible(θ)`` for an occupied cell (an oblique wall passed by a ray says nothing about
-the wall). Arc cells (``r_inner ≤ dist < r_out``) that are not occluded are counted
-(``count`` mode) or, in ``attribute`` mode, are candidates unless the log's free evidence
-rules them out (``free > ratio·arcs``, as §9); the echo is spread over its ``n``
-candidates, ``1/n**dilution`` each, and each candidate also adds the echo's weighted
-bearing as a doubled angle (``cos 2φ, sin 2φ``: an axial direction) to ``dir_c, dir_s``,
-from which the next map takes its surface normals.
+One reading's cone out to ``cones[i, 2]`` (the far edge of its echo's arc, or ``r_max``
+for a reading with no echo) is visited cell by cell (the cell rule of
+:mod:`pipeline.mapper.kernels.cone`). A cell of the surfaces grid ``occ`` whose normal line
+``psi`` (rad) is met by the ray at incidence θ answers with probability ``visible(θ)``
+(:func:`visible`); where that is below one half the surface is silent to the ray and
+reflects it away, so the ray stops: farther cells within the cell's angular width get no
+evidence from the reading. An unoccluded cell closer than ``r_free`` gets free evidence
+``q·visible(θ) + (1 − q)·v_unknown`` (``q`` = the consistency of its pooled normal,
+``v_unknown`` = visibility of a surface of unknown orientation); arc cells
+(``r_inner ≤ dist``) are counted (``attribute = False``) or, with ``attribute``, are an
+echo's candidates unless ``free_in > ratio·arcs_in`` (as §9); the echo is spread over its
+``n`` candidates, ``1/n**dilution`` each. In ``attribute`` mode every arc cell also adds
+its bearing φ from the sonar as a doubled angle (``cos 2φ, sin 2φ``: an axial direction)
+to ``arc_c, arc_s``, from which the normals are pooled.
 
 Loops run in reading order and add in that order, so results are deterministic.
 """
@@ -33,17 +32,23 @@ MAX_BINS = 2048  # angular bins of one cone's occlusion profile
 
 
 @njit(cache=True)
-def visible(bearing: float, psi: float, table: F64, step: float) -> float:
-    """The probability that a surface with normal line ``psi`` echoes a ray at
-    ``bearing`` (rad): the critical-angle survival ``table`` at the incidence θ ∈ [0, π/2],
-    sampled every ``step`` rad."""
+def incidence(bearing: float, psi: float) -> float:
+    """The angle (rad, in [0, π/2]) between a ray at ``bearing`` and the normal line ``psi``."""
     theta = abs(wrap_angle(bearing - psi))
     if theta > 0.5 * math.pi:
         theta = math.pi - theta
-    k = int(theta / step)
+    return theta
+
+
+@njit(cache=True)
+def visible(bearing: float, psi: float, table: F64, step: float) -> float:
+    """The probability that a surface with normal line ``psi`` echoes a ray at ``bearing``:
+    ``table`` (the critical angle's survival function) at the incidence, every ``step`` rad."""
+    x = incidence(bearing, psi) / step
+    k = int(x)
     if k >= table.shape[0] - 1:
         return table[table.shape[0] - 1]
-    f = theta / step - k
+    f = x - k
     return table[k] * (1.0 - f) + table[k + 1] * f
 
 
@@ -59,11 +64,13 @@ def _reach_cells(cones: F64, res: float) -> int:
 def trace_readings(
     cones: F64, up_down: B, r_inner: F64, r_free: F64, alpha: F64, half_fov: F64,
     gx: float, gy: float, res: float, occ: B, occ_rows: I32, psi: F32, cons: F32,
-    table: F64, step: float, attribute: bool, arc_c: F32, arc_s: F32, unknown_vis: float, free_in: F32, arcs_in: F32, ratio: float,
-    dilution: float, free_out: F32, arcs_out: F32, hits: F32, dir_c: F32, dir_s: F32,
+    table: F64, step: float, v_unknown: float, attribute: bool, free_in: F32,
+    arcs_in: F32, ratio: float, dilution: float, free_out: F32, arcs_out: F32,
+    hits: F32, arc_c: F32, arc_s: F32,
 ) -> int:
-    """One pass over the readings ``cones`` (module doc); returns, in ``attribute`` mode,
-    the echoes with no candidate cell."""
+    """One pass over the readings (module doc); returns, with ``attribute``, the echoes
+    with no candidate cell. ``occ_rows`` is the running count of ``occ`` along each row
+    (one leading zero column), so rows of a span without a surface are skipped."""
     height, width = free_out.shape
     reach = _reach_cells(cones, res)
     size = max_sector_spans(reach * res, res)
@@ -72,7 +79,6 @@ def trace_readings(
     c1s = np.empty(size, dtype=np.int64)
     cand_r = np.empty(reach * reach, dtype=np.int64)
     cand_c = np.empty(reach * reach, dtype=np.int64)
-    cand_b = np.empty(reach * reach, dtype=np.float64)
     stop = np.empty(MAX_BINS, dtype=np.float64)
     lost = 0
     for i in range(cones.shape[0]):
@@ -84,7 +90,7 @@ def trace_readings(
         nb = min(MAX_BINS, int(math.ceil(2.0 * hb * r_out / res)) + 1)
         bin_w = 2.0 * hb / nb
         stopped = False
-        for k in range(n):  # the oblique walls in the cone and their shadows
+        for k in range(n):  # the silent surfaces in the cone and their shadows
             r = rows[k]
             if occ_rows[r, c1s[k] + 1] == occ_rows[r, c0s[k]]:
                 continue
@@ -93,20 +99,19 @@ def trace_readings(
                     continue
                 dx = gx + (c + 0.5) * res - ox
                 dy = gy + (r + 0.5) * res - oy
-                dist = math.hypot(dx, dy)
                 bearing = math.atan2(dy, dx)
                 if visible(bearing, psi[r, c], table, step) >= 0.5:
                     continue
                 if not stopped:
                     stop[:nb] = np.inf
                     stopped = True
+                dist = math.hypot(dx, dy)
                 rel = wrap_angle(bearing - a) + hb
                 hw = 0.5 * res / max(dist, res)
                 k0 = max(0, int(math.floor((rel - hw) / bin_w)))
                 k1 = min(nb - 1, int(math.floor((rel + hw) / bin_w)))
                 for kb in range(k0, k1 + 1):
-                    if dist < stop[kb]:
-                        stop[kb] = dist
+                    stop[kb] = min(stop[kb], dist)
         m = 0
         rf, ri = r_free[i], r_inner[i]
         for k in range(n):
@@ -118,23 +123,21 @@ def trace_readings(
                 bearing = math.atan2(dy, dx)
                 if stopped:
                     kb = int(math.floor((wrap_angle(bearing - a) + hb) / bin_w))
-                    kb = min(max(kb, 0), nb - 1)
-                    if dist > stop[kb]:
+                    if dist > stop[min(max(kb, 0), nb - 1)]:
                         continue
                 if dist < rf and not attribute:
                     q = cons[r, c]
-                    w = q * visible(bearing, psi[r, c], table, step) + (1.0 - q) * unknown_vis
-                    free_out[r, c] += w
+                    free_out[r, c] += (q * visible(bearing, psi[r, c], table, step)
+                                       + (1.0 - q) * v_unknown)
                 if dist >= ri:
-                    if attribute:
-                        arc_c[r, c] += math.cos(2.0 * bearing)
-                        arc_s[r, c] += math.sin(2.0 * bearing)
                     if not attribute:
                         arcs_out[r, c] += 1.0
-                    elif free_in[r, c] <= ratio * arcs_in[r, c]:
+                        continue
+                    arc_c[r, c] += math.cos(2.0 * bearing)
+                    arc_s[r, c] += math.sin(2.0 * bearing)
+                    if free_in[r, c] <= ratio * arcs_in[r, c]:
                         cand_r[m] = r
                         cand_c[m] = c
-                        cand_b[m] = bearing
                         m += 1
         if not attribute:
             continue
@@ -144,6 +147,4 @@ def trace_readings(
         w = 1.0 / float(m) ** dilution
         for k in range(m):
             hits[cand_r[k], cand_c[k]] += w
-            dir_c[cand_r[k], cand_c[k]] += w * math.cos(2.0 * cand_b[k])
-            dir_s[cand_r[k], cand_c[k]] += w * math.sin(2.0 * cand_b[k])
     return lost
