@@ -138,7 +138,7 @@ class MapperConfig:
     spec_normal_radius_m: float = doc_field(
         "specular (§10): radius over which the bearings of the echo arcs covering a cell are "
         "pooled into its surface normal, m",
-        default=0.1,
+        default=0.05,
     )
     spec_max_range_free: bool = doc_field(
         "specular (§10): readings with no echo are free evidence out to r_max, weighted like "

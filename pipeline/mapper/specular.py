@@ -12,11 +12,11 @@ Four passes over the log's scans, in the same order:
 1. §9's attribution → a first map; every echo arc also adds its bearing (a doubled angle)
    to the cells it covers. Pooled over ``spec_normal_radius_m``, the bearings give each
    cell a normal line ψ and a consistency q ∈ [0, 1] (their mean resultant length).
-2. Free and arc counts again, with the first map's occupied cells as surfaces: free
-   evidence of a ray at a cell is ``q·visible(θ) + (1 − q)·v̄`` (v̄ = the mean of
-   ``visible`` over incidences, a surface of unknown orientation) and a ray stops at an
-   occupied cell it meets at ``visible(θ) < ½``. With ``spec_max_range_free`` readings with
-   no echo add free evidence out to ``r_max`` the same way.
+2. Free and arc counts again: free evidence of a ray at any cell is ``q·visible(θ) + (1 − q)·v̄`` (v̄ = the mean of
+   ``visible`` over incidences: a surface of unknown orientation), and a ray stops at a
+   cell the first map holds occupied when ``q·(1 − visible(θ)) > ½`` (a surface of known orientation that it
+   meets obliquely). With ``spec_max_range_free`` readings with no echo add free evidence
+   out to ``r_max`` the same way.
 3. §9's attribution with these counts and the same stops; the map is §9's linear test.
 
 Memory: §9's grids and eight more float32 / bool grids; nothing grows with the log.

@@ -4,9 +4,9 @@ One reading's cone out to ``cones[i, 2]`` (the far edge of its echo's arc, or ``
 for a reading with no echo) is visited cell by cell (the cell rule of
 :mod:`pipeline.mapper.kernels.cone`). A cell of the surfaces grid ``occ`` whose normal line
 ``psi`` (rad) is met by the ray at incidence θ answers with probability ``visible(θ)``
-(:func:`visible`); where that is below one half the surface is silent to the ray and
-reflects it away, so the ray stops: farther cells within the cell's angular width get no
-evidence from the reading. An unoccluded cell closer than ``r_free`` gets free evidence
+(:func:`visible`); where the cell's normal is consistent (``q = cons``) and
+``q·(1 − visible(θ)) > ½`` the surface is silent to the ray and reflects it away, so the
+ray stops: farther cells within the cell's angular width get no evidence from the reading. An unoccluded cell closer than ``r_free`` gets free evidence
 ``q·visible(θ) + (1 − q)·v_unknown`` (``q`` = the consistency of its pooled normal,
 ``v_unknown`` = visibility of a surface of unknown orientation); arc cells
 (``r_inner ≤ dist``) are counted (``attribute = False``) or, with ``attribute``, are an
@@ -100,7 +100,9 @@ def trace_readings(
                 dx = gx + (c + 0.5) * res - ox
                 dy = gy + (r + 0.5) * res - oy
                 bearing = math.atan2(dy, dx)
-                if visible(bearing, psi[r, c], table, step) >= 0.5:
+                # Silent with probability q·(1 − visible): a ray stops only at a surface
+                # whose orientation is known and that it meets obliquely.
+                if cons[r, c] * (1.0 - visible(bearing, psi[r, c], table, step)) <= 0.5:
                     continue
                 if not stopped:
                     stop[:nb] = np.inf
