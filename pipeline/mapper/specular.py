@@ -40,6 +40,7 @@ from pipeline.mapper.types import F32, F64, I32, B, GridSpec, MapperCounters, Ma
 from pipeline.stages import reading_quality as rq
 
 TABLE_STEP = math.radians(0.25)  # sampling of the visibility table, rad
+COS_SAMPLES = 4097  # samples of the kernel's visibility table, uniform in cos θ
 
 
 def visibility_table(median_deg: float, spread: float) -> F64:
@@ -53,7 +54,14 @@ def visibility_table(median_deg: float, spread: float) -> F64:
 
 def mean_visibility(table: F64) -> float:
     """v̄: ``visible`` averaged over incidences uniform in [0, π/2]."""
-    return float(np.mean(table[: int(round(0.5 * math.pi / TABLE_STEP)) + 1]))
+    return float(np.mean(table[: round(0.5 * math.pi / TABLE_STEP) + 1]))
+
+
+def cos_table(table: F64) -> F64:
+    """``visible`` at cos θ = 0, 1/(COS_SAMPLES − 1), … 1 (the kernel's table)."""
+    theta = np.arccos(np.linspace(0.0, 1.0, COS_SAMPLES))
+    out: F64 = np.interp(theta, np.arange(len(table)) * TABLE_STEP, table)
+    return out
 
 
 def box_sum(a: F32, radius: int) -> F64:
@@ -86,11 +94,13 @@ class SpecularMapper(AttributionMapper):
         self.table = visibility_table(config.spec_critical_angle_deg,
                                       config.spec_critical_spread)
         self.v_unknown = mean_visibility(self.table)
+        self.cos_table = cos_table(self.table)
         self.arc_c: F32 = empty_grid(grid.shape)
         self.arc_s: F32 = empty_grid(grid.shape)
         self.surfaces: B = np.zeros(grid.shape, dtype=bool)
         self.surface_rows: I32 = np.zeros((grid.shape[0], grid.shape[1] + 1), dtype=np.int32)
-        self.psi: F32 = empty_grid(grid.shape)
+        self.nx: F32 = empty_grid(grid.shape)
+        self.ny: F32 = empty_grid(grid.shape)
         self.consistency: F32 = empty_grid(grid.shape)
         self.free2: F32 = empty_grid(grid.shape)
         self.arcs2: F32 = empty_grid(grid.shape)
@@ -112,7 +122,8 @@ class SpecularMapper(AttributionMapper):
         """The first map's occupied cells, their normal lines and consistency."""
         self.surfaces = AttributionMapper.occupied(self)
         radius = max(0, round(self.config.spec_normal_radius_m / self.grid.resolution))
-        self.psi, self.consistency = normal_lines(self.arc_c, self.arc_s, self.arcs, radius)
+        psi, self.consistency = normal_lines(self.arc_c, self.arc_s, self.arcs, radius)
+        self.nx, self.ny = np.cos(psi), np.sin(psi)
         np.cumsum(self.surfaces, axis=1, out=self.surface_rows[:, 1:])
 
     def _integrate_group(self, group: ScanGroup) -> None:
@@ -139,7 +150,7 @@ class SpecularMapper(AttributionMapper):
         lost = trace_readings(
             cones, up_down, r_inner, free_r[rows], cat.alpha[rows], half,
             g.origin_x, g.origin_y, g.resolution, self.surfaces, self.surface_rows,
-            self.psi, self.consistency, self.table, TABLE_STEP, self.v_unknown, attribute,
+            self.nx, self.ny, self.consistency, self.cos_table, self.v_unknown, attribute,
             self.free if first else self.free2, self.arcs if first else self.arcs2,
             cfg.attr_candidate_ratio, cfg.attr_dilution, self.free2, self.arcs2,
             self.hits if first else self.hits2, self.arc_c, self.arc_s,
