@@ -50,7 +50,7 @@ bench: $(STAMP)
 
 # Thousands of mutated logs per format through every reader (about 12 minutes).
 fuzz: $(STAMP)
-	$(BIN)/python -m fuzz.run_fuzz --examples 1000 --values 300
+	$(BIN)/python -m fuzz.run_fuzz --examples 1000 --values 300 --side-files 40
 
 # Mutation testing of the mapper, pose sync, scan building and nav2 maps (mutmut) on a
 # seeded sample of mutants (~30 min on 2 cores; MUTATE_SAMPLE=0 runs none, `mutmut run`
@@ -59,9 +59,11 @@ MUTATE_SAMPLE ?= 150
 mutate: $(STAMP)
 	$(BIN)/python -m benchmarks.mutation_sample --sample $(MUTATE_SAMPLE) --children 2
 
-# Refresh the regression goldens on purpose (review `git diff sample_logs/goldens` after).
+# Refresh the regression goldens on purpose (review `git diff sample_logs/goldens` after):
+# the suite of sample_logs/goldens/suite.toml, run from the repository root.
 goldens: $(STAMP)
-	$(BIN)/python sample_logs/goldens/refresh.py
+	$(BIN)/sonarmap regress --suite sample_logs/goldens/suite.toml --goldens sample_logs/goldens \
+	  --update --workers 2
 
 # Regenerate the simulated sample logs (deterministic).
 samples: $(STAMP)

@@ -1,13 +1,14 @@
 """``python -m benchmarks``: every benchmark in one run, one table, written to RESULTS.md.
 
-Usage: ``python -m benchmarks [--quick] [--smoke] [--only readers mapper e2e batch]
+Usage: ``python -m benchmarks [--quick] [--smoke] [--only readers mapper e2e batch regress storage]
 [--results PATH | --no-results]``
 
 Inputs are generated deterministically (no downloads): the reader bags by
 ``bench_readers`` / ``bench_readers_ros2`` (~500k messages), the mapper's synthetic room
 by ``bench_mapper`` (~100k readings at 0.05 m), the simulated one-hour MCAP log by
 ``bench_end_to_end`` (cached under the system temp dir), the batch's CSV logs by
-``bench_batch``. The mapper section also reports the compiled kernels' one-off cost
+``bench_batch``; the storage section reads the one-hour log from a loopback S3 server
+(moto, 127.0.0.1). The mapper section also reports the compiled kernels' one-off cost
 (compiling on a machine's first run; loading from numba's cache after). Every ratio is of two figures
 measured side by side in this run. ``--quick`` skips the 10× memory runs and repeats
 nothing; ``--smoke`` runs everything on tiny inputs (seconds; for the test suite) and
@@ -33,10 +34,12 @@ from benchmarks import (
     bench_mapper,
     bench_readers,
     bench_readers_ros2,
+    bench_regress_suite,
+    bench_storage,
 )
 
 RESULTS = Path(__file__).resolve().parent / "RESULTS.md"
-SECTIONS = ("readers", "mapper", "e2e", "batch")
+SECTIONS = ("readers", "mapper", "e2e", "batch", "regress", "storage")
 NOTES_MARKER = "<!-- analysis: kept when the table above is regenerated -->"
 
 
@@ -216,6 +219,45 @@ def batch_rows(smoke: bool, quick: bool, verbose: bool) -> list[Row]:
     ]
 
 
+def regress_rows(smoke: bool, quick: bool, verbose: bool) -> list[Row]:
+    """``regress --suite`` of the sample logs beside ``batch`` of them, 2 workers each."""
+    argv = ["--smoke"] if smoke else (["--repeat", "1"] if quick else [])
+    f = _quiet(bench_regress_suite.main, argv, verbose=verbose)
+    assert isinstance(f, dict)
+    ratio = f["ratio"]
+    return [
+        Row("regress", f"sonarmap batch, {int(f['logs'])} sample logs, 2 workers", f["batch"],
+            "s wall", f"{f['batch cpu']:.1f} s CPU"),
+        Row("regress", "regress --suite, same logs (F1 with truths), 2 workers", f["suite"],
+            "s wall", f"{f['suite cpu']:.1f} s CPU ({f['cpu ratio']:.2f}x); {ratio:.2f}x batch",
+            "<= 1.2x", ratio <= 1.2 if not smoke else None),
+    ]
+
+
+def storage_rows(smoke: bool, quick: bool, verbose: bool) -> list[Row]:
+    """The one-hour log mapped from a loopback S3 server (moto) against the local file."""
+    argv = ["--smoke"] if smoke else (["--repeat", "1", "--rss-factor", "0"] if quick else [])
+    f = _quiet(bench_storage.main, argv, verbose=verbose)
+    assert isinstance(f, dict)
+    ratio = f["ratio"]
+    rows = [
+        Row("storage", f"sonarmap run, 1x log on disk ({f['size MB']:.0f} MB MCAP)",
+            f["wall local s"], "s wall"),
+        Row("storage", "same log from loopback S3 (moto), ranged reads", f["wall s3 s"],
+            "s wall", f"{ratio:.2f}x of disk", "<= 1.5x", ratio <= 1.5 if not smoke else None),
+        Row("storage", "peak RSS from S3, 1x log", f["rss s3 MB"], "MB",
+            f"{f['rss s3 MB'] - f['rss local MB']:+.0f} MB of disk"),
+        Row("storage", "map from S3 byte-identical to the map from disk", f["same map"],
+            "1 = yes", "", "1", f["same map"] == 1.0),
+    ]
+    if "rss growth" in f:
+        g = f["rss growth"]
+        rows.append(Row("storage", "peak RSS from S3, 10x log (bounded block cache)",
+                        f["rss s3 long MB"], "MB", f"{g:.2f}x of 1x", "<= 1.2x",
+                        g <= 1.2 if not smoke else None))
+    return rows
+
+
 def machine() -> str:
     """CPU model, cores, OS, Python and numpy versions."""
     import numpy
@@ -252,7 +294,7 @@ def main(argv: list[str] | None = None) -> list[Row]:
     ap.add_argument("-v", "--verbose", action="store_true", help="show each benchmark's output")
     args = ap.parse_args(argv)
     makers = {"readers": readers_rows, "mapper": mapper_rows, "e2e": e2e_rows,
-              "batch": batch_rows}
+              "batch": batch_rows, "regress": regress_rows, "storage": storage_rows}
     rows: list[Row] = []
     t0 = time.perf_counter()
     load_before = os.getloadavg()[0]

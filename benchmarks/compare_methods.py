@@ -407,6 +407,9 @@ def figure(results: list[tuple[list[Row], str]], path: Path, height: int = 360) 
 
 DRIFT_SCALE = 0.03
 DRIFT_BIAS_DEG_PER_M = 0.8
+# --drift-model walk: wheel odometry's random walk (issue 63): -2 % scale, -0.5°/m heading
+# bias, a heading random walk of 0.01 rad/√m and 0.01 m/√m of position noise.
+WALK = DriftModel(-0.02, -0.5, noise_xy=0.01, heading_walk=0.01)
 
 
 @dataclass
@@ -436,17 +439,17 @@ REAL_ODOMETRY_CASES = ("intel-lab-odometry", "freiburg-101-odometry", "fhw-odome
 DRIFT_CASES = SYNTHETIC_DRIFT_CASES + REAL_ODOMETRY_CASES
 
 
-def _drift_cases(work: Path, names: tuple[str, ...] = DRIFT_CASES
+def _drift_cases(work: Path, names: tuple[str, ...] = DRIFT_CASES, walk: bool = False
                  ) -> list[tuple[str, Path, Path, Path, Path]]:
     """(name, true-pose log, drifted log, truth map, truth trajectory) per case: the office,
     corridor and orchard simulations and the five real buildings (the Belgioioso castle
     beside make compare's four), emulated with drift applied to their corrected poses
     (:func:`drifted_case`)."""
-    drift = DriftModel(DRIFT_SCALE, DRIFT_BIAS_DEG_PER_M)
+    drift = WALK if walk else DriftModel(DRIFT_SCALE, DRIFT_BIAS_DEG_PER_M)
     work.mkdir(parents=True, exist_ok=True)
     cases = []
     for case in names:
-        drifted = work / f"{case}_drifted.mcap"
+        drifted = work / f"{case}_{'walk' if walk else 'drifted'}.mcap"
         clean, truth, traj = drifted_case(case, drifted, drift)
         cases.append((case, clean, drifted, truth, traj))
     return cases
@@ -487,7 +490,8 @@ def drifted_case(case: str, drifted: Path, drift: DriftModel, drift_seed: int = 
                            options=dataclasses.replace(
                                sim, drift_scale=drift.scale_error,
                                drift_heading_bias_deg_per_m=drift.heading_bias_deg_per_m,
-                               drift_xy=drift.noise_xy, drift_yaw=drift.noise_yaw))
+                               drift_xy=drift.noise_xy, drift_yaw=drift.noise_yaw,
+                               drift_heading_walk=drift.heading_walk))
         return (clean, clean.with_name(f"{clean.stem}.truth.yaml"),
                 clean.with_name(f"{clean.stem}.truth.csv"))
     if name == "intel-lab":
@@ -520,10 +524,11 @@ def drifted_case(case: str, drifted: Path, drift: DriftModel, drift_seed: int = 
 
 
 def drifted_comparison(work: Path, tolerance: float, names: tuple[str, ...] = DRIFT_CASES,
-                       config: Path | None = None) -> list[DriftRow]:
+                       config: Path | None = None, walk: bool = False) -> list[DriftRow]:
     """Map and score every drifted case (see the section comment); ``config`` (TOML) sets
-    the refined runs' ``[pose_refinement]`` (enabled either way)."""
-    return score_drift_cases(_drift_cases(work, names), work, tolerance, config)
+    the refined runs' ``[pose_refinement]`` (enabled either way); ``walk``: the random-walk
+    drift (``WALK``) instead of the systematic one."""
+    return score_drift_cases(_drift_cases(work, names, walk), work, tolerance, config)
 
 
 DRIFTED_MAX_CELLS = 100_000_000  # ~3.2 GB at ~32 bytes a cell
@@ -606,11 +611,15 @@ def main(argv: list[str] | None = None) -> int:
                     help="only the drifted-odometry rows (true / drifted / refined poses)")
     ap.add_argument("--cases", nargs="+", default=list(DRIFT_CASES), choices=DRIFT_CASES,
                     help="with --drifted: these cases only (default: all)")
+    ap.add_argument("--drift-model", choices=("systematic", "walk"), default="systematic",
+                    help="with --drifted: 3 %% scale and 0.8°/m (systematic) or wheel "
+                    "odometry's random walk (walk: -2 %%, -0.5°/m, 0.01 rad/√m, 0.01 m/√m)")
     args = ap.parse_args(argv)
     if args.drifted:
         with tempfile.TemporaryDirectory(prefix="sonarmap-drift-") as tmp:
             drift_rows = drifted_comparison(args.keep if args.keep is not None else Path(tmp),
-                                            args.tolerance, tuple(args.cases), args.config)
+                                            args.tolerance, tuple(args.cases), args.config,
+                                            walk=args.drift_model == "walk")
         print(drift_markdown(drift_rows))
         return 0
 

@@ -16,6 +16,7 @@ from cli.help_words import use_words
 from pipeline.methods import Method
 
 if TYPE_CHECKING:
+    from formats.storage.location import Location
     from pipeline.config import Config
 
 app = typer.Typer(
@@ -30,7 +31,7 @@ app = typer.Typer(
 ConfigOpt = Annotated[
     Path | None,
     typer.Option("--config", "-c", help="TOML configuration file (see `sonarmap config`).",
-                 dir_okay=False, show_default="built-in defaults"),
+                 show_default="built-in defaults"),
 ]
 FormatOpt = Annotated[
     str | None,
@@ -49,11 +50,19 @@ PoseTopicOpt = Annotated[
 ]
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print JSON instead of a table.")]
 LogsArg = Annotated[
-    list[Path],
-    typer.Argument(help="Log file or bag directory; several files are one recording (split "
+    list[str],
+    typer.Argument(help="Log file or bag directory, or its URL (s3://, gs://, az://, "
+                   "http(s)://, file://); several files are one recording (split "
                    "bags, sonar and odometry bags), read as one log in time order.",
                    show_default=False, metavar="LOG..."),
 ]
+
+
+def _locations(texts: list[str]) -> list[Location]:
+    """Command-line log names as locations: URLs stay URLs (a Path would fold their //)."""
+    from cli.errors import location_argument
+
+    return [location_argument(t) for t in texts]
 
 
 def _version(value: bool) -> None:
@@ -90,9 +99,11 @@ def _load(
     """The configuration file plus command-line overrides, validated."""
     import dataclasses
 
+    from formats.storage.options import configure
     from pipeline.config import load_config
 
     cfg = load_config(config)
+    configure(cfg.storage)  # before any URL is opened
     inp = cfg.input
     if format:
         inp = dataclasses.replace(inp, format=format)
@@ -116,7 +127,10 @@ def _load(
 @handle_errors
 def run(
     log: LogsArg,
-    output: Annotated[Path, typer.Option("--output", "-o", help="Output directory (must not exist).")],
+    output: Annotated[str, typer.Option(
+        "--output", "-o", help="Output directory (must not exist), or an object-store prefix "
+        "(s3://bucket/prefix, gs://, az://): written last of all, its .sonarmap-output "
+        "marker says the output is complete.")],
     config: ConfigOpt = None,
     format: FormatOpt = None,
     range_topic: RangeTopicOpt = None,
@@ -171,17 +185,19 @@ def run(
 
       sonarmap run drifted.mcap -o out/drifted --refine-poses
     """
+    from cli.errors import location_argument
     from pipeline.run import run as run_pipeline
 
+    logs, out = _locations(log), location_argument(output)
     cfg = _load(config, format=format, range_topics=range_topic, pose_topic=pose_topic,
                 method=method, resolution=resolution, refine_poses=refine_poses)
     if quiet or json_out:
-        result = run_pipeline(log, output, cfg, force=force, compare_correction=compare_correction)
+        result = run_pipeline(logs, out, cfg, force=force, compare_correction=compare_correction)
     else:
         from cli.progress import reading_progress
 
         with reading_progress() as progress:
-            result = run_pipeline(log, output, cfg, force=force,
+            result = run_pipeline(logs, out, cfg, force=force,
                                   compare_correction=compare_correction, progress=progress)
     m = result.metrics
     if json_out:
@@ -203,11 +219,18 @@ def run(
 
 def _run_summary(result: Any) -> dict[str, Any]:
     """``run --json``: where the outputs are and what the run found, in one object."""
+    from formats.storage.location import Url
+    from formats.writers.remote_output import remote_state
     from pipeline.stages.metrics import json_ready
 
     m = result.metrics
-    outputs = {p.name: str(p) for p in sorted(Path(result.out_dir).iterdir())
-               if p.is_file() and not p.name.startswith(".")}
+    out_dir = result.out_dir
+    if isinstance(out_dir, Url):
+        names = sorted(f for f in remote_state(out_dir).files if "/" not in f)
+        outputs = {n: str(out_dir / n) for n in names if not n.startswith(".")}
+    else:
+        outputs = {p.name: str(p) for p in sorted(out_dir.iterdir())
+                   if p.is_file() and not p.name.startswith(".")}
     summary: dict[str, Any] = json_ready({
         "out_dir": str(result.out_dir),
         "outputs": outputs,
@@ -250,7 +273,7 @@ def info(
     from formats import open_log
 
     cfg = _load(config, format=format)
-    with open_log(log, cfg) as reader:
+    with open_log(_locations(log), cfg) as reader:
         li = reader.info()
     if json_out:
         typer.echo(json.dumps(dataclasses.asdict(li) | {"duration_s": li.duration_s}, indent=2))
@@ -322,7 +345,7 @@ def validate(
     from pipeline.tools.validate import validate_log
 
     cfg = _load(config, format=format, range_topics=range_topic, pose_topic=pose_topic)
-    with open_log(log, cfg) as reader:
+    with open_log(_locations(log), cfg) as reader:
         report = validate_log(reader, cfg)
     if json_out:
         typer.echo(json.dumps(report.to_dict(), indent=2))
@@ -348,16 +371,15 @@ def config_cmd(
 
       sonarmap config --config mine.toml
     """
-    from formats.errors import OutputError
-    from formats.writers.atomic import atomic_write_text
+    from formats.writers.atomic import atomic_write_text, check_output_file
     from pipeline.config import dump_config, load_config
 
     text = dump_config(load_config(config))
     if output is None:
         typer.echo(text, nl=False)
         return
-    if output.exists():
-        raise OutputError("exists already, not overwriting", output)
+    inputs = ((config, "the configuration"),) if config is not None else ()
+    check_output_file(output, kind=None, force=False, inputs=inputs)
     atomic_write_text(output, text)
 
 

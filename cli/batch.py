@@ -7,24 +7,27 @@ import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from cli.errors import EXIT_FAILURE, handle_errors
 
+if TYPE_CHECKING:
+    from formats.storage.location import Location
+
 
 @contextmanager
-def _log_progress() -> Iterator[Callable[[int, int], None]]:
+def _log_progress(command: str = "batch") -> Iterator[Callable[[int, int], None]]:
     """A ``(done, total)`` callback driving a rich progress bar over logs on stderr; on a
-    non-terminal (CI, cron) a plain line per finished log instead."""
+    non-terminal (CI, cron) a plain line per finished log instead, named by ``command``."""
     from rich.console import Console
 
     from cli.progress import plain_progress
 
     if not Console(stderr=True).is_terminal:
         with plain_progress("logs", sys.stderr, every_s=0.0) as plain:
-            yield lambda done, total: plain("batch", done, total)
+            yield lambda done, total: plain(command, done, total)
         return
     from rich.progress import (
         BarColumn,
@@ -53,15 +56,20 @@ def _log_progress() -> Iterator[Callable[[int, int], None]]:
         yield update
 
 
-def split_inputs(inputs: list[str], manifests: list[Path]) -> tuple[list[Path], list[Path]]:
-    """``@FILE`` arguments are manifests; the rest are log files or directories."""
-    paths: list[Path] = []
+def split_inputs(
+    inputs: list[str], manifests: list[Path]
+) -> tuple[list[Location], list[Path]]:
+    """``@FILE`` arguments are manifests; the rest are log files, directories or URLs."""
+    from cli.errors import check_path_arguments, location_argument
+
+    paths: list[Location] = []
     lists = list(manifests)
     for s in inputs:
         if s.startswith("@") and len(s) > 1:
             lists.append(Path(s[1:]))
         else:
-            paths.append(Path(s))
+            paths.append(location_argument(s))
+    check_path_arguments([paths, lists])  # local paths only: URLs are not checked
     return paths, lists
 
 
@@ -72,7 +80,9 @@ def register(app: typer.Typer) -> None:
     @handle_errors
     def batch(
         output: Annotated[
-            Path, typer.Option("--output", "-o", help="Output directory (created if missing).")
+            str, typer.Option("--output", "-o", help="Output directory (created if missing), "
+                              "or an object-store prefix (s3://bucket/prefix) the workers "
+                              "write to directly.")
         ],
         inputs: Annotated[
             list[str] | None,
@@ -84,14 +94,12 @@ def register(app: typer.Typer) -> None:
         ] = None,
         config: Annotated[
             Path | None,
-            typer.Option("--config", "-c", help="TOML configuration for every log.",
-                         dir_okay=False),
+            typer.Option("--config", "-c", help="TOML configuration for every log."),
         ] = None,
         manifest: Annotated[
             list[Path] | None,
             typer.Option("--manifest", help="File listing one log path per line, the files "
                          "of one recording joined by ' + ' (repeatable; same as @FILE).",
-                         dir_okay=False,
                          metavar="FILE"),
         ] = None,
         workers: Annotated[
@@ -107,7 +115,8 @@ def register(app: typer.Typer) -> None:
         memory_limit: Annotated[
             str,
             typer.Option("--memory-limit", help="Memory per local worker, e.g. 4GB "
-                         "(default auto: the machine's memory / --workers); a log that "
+                         "(default auto: the machine's memory / --workers; at least 512MB, 0 = no "
+                         "limit); a log that "
                          "needs more fails as its own row."),
         ] = "auto",
         rerun: Annotated[
@@ -146,24 +155,29 @@ def register(app: typer.Typer) -> None:
 
           sonarmap batch logs/ -o out/ --rerun
         """
+        from cli.errors import location_argument
         from pipeline.tools.batch import run_batch
 
+        out = location_argument(output)  # a local OUT: its names checked before any work
         paths, lists = split_inputs(inputs or [], manifest or [])
         if not paths and not lists:
             raise typer.BadParameter("give at least one log, directory or @MANIFEST",
                                      param_hint="INPUTS")
         with contextlib.ExitStack() as stack:
             progress = None if quiet else stack.enter_context(_log_progress())
-            result = run_batch(paths, output, config, workers=workers, scheduler=scheduler,
+            result = run_batch(paths, out, config, workers=workers, scheduler=scheduler,
                                rerun=rerun, progress=progress, manifests=lists,
                                memory_limit=memory_limit)
         for row in result.failures:
             print(f"sonarmap: failed: {row.name}: {row.error}", file=sys.stderr)
+        for row in result.unread:
+            print(f"sonarmap: skipped: {row.path}: {row.error}", file=sys.stderr)
         if not quiet:
+            unread = f", {len(result.unread)} directories not read" if result.unread else ""
             typer.echo(
                 f"{len(result.outcomes)} logs: {result.count('ok')} mapped, "
-                f"{result.count('skipped')} skipped (unchanged), "
-                f"{result.count('failed')} failed; summary in {result.summary_md}"
+                f"{result.count('skipped') - len(result.unread)} skipped (unchanged), "
+                f"{result.count('failed')} failed{unread}; summary in {result.summary_md}"
             )
         if not result.ok:
             raise typer.Exit(EXIT_FAILURE)

@@ -21,10 +21,10 @@ def register(app: typer.Typer) -> None:
 @handle_errors
 def emulate(
     laser_log: Annotated[
-        Path,
+        str,
         typer.Argument(
             help="CARMEN log (.log/.log.gz, FLASER) or ROS 1/ROS 2/MCAP log with "
-            "sensor_msgs/LaserScan.",
+            "sensor_msgs/LaserScan, or its URL (s3://, gs://, az://, http(s)://).",
             show_default=False,
         ),
     ],
@@ -48,7 +48,6 @@ def emulate(
             "--config",
             "-c",
             help="TOML configuration (sensors, grid, input sections).",
-            dir_okay=False,
         ),
     ] = None,
     max_range: Annotated[
@@ -113,6 +112,22 @@ def emulate(
         float, typer.Option("--drift-yaw", help="Odometry yaw noise, rad per √rad.")
     ] = 0.0,
     drift_seed: Annotated[int, typer.Option("--drift-seed", help="Seed of the drift noise.")] = 0,
+    drift_heading_walk: Annotated[
+        float, typer.Option("--drift-heading-walk", help="Odometry heading random walk, rad per √m driven.")
+    ] = 0.0,
+    drift_slips: Annotated[
+        float, typer.Option("--drift-slips", help="Wheel slips per 100 m driven (Poisson).")
+    ] = 0.0,
+    drift_slip_yaw: Annotated[
+        float, typer.Option("--drift-slip-yaw", help="Std of one slip's heading error, degrees.")
+    ] = 0.0,
+    drift_slip_scale: Annotated[
+        float, typer.Option("--drift-slip-scale", help="Std of one slip's scale error over 0.5 m, fraction.")
+    ] = 0.0,
+    drift_wheel_odometry: Annotated[
+        bool, typer.Option("--drift-wheel-odometry", help="Set every --drift-* term left at 0 to "
+                           "typical wheel-odometry figures (docs/POSE_REFINEMENT.md).")
+    ] = False,
     raw_odometry: Annotated[
         bool,
         typer.Option("--raw-odometry", help="Log the laser log's own wheel odometry (CARMEN "
@@ -152,9 +167,11 @@ def emulate(
       sonarmap emulate intel.log -o drifted.mcap --drift-scale 0.03 --drift-heading-bias 0.8
 
       sonarmap emulate intel.log -o odometry.mcap --raw-odometry
+
+      sonarmap emulate intel.log -o walk.mcap --drift-heading-walk 0.01 --drift-scale -0.02
     """
     from pipeline.config import load_config
-    from pipeline.drift import DriftModel
+    from pipeline.drift import DriftModel, drift_model
     from pipeline.tools.emulate import EmulateOptions, run_emulation
     from pipeline.tools.sonar import SonarPhysics, check_model_name
 
@@ -171,14 +188,21 @@ def emulate(
         laser_max_range=laser_max_range,
         map_resolution=resolution,
         compression=compression,
-        drift=DriftModel(drift_scale, drift_heading_bias, drift_xy, drift_yaw).validate(),
+        drift=drift_model(DriftModel(drift_scale, drift_heading_bias, drift_xy, drift_yaw,
+                                     drift_heading_walk, drift_slips, drift_slip_yaw,
+                                     drift_slip_scale), drift_wheel_odometry),
         drift_seed=drift_seed,
         raw_odometry=raw_odometry,
         sonar_model=check_model_name(sonar_model),
         physics=SonarPhysics().with_overrides(sonar_param or []),
         seed=seed,
     )
-    result = run_emulation(laser_log, output, format, config=cfg, options=options)
+    from cli.errors import location_argument
+    from formats.storage.options import configure
+
+    configure(cfg.storage)
+    result = run_emulation(location_argument(laser_log), output, format, config=cfg,
+                           options=options)
     if quiet:
         return
     for note in result.notes:

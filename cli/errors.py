@@ -15,7 +15,7 @@ import gc
 import signal
 import sys
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from typing import TYPE_CHECKING, ParamSpec, TypeVar
 
 import typer
@@ -24,6 +24,8 @@ from formats.errors import SonarmapError
 
 if TYPE_CHECKING:
     from sys import UnraisableHookArgs
+
+    from formats.storage.location import Location
 
 P = ParamSpec("P")
 R = TypeVar("R")
@@ -185,6 +187,31 @@ def _quiet_finalizers() -> None:
     atexit.register(setattr, sys, "unraisablehook", lambda unraisable: None)
 
 
+def check_path_arguments(values: Iterable[object]) -> None:
+    """Refuse, before a command starts, a path argument the OS cannot take: a component
+    longer than NAME_MAX bytes (a one-line OutputError instead of an OSError traceback
+    from the first ``exists()``)."""
+    from pathlib import Path
+
+    from formats.writers.atomic import check_path_names
+
+    for v in values:
+        for p in (v if isinstance(v, list | tuple) else [v]):
+            if isinstance(p, Path):
+                check_path_names(p)
+
+
+def location_argument(text: str) -> Location:
+    """A command-line name of a log or an output as a location (a URL stays a URL, never a
+    path with its ``//`` folded); a local path is refused like any path argument when a
+    component is too long (:func:`check_path_arguments`)."""
+    from formats.storage.location import as_location
+
+    where = as_location(text)
+    check_path_arguments([where])
+    return where
+
+
 def fail(message: str) -> typer.Exit:
     """Print ``sonarmap: error: <message>`` (one line) to stderr; return the Exit to raise."""
     print(f"sonarmap: error: {' '.join(message.split())}", file=sys.stderr)
@@ -198,6 +225,7 @@ def handle_errors(fn: Callable[P, R]) -> Callable[P, R]:
     @functools.wraps(fn)
     def wrapper(*args: P.args, **kwargs: P.kwargs) -> R:
         try:
+            check_path_arguments(kwargs.values())
             with sigterm_as_interrupt():
                 return fn(*args, **kwargs)
         except SonarmapError as err:

@@ -64,6 +64,20 @@ def register(app: typer.Typer) -> None:
         drift_heading_bias: Annotated[
             float, typer.Option(help="Odometry heading bias, degrees per metre driven.")
         ] = 0.0,
+        drift_heading_walk: Annotated[
+            float, typer.Option(help="Odometry heading random walk, rad per √m driven.")
+        ] = 0.0,
+        drift_slips: Annotated[float, typer.Option(help="Wheel slips per 100 m driven.")] = 0.0,
+        drift_slip_yaw: Annotated[
+            float, typer.Option(help="Std of one slip's heading error, degrees.")
+        ] = 0.0,
+        drift_slip_scale: Annotated[
+            float, typer.Option(help="Std of one slip's scale error over 0.5 m, fraction.")
+        ] = 0.0,
+        drift_wheel_odometry: Annotated[
+            bool, typer.Option(help="Set every --drift-* term left at 0 to typical "
+                               "wheel-odometry figures (docs/POSE_REFINEMENT.md).")
+        ] = False,
         compression: Annotated[str, typer.Option(help="ros1: none/bz2/lz4; mcap: none/lz4/zstd.")] = "none",
     ) -> None:
         """Simulate a sonar ring on a robot driving through WORLD; write the log plus its
@@ -81,6 +95,7 @@ def register(app: typer.Typer) -> None:
         """
         from formats.presets import PRESETS
         from pipeline.config import load_config
+        from pipeline.drift import drift_model
         from pipeline.tools.simulate.simulate import SimOptions, run_simulation
         from pipeline.tools.sonar import SonarPhysics, check_model_name
 
@@ -99,7 +114,12 @@ def register(app: typer.Typer) -> None:
             sonar_model=check_model_name(sonar_model), physics=physics,
             drift_xy=drift_xy, drift_yaw=drift_yaw, drift_scale=drift_scale,
             drift_heading_bias_deg_per_m=drift_heading_bias, mounts=mounts,
-        ).validate()
+            drift_heading_walk=drift_heading_walk, drift_slips_per_100m=drift_slips,
+            drift_slip_yaw_deg=drift_slip_yaw, drift_slip_scale=drift_slip_scale,
+        )
+        if drift_wheel_odometry:
+            opts = opts.with_drift(drift_model(opts.drift, True))
+        opts = opts.validate()
         paths = run_simulation(world, output, format, waypoints_path=waypoints, options=opts,
                                compression=compression)
         for p in paths:

@@ -18,39 +18,40 @@ from formats.contract import LogReader
 from formats.errors import FormatError
 from formats.magic import MCAP_MAGIC, ROS1_MAGIC, SQLITE_MAGIC, ZSTD_MAGIC
 from formats.options import ReaderOptions, ReaderSettings
+from formats.storage.location import Location, Url, as_location
 
 if TYPE_CHECKING:
     from formats.ros.source import MessageSource
 
 
-def _ros1_source(path: Path) -> MessageSource:
+def _ros1_source(path: Location) -> MessageSource:
     from formats.ros.ros1bag import Ros1BagSource
 
     return Ros1BagSource(path)
 
 
-def _ros2_source(path: Path) -> MessageSource:
+def _ros2_source(path: Location) -> MessageSource:
     from formats.ros.ros2bag import Ros2BagSource
 
     return Ros2BagSource(path)
 
 
-def _mcap_source(path: Path) -> MessageSource:
+def _mcap_source(path: Location) -> MessageSource:
     from formats.ros.mcap_source import McapSource
 
     return McapSource(path)
 
 
 #: The ROS formats: a message container each, read by one RosLogReader.
-SOURCES: dict[str, Callable[[Path], MessageSource]] = {
+SOURCES: dict[str, Callable[[Location], MessageSource]] = {
     "ros1": _ros1_source,
     "ros2": _ros2_source,
     "mcap": _mcap_source,
 }
 
 
-def _open_ros(name: str) -> Callable[[Path, ReaderSettings], LogReader]:
-    def open_ros(path: Path, config: ReaderSettings) -> LogReader:
+def _open_ros(name: str) -> Callable[[Location, ReaderSettings], LogReader]:
+    def open_ros(path: Location, config: ReaderSettings) -> LogReader:
         from formats.ros.reader import RosLogReader
 
         return RosLogReader(SOURCES[name](path), config)
@@ -58,13 +59,13 @@ def _open_ros(name: str) -> Callable[[Path, ReaderSettings], LogReader]:
     return open_ros
 
 
-def _open_csv(path: Path, config: ReaderSettings) -> LogReader:
+def _open_csv(path: Location, config: ReaderSettings) -> LogReader:
     from formats.csv_log import CsvLogReader
 
     return CsvLogReader(path, config)
 
 
-FORMATS: dict[str, Callable[[Path, ReaderSettings], LogReader]] = {
+FORMATS: dict[str, Callable[[Location, ReaderSettings], LogReader]] = {
     "ros1": _open_ros("ros1"),
     "ros2": _open_ros("ros2"),
     "mcap": _open_ros("mcap"),
@@ -72,10 +73,18 @@ FORMATS: dict[str, Callable[[Path, ReaderSettings], LogReader]] = {
 }
 
 
-def check_log_path(p: Path) -> None:
+def check_log_path(p: Location) -> None:
     """Refuse what is not a log file or directory, with the reason: a missing path, a
     symlink loop, a FIFO, socket or device (reading one would hang or never end), a
-    rosbag2 ``metadata.yaml`` given instead of its bag directory."""
+    rosbag2 ``metadata.yaml`` given instead of its bag directory. A URL must name an
+    object, or a prefix holding a bag (a StorageError says why it cannot be reached)."""
+    if isinstance(p, Url):
+        if p.name == "metadata.yaml":
+            raise FormatError(f"is a rosbag2 bag's metadata file; pass the bag directory "
+                              f"{p.parent} instead", p)
+        if not (p.exists() or p.is_dir()):  # the URL itself first: errors name it
+            raise FormatError("no such object or prefix (HTTP 404)", p)
+        return
     try:
         st = p.stat()
     except FileNotFoundError as err:
@@ -94,10 +103,12 @@ def check_log_path(p: Path) -> None:
                           f"{p.parent} instead", p)
 
 
-def detect_format(path: str | Path) -> str:
+def detect_format(path: str | Location) -> str:
     """The format name of a log, from its content. Raises FormatError when unknown."""
-    p = Path(path)
+    p = as_location(path)
     check_log_path(p)
+    if isinstance(p, Url) and (p / "metadata.yaml").is_file():
+        return "ros2"  # a bag directory as a URL prefix (HTTP has no directories)
     if p.is_dir():
         if (p / "metadata.yaml").is_file():
             return "ros2"
@@ -139,7 +150,7 @@ def detect_format(path: str | Path) -> str:
 
 
 def open_log(
-    path: str | Path | Sequence[str | Path], config: ReaderSettings | None = None
+    path: str | Location | Sequence[str | Location], config: ReaderSettings | None = None
 ) -> LogReader:
     """Open a log for reading; ``config.input.format`` (a key of FORMATS) overrides
     detection.
@@ -148,12 +159,12 @@ def open_log(
     odometry bags), read as one log: :class:`~formats.ros.multi_source.MultiSource`.
     """
     cfg = config if config is not None else ReaderOptions()
-    if not isinstance(path, str | Path):
-        paths = [Path(p) for p in path]
+    if not isinstance(path, str | Path | Url):
+        paths = [as_location(p) for p in path]
         if len(paths) != 1:
             return _open_several(paths, cfg)
         path = paths[0]
-    p = Path(path)
+    p = as_location(path)
     name = cfg.input.format or detect_format(p)
     if name not in FORMATS:
         raise FormatError(f"unknown format '{name}' (known: {', '.join(sorted(FORMATS))})", p)
@@ -161,14 +172,14 @@ def open_log(
     return FORMATS[name](p, cfg)
 
 
-def _open_several(paths: list[Path], cfg: ReaderSettings) -> LogReader:
+def _open_several(paths: list[Location], cfg: ReaderSettings) -> LogReader:
     """Several files of one recording as one log (ROS formats only; one format)."""
     from formats.ros.multi_source import MultiSource
     from formats.ros.reader import RosLogReader
 
     if not paths:
         raise FormatError("no log given")
-    seen: dict[Path, Path] = {}
+    seen: dict[Location, Location] = {}
     for p in paths:
         check_log_path(p)
         key = p.resolve()

@@ -25,13 +25,13 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Literal, Protocol, runtime_checkable
 
 import numpy as np
 import numpy.typing as npt
 
 from formats.arrays import F64, I32, I64
+from formats.storage.location import Location
 
 Kind = Literal["ranges", "poses", "mounts"]
 ALL_KINDS: tuple[Kind, ...] = ("ranges", "poses", "mounts")
@@ -229,7 +229,7 @@ class LogReader(Protocol):
     sensors are met; ``sensor_id`` values index it.
     """
 
-    path: Path
+    path: Location
     format_name: str
     sensor_names: list[str]
 

@@ -46,7 +46,6 @@ import math
 import re
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import BinaryIO
 
 import numpy as np
@@ -66,11 +65,17 @@ from formats.contract import (
     make_range_batch,
 )
 from formats.errors import FormatError
-from formats.options import CsvConfig, ReaderSettings
+from formats.options import MAX_NAME_CHARS, CsvConfig, ReaderSettings
+from formats.ranges import ANGLE_RAD, COORD_M, LIMIT_M, MOUNT_M, Range
 from formats.sensor_config import BeamLimits, sensor_setup
 from formats.stamps import parse_time
+from formats.storage.location import Location, as_location
 
 CHUNK_BYTES = 4 << 20  # bytes of text per chunk (about 60 000 rows of a typical log)
+# A field is a number or a sensor name: longer is no field (and would make every string
+# array of its chunk that wide).
+MAX_FIELD_CHARS = MAX_NAME_CHARS
+SCAN_ID = Range(-(2**63), 2**63 - 1)  # int64, as scans are numbered
 POSE_PARENT_FRAME = "odom"
 
 _TIME_DIGITS = {"s": 9, "ms": 6, "us": 3, "ns": 0}  # decimal digits of a unit below 1 ns
@@ -88,14 +93,14 @@ _SENSORS = (("sensor", "x", "y", "yaw"), ("fov", "min_range", "max_range"))
 # --------------------------------------------------------------------------- sniffing
 
 
-def looks_like_csv(path: str | Path, config: ReaderSettings | None = None) -> bool:
+def looks_like_csv(path: str | Location, config: ReaderSettings | None = None) -> bool:
     """Whether ``path`` looks like a CSV log (content sniffing, for format detection).
 
     A file: UTF-8 text without NUL bytes whose first non-comment line splits into at
     least two fields by the configured delimiter, a comma or whitespace. A directory:
     holds the default ``ranges.csv`` and ``poses.csv``, or the configured file names.
     """
-    p = Path(path)
+    p = as_location(path)
     if p.is_dir():
         names = [("ranges.csv", "poses.csv")]
         if config is not None:
@@ -154,7 +159,7 @@ class _Table:
 
     def __init__(
         self,
-        path: Path,
+        path: Location,
         csv_cfg: CsvConfig,
         columns: tuple[tuple[str, ...], tuple[str, ...]] | None,
     ) -> None:
@@ -263,9 +268,16 @@ class _Table:
         else:
             self._check_counts(counts, nums, ncols)
             flat = text.split() if d == "whitespace" else text.replace("\n", d).split(d)
-        return {
+        cols = {
             name: flat[j::ncols] for j, name in enumerate(self.names) if not name.startswith("\0")
         }
+        for name, col in cols.items():
+            # Before any numpy string array: its width is the longest field's, times rows.
+            if col and max(map(len, col)) > MAX_FIELD_CHARS:
+                i = next(i for i, f in enumerate(col) if len(f) > MAX_FIELD_CHARS)
+                raise self.error(int(nums[i]), f"column '{name}': a field of {len(col[i])}"
+                                 f" characters (a number or name has at most {MAX_FIELD_CHARS})")
+        return cols
 
     def _check_counts(self, counts: I64, nums: I64, ncols: int) -> None:
         bad = np.flatnonzero(counts != ncols)
@@ -300,6 +312,10 @@ class _Table:
     def _set_header(self, fields: list[str], line: int) -> int:
         names = [s.strip() for s in fields]
         low = [s.lower() for s in names]
+        long = [n for n in names if len(n) > MAX_FIELD_CHARS]
+        if long:
+            raise self.error(line, f"a header name of {len(long[0])} characters (at most"
+                                   f" {MAX_FIELD_CHARS})")
         if self.columns is None:  # wide ranges: t, then the sensor names (case kept)
             if len(names) < 2 or low[0] != "t":
                 raise self._header_error(names, line, "a header 't,<sensor>,<sensor>,...'")
@@ -487,15 +503,28 @@ def _scan_column(table: _Table, chunk: _Chunk) -> I64:
     s = np.where(s == "", "-1", s)
     try:
         return s.astype(np.int64)
-    except ValueError:
+    except (ValueError, OverflowError):
         for i, text in enumerate(s.tolist()):
             try:
-                int(text)
+                value = int(text)
             except ValueError:
                 raise table.error(
                     int(chunk.lines[i]), f"column 'scan': expected an integer, found {text!r}"
                 ) from None
+            if not SCAN_ID.holds(value):
+                raise table.error(int(chunk.lines[i]),
+                                  f"column 'scan': {text} {SCAN_ID.rule()}") from None
         raise  # pragma: no cover
+
+
+def _check_column(table: _Table, chunk: _Chunk, name: str, v: F64, rng: Range) -> F64:
+    """``v`` (a column in sonarmap's units), every value given (not NaN) within ``rng``."""
+    bad = np.flatnonzero(~np.isnan(v) & ~((v >= rng.lo) & (v <= rng.hi)))
+    if bad.size:
+        i = int(bad[0])
+        raise table.error(int(chunk.lines[i]),
+                          f"column '{name}': {chunk.cols[name][i].strip()} {rng.rule()}")
+    return v
 
 
 # --------------------------------------------------------------------------- the reader
@@ -506,8 +535,8 @@ class CsvLogReader:
 
     format_name = "csv"
 
-    def __init__(self, path: str | Path, config: ReaderSettings) -> None:
-        self.path = Path(path)
+    def __init__(self, path: str | Location, config: ReaderSettings) -> None:
+        self.path = as_location(path)
         self.config = config
         self.csv = config.input.csv
         self.sensor_names: list[str] = []
@@ -538,9 +567,9 @@ class CsvLogReader:
         if self.layout == "set":
             folder = self.path if self.path.is_dir() else self.path.parent
             self.ranges_path = folder / c.ranges_file
-            self.poses_path: Path | None = folder / c.poses_file
+            self.poses_path: Location | None = folder / c.poses_file
             sensors = folder / c.sensors_file
-            self.sensors_path: Path | None = sensors if sensors.is_file() else None
+            self.sensors_path: Location | None = sensors if sensors.is_file() else None
             for p in (self.ranges_path, self.poses_path):
                 if not p.is_file():
                     raise FormatError(
@@ -650,9 +679,12 @@ class CsvLogReader:
 
     def _poses(self, table: _Table, chunk: _Chunk, t: I64 | None = None) -> PoseBatch:
         t = _times_ns(table, chunk, "t") if t is None else t
-        x = _floats(table, chunk, "x", finite=True) / self._len_div
-        y = _floats(table, chunk, "y", finite=True) / self._len_div
-        yaw = _floats(table, chunk, "yaw", finite=True) * self._ang_mul
+        x = _check_column(table, chunk, "x", _floats(table, chunk, "x", finite=True)
+                          / self._len_div, COORD_M)
+        y = _check_column(table, chunk, "y", _floats(table, chunk, "y", finite=True)
+                          / self._len_div, COORD_M)
+        yaw = _check_column(table, chunk, "yaw", _floats(table, chunk, "yaw", finite=True)
+                            * self._ang_mul, ANGLE_RAD)
         return PoseBatch(t, x, y, yaw, POSE_PARENT_FRAME, self.config.input.base_frame)
 
     def _ranges_m(self, raw: F64) -> F64:
@@ -675,10 +707,10 @@ class CsvLogReader:
             fov = np.where(np.isnan(v), fov, v)
         if "min_range" in cols:
             v = _floats(table, chunk, "min_range", finite=False, optional=True) / self._len_div
-            lo = np.where(np.isnan(v), lo, v)
+            lo = np.where(np.isnan(v), lo, _check_column(table, chunk, "min_range", v, LIMIT_M))
         if "max_range" in cols:
             v = _floats(table, chunk, "max_range", finite=False, optional=True) / self._len_div
-            hi = np.where(np.isnan(v), hi, v)
+            hi = np.where(np.isnan(v), hi, _check_column(table, chunk, "max_range", v, LIMIT_M))
         scan = _scan_column(table, chunk) if "scan" in cols else None
         return make_range_batch(t, sid, rng, fov, lo, hi, scan_id=scan)
 
@@ -730,9 +762,12 @@ class CsvLogReader:
             table = _Table(self.sensors_path, self.csv, _SENSORS)
             for chunk in table.chunks():
                 names = _sensor_column(table, chunk).tolist()
-                x = _floats(table, chunk, "x", finite=True) / self._len_div
-                y = _floats(table, chunk, "y", finite=True) / self._len_div
-                yaw = _floats(table, chunk, "yaw", finite=True) * self._ang_mul
+                x = _check_column(table, chunk, "x", _floats(table, chunk, "x", finite=True)
+                                  / self._len_div, MOUNT_M)
+                y = _check_column(table, chunk, "y", _floats(table, chunk, "y", finite=True)
+                                  / self._len_div, MOUNT_M)
+                yaw = _check_column(table, chunk, "yaw", _floats(table, chunk, "yaw", finite=True)
+                                    * self._ang_mul, ANGLE_RAD)
                 nan = np.full(len(chunk), np.nan)
                 fov = (
                     _floats(table, chunk, "fov", finite=False, optional=True) * self._ang_mul
@@ -740,12 +775,16 @@ class CsvLogReader:
                     else nan
                 )
                 lo = (
-                    _floats(table, chunk, "min_range", finite=False, optional=True) / self._len_div
+                    _check_column(table, chunk, "min_range", _floats(
+                        table, chunk, "min_range", finite=False, optional=True) / self._len_div,
+                        LIMIT_M)
                     if "min_range" in chunk.cols
                     else nan
                 )
                 hi = (
-                    _floats(table, chunk, "max_range", finite=False, optional=True) / self._len_div
+                    _check_column(table, chunk, "max_range", _floats(
+                        table, chunk, "max_range", finite=False, optional=True) / self._len_div,
+                        LIMIT_M)
                     if "max_range" in chunk.cols
                     else nan
                 )

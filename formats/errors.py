@@ -16,7 +16,8 @@ from pathlib import Path
 class SonarmapError(Exception):
     """Base of every error sonarmap raises on purpose."""
 
-    def __init__(self, message: str, path: str | Path | None = None) -> None:
+    def __init__(self, message: str, path: str | Path | object | None = None) -> None:
+        # ``path``: a Path, a text, or a URL (whose str() is already redacted).
         self.path = None if path is None else str(path)
         self.reason = message
         text = message if path is None else f"{path}: {message}"
@@ -42,3 +43,8 @@ class InputError(SonarmapError):
 
 class OutputError(SonarmapError):
     """An output cannot be written (exists already, symlinked, outside the output dir)."""
+
+
+class StorageError(SonarmapError):
+    """A URL cannot be reached, read or written (not found, access denied, timed out,
+    connection refused, the filesystem's extra not installed)."""

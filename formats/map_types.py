@@ -16,7 +16,11 @@ import numpy as np
 
 from formats.arrays import F32, F64, I64
 
-__all__ = ["FeatureTable", "GridSpec", "ProbabilityMap"]
+__all__ = ["DEFAULT_MAX_CELLS", "FeatureTable", "GridSpec", "ProbabilityMap"]
+
+#: The largest grid (cells) built or read unless configured otherwise (``[grid] max_cells``;
+#: ~32 bytes a cell while mapping keeps a run under ~1.5 GB).
+DEFAULT_MAX_CELLS = 40_000_000
 
 
 @dataclass(frozen=True)

@@ -63,6 +63,9 @@ class InputConfig:
     csv: CsvConfig = field(default_factory=CsvConfig)
 
 
+# A sensor's name (a ROS frame id, a CSV sensor column, a config mount): longer is no name.
+MAX_NAME_CHARS = 256
+
 # Beam widths sonarmap maps with, wherever they come from (config, preset, log): narrower
 # beams are no sonar (and leave no cell to free), 180° and wider have no cone.
 FOV_MIN_DEG = 0.5

@@ -76,8 +76,9 @@ class Target:
 
 @dataclass
 class Outcome:
-    """What one input did: ``status`` is 'ok', 'rejected' (a proper FormatError/TopicError)
-    or 'defect'; ``detail`` the error line or the defect (with the traceback's last frame)."""
+    """What one input did: ``status`` is 'ok', 'loss' (read, with losses recorded),
+    'rejected' (a proper FormatError/TopicError, one line naming the file) or 'defect';
+    ``detail`` the error line or the defect (with the traceback's last frame)."""
 
     status: str
     detail: str = ""
@@ -114,7 +115,13 @@ def _time_limit(seconds: float) -> Iterator[None]:
 
 def read_everything(path: Path | list[Path]) -> int:
     """Open a log (or the files of one recording), read ``info()`` and drain
-    ``batches()``; returns the records read.
+    ``batches()``; returns the records read (:func:`read_with_losses`)."""
+    return read_with_losses(path)[0]
+
+
+def read_with_losses(path: Path | list[Path]) -> tuple[int, int]:
+    """Open a log (or the files of one recording), read ``info()`` and drain
+    ``batches()``; returns the records read and the losses recorded.
 
     A log without a range or pose topic (TopicError from ``batches``) still has its
     container drained message by message (ROS logs), so the container parser is
@@ -136,7 +143,8 @@ def read_everything(path: Path | list[Path]) -> int:
                 raise
             for raw in source.raw_batches([c.id for c in source.connections]):
                 records += len(raw)
-    return records
+        losses = len(reader.info().losses)
+    return records, losses
 
 
 def check(target: Target, data: bytes, work: Path, time_limit_s: float = TIME_LIMIT_S) -> Outcome:
@@ -152,8 +160,8 @@ def check(target: Target, data: bytes, work: Path, time_limit_s: float = TIME_LI
     tracemalloc.start()
     try:
         with _time_limit(time_limit_s):
-            records = read_everything(logs if target.companions else path)
-        outcome = Outcome("ok", records=records)
+            records, losses = read_with_losses(logs if target.companions else path)
+        outcome = Outcome("loss" if losses else "ok", records=records)
     except _Timeout:
         outcome = Outcome("defect", f"timeout: more than {time_limit_s} s of CPU time")
     except (FormatError, TopicError) as err:

@@ -34,6 +34,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--target", default="", help="only targets whose name contains this")
     ap.add_argument("--keep", type=Path, default=None, help="save defect inputs here")
+    ap.add_argument("--side-files", type=int, default=0,
+                    help="also the side-file classes (fuzz.side_files), this many random "
+                         "cases per class where a class draws them")
     ap.add_argument("--values", type=int, default=0,
                     help="also this many hostile-value logs (fuzz.values) plus every "
                          "numeric config key with every hostile number")
@@ -50,7 +53,22 @@ def main(argv: list[str] | None = None) -> int:
         status = _run(targets, args.examples, args.seed, work, args.keep)
         if args.values:
             status |= _run_values(args.values, args.seed, work)
+        if args.side_files:
+            status |= _run_side_files(args.side_files, args.seed, Path(tmp) / "side")
         return status
+
+
+def _run_side_files(examples: int, seed: int, work: Path) -> int:
+    """Side files and hostile numbers through the commands (fuzz.side_files)."""
+    from fuzz.side_files import run_classes, table
+
+    defects: list[str] = []
+    tally = run_classes(work, seed, examples, report=defects.append)
+    print()
+    print(table(tally))
+    for d in sorted(set(defects)):
+        print(d)
+    return 1 if defects else 0
 
 
 def _run_values(examples: int, seed: int, work: Path) -> int:
@@ -94,6 +112,7 @@ def _run(targets: list[Target], examples: int, seed: int, work: Path, keep: Path
             mutated = apply(data, m)
             outcome = check(target, mutated, work)
             local[outcome.status] += 1
+            local["read"] += outcome.status in ("ok", "loss")
             if outcome.defect:
                 defects[outcome.detail[:160]].append((target.name, m))
                 if keep is not None:
@@ -102,16 +121,17 @@ def _run(targets: list[Target], examples: int, seed: int, work: Path, keep: Path
         per_family[target.family].update(local)
         per_family[target.family]["tried"] += examples
         print(
-            f"{target.name:<38} {examples:>6} tried {local['ok']:>6} ok "
+            f"{target.name:<38} {examples:>6} tried {local['ok']:>6} ok {local['loss']:>6} loss "
             f"{local['rejected']:>6} rejected {local['defect']:>4} defects "
             f"({time.perf_counter() - t0:.1f} s)",
             flush=True,
         )
     print()
-    print(f"{'format':<8} {'tried':>8} {'ok':>8} {'rejected':>9} {'defects':>8}")
+    print(f"{'format':<8} {'tried':>8} {'ok':>8} {'loss':>8} {'rejected':>9} {'defects':>8}")
     for family in sorted(per_family):
         c = per_family[family]
-        print(f"{family:<8} {c['tried']:>8} {c['ok']:>8} {c['rejected']:>9} {c['defect']:>8}")
+        print(f"{family:<8} {c['tried']:>8} {c['ok']:>8} {c['loss']:>8} {c['rejected']:>9}"
+              f" {c['defect']:>8}")
     total = sum(c["tried"] for c in per_family.values())
     print(f"{total} inputs in {time.perf_counter() - started:.0f} s; "
           f"{len(defects)} distinct defects")

@@ -3,12 +3,17 @@
 1. **ingest** — open the log (:mod:`formats`), pass 1 survey (:mod:`pipeline.stages.ingest`): the
    log is read and decoded once, its readings spilled in time order for the mapping passes;
 2. **pose_sync** — each reading's robot pose and sonar geometry (:mod:`pipeline.stages.pose_sync`);
-3. **scan_building** — readings grouped into scans (:mod:`pipeline.stages.scans`);
-4. **mapping** — the mapper (:mod:`pipeline.mapper`), Andersone's method or the baseline;
-5. **outputs** — map.pgm/yaml, map.png, features.parquet, metrics.json, config.toml,
-   reports, written into a temporary directory renamed into place when complete.
+3. **pose_refinement** — with ``[pose_refinement] enabled`` (``run --refine-poses``), the pose
+   track corrected from the echoes before mapping (:mod:`pipeline.refine`);
+4. **scan_building** — readings grouped into scans (:mod:`pipeline.stages.scans`);
+5. **mapping** — the mapper (:mod:`pipeline.mapper`): the configured ``[mapper] method``
+   (the default, the paper's method ``andersone`` or the ``classic`` grid), over as many
+   passes of the spilled readings as the method needs;
+6. **outputs** — map.pgm/yaml, map.png, map.mcap, features.parquet, trajectory.csv,
+   metrics.json, config.toml, reports, written into a temporary directory renamed into
+   place when complete.
 
-Stages 2-4 run interleaved over the streamed readings; each stage's seconds are summed.
+Stages 2, 4 and 5 run interleaved over the streamed readings; each stage's seconds are summed.
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 
@@ -29,6 +34,7 @@ from formats import open_log
 from formats.contract import LogInfo, LogReader, RangeBatch
 from formats.errors import ConfigError, InputError
 from formats.map_types import GridSpec
+from formats.storage.location import Location, as_location
 from formats.writers.trajectory_tum import Trajectory
 from pipeline import __version__
 from pipeline.config import Config, dump_config
@@ -55,7 +61,7 @@ from pipeline.stages.reading_quality import REASONS
 from pipeline.stages.run_warnings import run_warnings
 from pipeline.stages.scans import ScanBuilder, ScanKeys
 from pipeline.stages.sensors import SensorTable, beam_problem, resolve_sensors
-from pipeline.streaming.run_input import input_section, log_label, log_paths
+from pipeline.streaming.run_input import input_section, log_label, log_paths, losses_named
 
 log = logging.getLogger("sonarmap")
 
@@ -69,7 +75,7 @@ Progress = Callable[[str, int, int | None], None]
 class RunResult:
     """What a run produced: where, its metrics and the final map."""
 
-    out_dir: Path
+    out_dir: Location
     metrics: RunMetrics
     snapshot: MapSnapshot
 
@@ -87,8 +93,8 @@ class StreamState:
 
 
 def run(
-    log_path: str | Path | Sequence[str | Path],
-    out_dir: str | Path,
+    log_path: str | Location | Sequence[str | Location],
+    out_dir: str | Location,
     config: Config,
     *,
     force: bool = False,
@@ -104,10 +110,16 @@ def run(
     ``force`` replaces a previous sonarmap output only (never the input's directory, the
     working directory or the user's files: :class:`~formats.writers.atomic.OutputDir`).
     ``on_complete(tmp_dir, metrics)`` may add files after the outputs are written and
-    before the directory is committed (a batch's resume marker)."""
-    from formats.writers.atomic import OutputDir
+    before the directory is committed (a batch's resume marker).
 
+    Logs and ``out_dir`` may be URLs (``s3://bucket/prefix``): read by ranges, written by
+    :class:`~formats.writers.remote_output.RemoteOutputDir` (marker last)."""
+    from formats.storage.options import configure
+    from formats.writers.remote_output import open_output_dir
+
+    configure(config.storage)
     paths = log_paths(log_path)
+    final = as_location(out_dir)
     label = log_label(paths)
     if compare_correction and config.mapper.method == Method.CLASSIC:
         raise ConfigError(
@@ -115,15 +127,15 @@ def run(
         )
     timer = StageTimer()
     t_start = time.perf_counter()
-    with OutputDir(Path(out_dir), force=force, protect=tuple(paths)) as out:
+    with open_output_dir(final, force=force, protect=tuple(paths)) as out:
         with timer.stage("ingest"):
             reader = open_log(paths, config)
-        with reader:
+        with reader, losses_named(reader.info):
             with timer.stage("ingest"):
                 found = None if progress is None else (lambda n: progress("reading", n, None))
                 sv, sensors = surveyed(reader, config, found)
                 info = reader.info()
-                _check_mcap_stamps(out.path("map.mcap"), sv.track)
+                _check_mcap_stamps(label, sv.track)
             odometry: PoseTrack | None = None
             refinement: dict[str, Any] | None = None
             if config.pose_refinement.enabled:
@@ -173,24 +185,29 @@ def run(
         metrics = _metrics(paths, info, sv, sensors, mappers, snapshots, state, config)
         metrics.pose_refinement = refinement
         # A map of (almost) nothing is an error, not an empty result with exit 0.
-        check_mapped_share(label, metrics.counts, metrics.dropped, state.max_pose_gap_s,
-                           state.median_pose_interval_s, config)
+        with losses_named(lambda: info):
+            check_mapped_share(label, metrics.counts, metrics.dropped, state.max_pose_gap_s,
+                               state.median_pose_interval_s, config)
         _write_outputs(out, config, sv, drawn, snapshots, metrics, timer, t_start,
                        odometry=odometry)
         if on_complete is not None:
             on_complete(out.tmp_dir, metrics)
-    return RunResult(Path(out_dir), metrics, snapshots["main"])
+    return RunResult(final, metrics, snapshots["main"])
 
 
-def _check_mcap_stamps(path: Path, track: PoseTrack) -> None:
-    """Refuse, before mapping, a log whose stamps ``map.mcap`` cannot carry: its messages
-    are stamped at the last pose, its paths with every pose's stamp (refinement keeps
-    them)."""
+def _check_mcap_stamps(label: Location, track: PoseTrack) -> None:
+    """Refuse (InputError naming the log), before mapping, a log whose stamps ``map.mcap``
+    cannot carry: its messages are stamped at the last pose, its paths with every pose's
+    stamp (refinement keeps them)."""
+    from formats.errors import OutputError
     from formats.writers.map_mcap import check_stamps
 
     if len(track):
         t = np.asarray(track.t_ns)
-        check_stamps(path, int(t[-1]), int(t.min()), int(t.max()))
+        try:
+            check_stamps(Path("map.mcap"), int(t[-1]), int(t.min()), int(t.max()))
+        except OutputError as err:
+            raise InputError(f"the log's {err.reason}", label) from err
 
 
 def _refine_poses(
@@ -253,12 +270,10 @@ def grid_for(sv: Survey, sensors: SensorTable, config: Config) -> GridSpec:
     if g.extent:
         x0, y0, x1, y1 = g.extent
     else:
-        reach_candidates = [sv.ranges.max_range_m, sensors.default_max]
-        reach_candidates += [v for v in sensors.max_override.tolist() if not math.isnan(v)]
-        finite = [v for v in reach_candidates if not math.isnan(v) and math.isfinite(v)]
+        finite = [v for v in _reaches(sv, sensors) if math.isfinite(v) and v > 0]
         if not finite:
             raise InputError(
-                "cannot size the grid: no sensor reports a max range; set [grid] extent "
+                "cannot size the grid: no sensor reports a max range > 0; set [grid] extent "
                 "or [sensors] max_range"
             )
         offsets = np.hypot(sensors.mount_x, sensors.mount_y)
@@ -267,16 +282,40 @@ def grid_for(sv: Survey, sensors: SensorTable, config: Config) -> GridSpec:
         (bx0, by0, bx1, by1), _ = sv.track.bulk_bounds()
         x0, x1 = bx0 - reach, bx1 + reach
         y0, y1 = by0 - reach, by1 + reach
+    # Sized in floats first: a box of 1e308 m (a mount or pose at the edge of a float)
+    # must be the same one-line refusal, not an overflow in the grid's integer size.
+    w_m, h_m = x1 - x0, y1 - y0
+    cells_f = (w_m / g.resolution + 1.0) * (h_m / g.resolution + 1.0)
+    if not math.isfinite(cells_f) or cells_f > 2.0**53:  # beyond exact integers
+        _too_many_cells(f"{w_m:.3g} x {h_m:.3g} m", f"{cells_f:.3g}", g.max_cells)
     grid = GridSpec.covering(x0, y0, x1, y1, g.resolution)
     cells = grid.width * grid.height
     if cells > g.max_cells:
-        raise ConfigError(
-            f"grid of {grid.width}x{grid.height} = {cells} cells "
-            f"({grid.width * g.resolution:.0f} x {grid.height * g.resolution:.0f} m) exceeds "
-            f"grid.max_cells = {g.max_cells}; use a coarser grid.resolution, a [grid] extent, "
-            "or a larger grid.max_cells if the memory is there (~32 bytes a cell)"
-        )
+        _too_many_cells(f"{grid.width}x{grid.height} = {cells} cells "
+                        f"({grid.width * g.resolution:.0f} x {grid.height * g.resolution:.0f} m)",
+                        None, g.max_cells)
     return grid
+
+
+def _too_many_cells(size: str, cells: str | None, max_cells: int) -> NoReturn:
+    what = f"{size} ({cells} cells)" if cells is not None else size
+    raise ConfigError(
+        f"grid of {what} exceeds grid.max_cells = {max_cells}; use a coarser grid.resolution, "
+        "a [grid] extent, or a larger grid.max_cells if the memory is there (~32 bytes a cell)"
+    )
+
+
+def _reaches(sv: Survey, sensors: SensorTable) -> list[float]:
+    """Each sensor's r_max as the mapping uses it (:meth:`SensorTable.apply_limits`): a
+    config or preset max_range wins over what the log's readings claim, which wins over
+    the ``[sensors] max_range`` default. Sensors without readings do not widen the grid."""
+    out = []
+    for sid in sorted(sv.ranges.per_sensor):
+        override = float(sensors.max_override[sid])
+        logged = sv.ranges.max_range_by_sensor.get(sid, math.nan)
+        out.append(override if not math.isnan(override)
+                   else logged if not math.isnan(logged) else sensors.default_max)
+    return out
 
 
 def _map_stream(
@@ -401,9 +440,13 @@ def _sync(
     state.per_sensor.update(dict(zip(ids.tolist(), per.tolist(), strict=True)))
     fov, lo, hi = sensors.apply_limits(b)
     if np.isnan(fov).any():
-        bad = sorted({sensors.names[i] for i in sid[np.isnan(fov)].tolist()})
+        bad_ids = np.unique(sid[np.isnan(fov)])
+        bad = [sensors.names[i] for i in bad_ids.tolist()]
+        n_nan, n_all = int(np.isnan(fov).sum()), int(np.isin(sid, bad_ids).sum())
+        what = ("the log carries none" if n_nan == n_all else
+                f"{n_nan} of their {n_all} readings in this part of the log carry a NaN fov")
         raise InputError(
-            f"no beam width (fov) for sensor(s) {', '.join(bad)}: the log carries none; set "
+            f"no beam width (fov) for sensor(s) {', '.join(bad)}: {what}; set "
             f"fov_deg in [sensors] or [[sensors.mounts]]"
         )
     problem = beam_problem(sensors.names, sid, fov, lo, hi)
@@ -417,7 +460,7 @@ def _sync(
 
 
 def _metrics(
-    paths: list[Path],
+    paths: list[Location],
     info: LogInfo,
     sv: Survey,
     sensors: SensorTable,
@@ -582,6 +625,8 @@ def _write_outputs(
                   title=title)
     track = sv.track
     drawn_odometry = None
+    closures = np.array((metrics.pose_refinement or {}).get("loop_closure_edges", []),
+                        np.float64).reshape(-1, 4)
     if odometry is not None:  # pose refinement: the odometry the trajectory started from
         from formats.writers.trajectory_png import write_trajectory_png
 
@@ -590,12 +635,13 @@ def _write_outputs(
         drawn_odometry = _drawn_trajectory(odometry)
         write_trajectory_png(out.path("trajectory.png"),
                              np.column_stack([drawn_odometry.x, drawn_odometry.y]), traj_xy,
-                             title=f"{metrics.input['name']} - pose refinement")
+                             title=f"{metrics.input['name']} - pose refinement",
+                             closures=closures)
     write_map_mcap(
         out.path("map.mcap"), probability=snap.probability, grid=snap.grid,
         features=snap.features, trajectory=traj, frame_id=track.parent_frame,
         stamp_ns=int(metrics.trajectory["end_ns"]), library=f"sonarmap {__version__}",
-        odometry=drawn_odometry,
+        odometry=drawn_odometry, closures=closures,
     )
     write_features(
         out.path("features.parquet"),

@@ -12,11 +12,11 @@ integers, strings and byte arrays prefixed by a u32 length, maps by a u32 byte l
 
 from __future__ import annotations
 
+import array
 import struct
 import zlib
 from collections.abc import Collection, Iterator
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -24,6 +24,7 @@ import numpy.typing as npt
 
 from formats.errors import FormatError
 from formats.magic import MCAP_MAGIC
+from formats.ros.inflate import ChunkError, inflate
 from formats.ros.source import (
     Connection,
     Encoding,
@@ -32,6 +33,7 @@ from formats.ros.source import (
     SourceAccessors,
     normalize_msgtype,
 )
+from formats.storage.location import Location, as_location
 
 OP_HEADER = 0x01
 OP_FOOTER = 0x02
@@ -49,6 +51,9 @@ _MESSAGE_HEAD = 22  # channel_id u16, sequence u32, log_time u64, publish_time u
 _FOOTER_LEN = _RECORD_HEAD + 20
 # Top-level messages outside chunks are grouped into blocks of about this many bytes.
 _LOOSE_BLOCK_BYTES = 4 << 20
+_U64 = struct.Struct("<Q")
+# A record length seen this many times in a row starts a vectorised run (see _walk).
+_RUN_START = 4
 
 
 def encoding_of(message_encoding: str) -> Encoding:
@@ -175,40 +180,64 @@ def _parse_channel(c: _Cursor) -> _Channel:
     return _Channel(cid, sid, topic, enc, meta)
 
 
-def _decompress(compression: str, data: bytes | memoryview, size: int) -> bytes | memoryview:
-    """Chunk records; raises ValueError-like errors from the codecs on corrupt data."""
-    if compression == "":
-        return data
-    if compression == "zstd":
-        import zstandard
+def _walk(
+    buf: bytes | memoryview | npt.NDArray[np.uint8], start: int, stop: int
+) -> tuple[npt.NDArray[np.int64], int]:
+    """Offsets of the complete records in ``buf[start:stop]`` (int64, 8 bytes per record,
+    no Python object per record), and where the walk ended.
 
-        return zstandard.ZstdDecompressor().decompress(data, max_output_size=size)
-    if compression == "lz4":
-        import lz4.frame
-
-        out: bytes = lz4.frame.decompress(bytes(data))
-        return out
-    raise NotImplementedError(compression)
-
-
-def _walk(buf: bytes | memoryview, start: int, stop: int) -> tuple[list[tuple[int, int]], int]:
-    """(opcode, offset) of the complete records in ``buf[start:stop]``, and where the walk ended.
-
-    This is the slow path (a Python step per record), used only for blocks without
-    Message Index records.
+    A record's place depends on the one before, so the walk is a Python step per record,
+    except along a run of records of one length (a topic's fixed-size messages, or the
+    9-byte empty records of a bomb): once a length repeats, the next records are guessed
+    at that stride and checked with numpy, as many as hold the same length.
     """
-    out: list[tuple[int, int]] = []
-    unpack = struct.unpack_from
-    pos = start
+    arr = np.frombuffer(buf, np.uint8)
+    view = arr.data
+    parts: list[npt.NDArray[np.int64]] = []
+    found = array.array("q")
+    unpack = _U64.unpack_from
+    pos, prev, repeats = start, -1, 0
     while pos + _RECORD_HEAD <= stop:
-        op = buf[pos]
-        (length,) = unpack("<Q", buf, pos + 1)
+        (length,) = unpack(view, pos + 1)
         nxt = pos + _RECORD_HEAD + length
         if nxt > stop:
             break
-        out.append((op, pos))
+        found.append(pos)
         pos = nxt
-    return out, pos
+        repeats = repeats + 1 if length == prev else 0
+        prev = length
+        if repeats >= _RUN_START:
+            run = _same_length_run(arr, pos, stop, length)
+            if run.size:
+                parts += [np.array(found, np.int64), run]
+                found = array.array("q")
+                pos = int(run[-1]) + _RECORD_HEAD + length
+            repeats = 0
+    parts.append(np.array(found, np.int64))
+    return (parts[0] if len(parts) == 1 else np.concatenate(parts)), pos
+
+
+def _same_length_run(
+    arr: npt.NDArray[np.uint8], pos: int, stop: int, length: int
+) -> npt.NDArray[np.int64]:
+    """Offsets of the records from ``pos`` on that each have ``length`` (consecutive,
+    complete, up to the first of another length)."""
+    step = _RECORD_HEAD + length
+    out: list[npt.NDArray[np.int64]] = []
+    window = 1024
+    while True:
+        k = min(window, (stop - pos) // step)
+        if k <= 0:
+            break
+        at = pos + step * np.arange(k, dtype=np.int64)
+        same = _u64_at(arr, at + 1) == length
+        n = k if same.all() else int(np.argmin(same))
+        out.append(at[:n])
+        if n < k:
+            break
+        pos += step * k
+        window = min(window * 4, 1 << 22)
+    return np.concatenate(out) if out else np.empty(0, np.int64)
 
 
 def _at(buf: npt.NDArray[np.uint8], pos: npt.NDArray[np.int64], dtype: str) -> npt.NDArray[Any]:
@@ -236,8 +265,8 @@ class McapSource(FileSource, SourceAccessors):
 
     format_name = "mcap"
 
-    def __init__(self, path: str | Path) -> None:
-        self.path = Path(path)
+    def __init__(self, path: str | Location) -> None:
+        self.path = as_location(path)
         self._warnings: list[str] = []
         self._schemas: dict[int, _Schema] = {}
         self._channels: dict[int, _Channel] = {}
@@ -308,7 +337,8 @@ class McapSource(FileSource, SourceAccessors):
         chunk_indexes: list[_Block] = []
         stats: tuple[int, int, int, dict[int, int]] | None = None
         try:
-            for op, pos in _walk(data, 0, len(data))[0]:
+            for pos in _walk(data, 0, len(data))[0].tolist():
+                op = data[pos]
                 c = _Cursor(data, pos + _RECORD_HEAD, pos + _RECORD_HEAD + _length(data, pos))
                 if op == OP_SCHEMA:
                     schema = _parse_schema(c)
@@ -378,6 +408,7 @@ class McapSource(FileSource, SourceAccessors):
         loose: _Block | None = None
         counts: dict[int, int] = {}
         times: list[int] = []
+        summary = False
         while True:
             head = self._read_at(pos, _RECORD_HEAD)
             if len(head) < _RECORD_HEAD:
@@ -396,8 +427,19 @@ class McapSource(FileSource, SourceAccessors):
                     f" file ends first; {self._size - pos} bytes lost"
                 )
                 break
-            if op in (OP_DATA_END, OP_FOOTER) or (op == OP_HEADER and pos > len(MCAP_MAGIC)):
+            if op == OP_FOOTER:
+                if end + len(MCAP_MAGIC) < self._size:
+                    tail = self._size - end - len(MCAP_MAGIC)
+                    self._lose(tail, f"{tail} bytes after the footer at byte {pos} are not a"
+                                     " record (lost)")
                 break
+            if op == OP_DATA_END:
+                summary = True  # then only framed up to the footer (trailing bytes)
+            if summary or (op == OP_HEADER and pos > len(MCAP_MAGIC)):
+                if op == OP_HEADER:
+                    break
+                pos = end
+                continue
             if op == OP_CHUNK:
                 loose = None
                 content = f.read(length)
@@ -451,35 +493,44 @@ class McapSource(FileSource, SourceAccessors):
     def _scan_chunk(self, pos: int, content: bytes, counts: dict[int, int]) -> _Block | None:
         """Block of one chunk found by the scan (its records walked to count messages)."""
         try:
-            records, compression, size, crc = _chunk_records(content)
-            buf = _decompress(compression, records, size)
-            _check_chunk(buf, size, crc)
-        except NotImplementedError as err:
-            raise FormatError(f"unsupported chunk compression {err}", self.path) from err
-        except Exception as err:  # codec errors have no common base class
-            self._warn(f"corrupt chunk at byte {pos} skipped ({_reason(err)})")
+            buf = _inflated_chunk(content)
+        except ChunkError as err:
+            self._lose(_RECORD_HEAD + len(content), f"corrupt chunk at byte {pos} skipped ({err})")
             return None
         block = _Block(0, 0, pos, _RECORD_HEAD + len(content), True)
-        times: list[int] = []
-        walked, stop = _walk(buf, 0, len(buf))
-        for op, at in walked:
-            try:
-                self._scan_record(
-                    op,
-                    buf,
-                    at + _RECORD_HEAD,
-                    at + _RECORD_HEAD + _length(buf, at),
-                    block.counts,
-                    times,
-                )
-            except _Short:
-                self._warn(f"corrupt record in chunk at byte {pos} skipped")
+        rec, stop = _walk(buf, 0, len(buf))
+        arr = np.frombuffer(buf, np.uint8)
+        ops = arr[rec] if rec.size else np.empty(0, np.uint8)
+        bad = 0
+        # Schemas and channels: the first record of each id is parsed (Python), the rest of
+        # a chunk's records only through numpy (a chunk may hold millions of them).
+        for op in (OP_SCHEMA, OP_CHANNEL):
+            at = rec[ops == op]
+            if not at.size:
+                continue
+            ids = _u16_at(arr, at + _RECORD_HEAD) if at.size else at
+            _, first = np.unique(ids, return_index=True)
+            for a in at[np.sort(first)].tolist():
+                try:
+                    self._scan_record(op, buf, a + _RECORD_HEAD, a + _RECORD_HEAD + _length(buf, a),
+                                      block.counts, [])
+                except _Short:
+                    bad += 1
+        msgs = rec[ops == OP_MESSAGE]
+        msgs = msgs[_u64_at(arr, msgs + 1) >= _MESSAGE_HEAD] if msgs.size else msgs
+        if bad:
+            self._warn(f"chunk at byte {pos}: {bad} corrupt schema/channel records skipped")
         if stop != len(buf):
-            self._warn(f"chunk at byte {pos}: {len(buf) - stop} bytes of records are corrupt")
-        for cid, n in block.counts.items():
-            counts[cid] = counts.get(cid, 0) + n
-        if times:
-            block.start_ns, block.end_ns = min(times), max(times)
+            self._lose(len(buf) - stop, f"chunk at byte {pos}: its last {len(buf) - stop}"
+                       " bytes are not a whole record (lost)")
+        if msgs.size:
+            cids = _u16_at(arr, msgs + _RECORD_HEAD)
+            times = _u64_at(arr, msgs + _RECORD_HEAD + 6).astype(np.int64)
+            ids, n = np.unique(cids, return_counts=True)
+            for cid, k in zip(ids.tolist(), n.tolist(), strict=True):
+                block.counts[cid] = k
+                counts[cid] = counts.get(cid, 0) + k
+            block.start_ns, block.end_ns = int(times.min()), int(times.max())
         return block
 
     def _make_connections(self) -> dict[int, Connection]:
@@ -503,6 +554,12 @@ class McapSource(FileSource, SourceAccessors):
         if line not in self._warnings:
             self._warnings.append(line)
 
+    def _lose(self, nbytes: int, line: str) -> None:
+        """Record a loss of ``nbytes`` of the file, once (every pass meets it again)."""
+        if line not in self._warnings:
+            self._bytes_lost += nbytes
+            self._warnings.append(line)
+
     # -- reading ---------------------------------------------------------------------------
 
     def _block_batches(self, block: _Block, wanted: set[int]) -> Iterator[RawBatch]:
@@ -515,20 +572,17 @@ class McapSource(FileSource, SourceAccessors):
             return
         if block.is_chunk:
             try:
-                if content[0] != OP_CHUNK:
-                    raise ValueError("chunk index points at a non-chunk record")
-                records, compression, size, crc = _chunk_records(content[_RECORD_HEAD:])
-                data = _decompress(compression, records, size)
-                _check_chunk(data, size, crc)
-            except NotImplementedError as err:
-                raise FormatError(f"unsupported chunk compression {err}", self.path) from err
-            except Exception as err:
-                lost = sum(block.counts.get(c, 0) for c in wanted)
+                if not content or content[0] != OP_CHUNK:
+                    raise ChunkError("chunk index points at a non-chunk record")
+                data = _inflated_chunk(content[_RECORD_HEAD:])
+            except ChunkError as err:
+                lost = sum(block.counts.values())
                 what = f"{lost} messages" if lost else "its messages"
-                self._warn(
-                    f"corrupt chunk at byte {block.record_offset} skipped ({_reason(err)});"
-                    f" {what} lost"
-                )
+                line = (f"corrupt chunk at byte {block.record_offset} skipped ({err});"
+                        f" {what} lost")
+                if line not in self._warnings:
+                    self._messages_lost += lost
+                self._lose(block.record_length, line)
                 return
         else:
             data = content
@@ -559,11 +613,12 @@ class McapSource(FileSource, SourceAccessors):
         """Record offsets per channel from the Message Index records, validated."""
         region = self._read_at(*block.index_region)
         out: dict[int, npt.NDArray[np.int64]] = {}
+        unindexed: set[int] = set()
         for cid in sorted(wanted & set(block.msg_index)):
             try:
                 entries = _index_entries(region, block.msg_index[cid] - block.index_region[0])
             except _Short:
-                self._warn(f"message index of chunk at byte {block.record_offset} is corrupt")
+                unindexed.add(cid)
                 continue
             rec = entries[:, 1].astype(np.int64)
             if np.any(rec[1:] < rec[:-1]):
@@ -582,23 +637,27 @@ class McapSource(FileSource, SourceAccessors):
                 )
                 ok &= _u16_at(buf, rec + _RECORD_HEAD) == cid
             if not ok.all():
-                self._warn(
-                    f"chunk at byte {block.record_offset}: message index of channel {cid}"
-                    f" does not match its records; {rec.size} messages skipped"
-                )
+                unindexed.add(cid)
                 continue
             out[cid] = rec
+        if unindexed:
+            # A damaged index, intact records: the chunk is walked for those channels.
+            self._warn(f"chunk at byte {block.record_offset}: message index of channels"
+                       f" {sorted(unindexed)} does not match its records; records walked")
+            out |= self._walked_messages(block, buf, unindexed)
         return out
 
     def _walked_messages(
-        self, block: _Block, data: bytes | memoryview, wanted: set[int]
+        self, block: _Block, data: bytes | memoryview | npt.NDArray[np.uint8], wanted: set[int]
     ) -> dict[int, npt.NDArray[np.int64]]:
-        walked, _ = _walk(data, 0, len(data))
-        at = [pos for op, pos in walked if op == OP_MESSAGE]
-        if not at:
-            return {}
-        rec = np.asarray(at, dtype=np.int64)
         buf = np.frombuffer(data, dtype=np.uint8)
+        rec, stop = _walk(buf, 0, buf.shape[0])
+        if stop != buf.shape[0] and block.is_chunk:
+            self._lose(buf.shape[0] - stop, f"chunk at byte {block.record_offset}: its last"
+                       f" {buf.shape[0] - stop} bytes are not a whole record (lost)")
+        if not rec.size:
+            return {}
+        rec = rec[buf[rec] == OP_MESSAGE]
         rec = rec[_u64_at(buf, rec + 1) >= _MESSAGE_HEAD]
         cids = _u16_at(buf, rec + _RECORD_HEAD)
         return {c: rec[cids == c] for c in sorted(wanted) if np.any(cids == c)}
@@ -608,7 +667,7 @@ def _length(buf: bytes | memoryview, pos: int) -> int:
     return int(struct.unpack_from("<Q", buf, pos + 1)[0])
 
 
-def _chunk_records(content: bytes) -> tuple[memoryview, str, int, int]:
+def _chunk_records(content: bytes | memoryview) -> tuple[memoryview, str, int, int]:
     """(compressed records, compression, uncompressed size, crc) of a Chunk record's content."""
     c = _Cursor(content)
     try:
@@ -624,11 +683,17 @@ def _chunk_records(content: bytes) -> tuple[memoryview, str, int, int]:
     return memoryview(content)[start : start + n], compression, size, crc
 
 
-def _check_chunk(data: bytes | memoryview, size: int, crc: int) -> None:
-    if len(data) != size:
-        raise ValueError(f"{len(data)} bytes of records, header says {size}")
+def _inflated_chunk(content: bytes | memoryview) -> bytes | memoryview:
+    """The records of a Chunk record's content, inflated within the bound of
+    :mod:`formats.ros.inflate` and checked against the chunk's CRC. Raises ChunkError."""
+    try:
+        records, compression, size, crc = _chunk_records(content)
+    except ValueError as err:
+        raise ChunkError(str(err)) from err
+    data = inflate(compression, records, size)
     if crc and zlib.crc32(data) != crc:
-        raise ValueError("CRC mismatch")
+        raise ChunkError("CRC mismatch")
+    return data
 
 
 def _index_entries(region: bytes, at: int) -> npt.NDArray[np.uint64]:

@@ -40,13 +40,13 @@ from collections import deque
 from collections.abc import Collection, Iterator, Sequence
 from dataclasses import replace
 from datetime import UTC, datetime
-from pathlib import Path
 
 import numpy as np
 
 from formats.contract import LogFile
 from formats.errors import FormatError
-from formats.ros.source import Connection, MessageSource, RawBatch
+from formats.ros.source import Connection, MessageSource, RawBatch, messages_lost
+from formats.storage.location import Location, joined
 
 #: Two files' streams may alternate this far out of log order (the pipeline reorders
 #: readings within 2 s; poses of one topic never come from two overlapping files). Half
@@ -86,7 +86,7 @@ class MultiSource:
             )
             first = self._sources[0]
             # For messages about the whole recording: every file, in time order.
-            self.path: Path = Path(" + ".join(str(s.path) for s in self._sources))
+            self.path: Location = joined([s.path for s in self._sources])
             self.format_name = first.format_name
             self._check_formats()
             self._check_time(max_gap_s)
@@ -122,6 +122,10 @@ class MultiSource:
     @property
     def bytes_lost(self) -> int:
         return sum(s.bytes_lost for s in self._sources)
+
+    @property
+    def messages_lost(self) -> int:
+        return sum(messages_lost(s) for s in self._sources)
 
     @property
     def files(self) -> list[LogFile]:

@@ -51,7 +51,7 @@ from formats.ros.columns import (
     TransformColumns,
 )
 from formats.ros.decode import decode
-from formats.ros.source import Connection, MessageSource, RawBatch
+from formats.ros.source import Connection, MessageSource, RawBatch, messages_lost
 from formats.sensor_config import SensorRing, sensor_setup
 
 RING_TYPES = POINTCLOUD_TYPES | SONARARRAY_TYPES
@@ -157,17 +157,20 @@ class RosLogReader:
         notes += self._range_notes()
         notes += [w for w in self.source.warnings if w not in notes]
         notes += getattr(self.source, "notes", [])  # several files: duplicates read once
+        name = self.path.name
+        several = bool(getattr(self.source, "files", None))  # its lines name their files
         return LogInfo(
             path=str(self.path),
             format=self.format_name,
             start_ns=self.source.start_ns,
             end_ns=self.source.end_ns,
-            message_count=sum(t.count for t in topics),
+            message_count=max(0, sum(t.count for t in topics) - messages_lost(self.source)),
             topics=topics,
             range_topics=list(sel.range_topics),
             pose_topic=sel.pose_topic,
             notes=notes,
-            losses=list(self.source.warnings),
+            # Each loss names its file (a source's own lines may name only the place).
+            losses=[w if name in w or several else f"{name}: {w}" for w in self.source.warnings],
             bytes_lost=self.source.bytes_lost,
             files=list(getattr(self.source, "files", [])),
             duplicates_read_once=getattr(self.source, "duplicates_read_once", 0),

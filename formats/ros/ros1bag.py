@@ -17,21 +17,21 @@ read by scanning the intact records, with one line in :attr:`Ros1BagSource.warni
 
 from __future__ import annotations
 
-import bz2
 import struct
 from collections.abc import Collection, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import lz4.frame
 import numpy as np
 import numpy.typing as npt
 
 from formats.errors import FormatError
 from formats.magic import ROS1_MAGIC
 from formats.options import ReaderOptions, ReaderSettings
+from formats.ros.inflate import MAX_CHUNK_BYTES, ChunkError, inflate, inflate_prefix
 from formats.ros.source import Connection, FileSource, RawBatch, normalize_msgtype
+from formats.storage.location import Location, as_location
 
 if TYPE_CHECKING:
     from formats.ros.reader import RosLogReader
@@ -71,6 +71,7 @@ class _Chunk:
     counts: dict[int, int]
     index: dict[int, tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]] | None = None
     partial: bool = False
+    length: int = 0  # bytes from ``pos`` to the next chunk (or the index): lost with it
 
 
 @dataclass
@@ -87,6 +88,8 @@ class _ScanResult:
     chunks: list[_Chunk] = field(default_factory=list)
     end: int = 0  # end of the last intact record
     salvaged: int = 0  # messages recovered from a chunk cut off by the end of the file
+    lost: int = 0  # bytes of corrupt records skipped before ``end``
+    lines: list[str] = field(default_factory=list)  # one per corrupt record skipped
 
 
 def parse_header(data: bytes | memoryview) -> dict[str, bytes]:
@@ -145,26 +148,14 @@ def _op(fields: dict[str, bytes]) -> int:
 
 
 def _decompress(compression: str, data: bytes, size: int, partial: bool) -> bytes:
-    """Uncompressed chunk data; ``partial`` accepts a cut-off stream (returns what decodes)."""
-    # At most the declared size (+1 to notice more): a corrupt stream or size field must not
-    # make memory grow beyond what the header declares.
-    limit = size + 1
+    """Uncompressed chunk data within the bound of :mod:`formats.ros.inflate`; ``partial``
+    accepts a cut-off stream (returns what decodes)."""
     try:
-        if compression == "none":
-            out = data
-        elif compression == "bz2":
-            out = bz2.BZ2Decompressor().decompress(data, max_length=limit)
-        elif compression == "lz4":
-            out = lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=limit)
-        else:
-            raise _Corrupt(f"unknown chunk compression '{compression}'")
-    except (OSError, ValueError, RuntimeError, EOFError) as err:
-        raise _Corrupt(f"{compression} chunk does not decompress ({err})") from err
-    if partial:
-        return out[:size]
-    if len(out) != size:
-        raise _Corrupt(f"chunk decompresses to {len(out)} bytes, header says {size}")
-    return out
+        if partial:
+            return inflate_prefix(compression, data, size)
+        return bytes(inflate(compression, data, size))
+    except ChunkError as err:
+        raise _Corrupt(str(err)) from err
 
 
 def _conn_record(header: dict[str, bytes], data: bytes) -> _ConnRecord:
@@ -187,10 +178,11 @@ class Ros1BagSource(FileSource):
 
     format_name = "ros1"
 
-    def __init__(self, path: str | Path) -> None:
-        self.path = Path(path)
+    def __init__(self, path: str | Location) -> None:
+        self.path = as_location(path)
         self._warnings: list[str] = []
         self._bytes_lost = 0
+        self._messages_lost = 0
         self._open_file()
 
     # ------------------------------------------------------------------ opening
@@ -224,20 +216,32 @@ class Ros1BagSource(FileSource):
             reason = f"index position {index_pos} is outside the file ({self._size} bytes)"
         else:
             try:
-                conns, chunks = self._read_index(index_pos, conn_count, chunk_count)
+                conns, chunks, index_end = self._read_index(index_pos, conn_count, chunk_count)
             except _Corrupt as err:
                 reason = f"index at byte {index_pos} is unreadable ({err})"
+            else:
+                if index_end < self._size:
+                    tail = self._size - index_end
+                    self._bytes_lost += tail
+                    self._warnings.append(f"{self.path}: {tail} bytes after the index at byte"
+                                          f" {index_end} are not a record (lost)")
         if reason:
             scan = self._scan()
             conns, chunks = scan.conns, scan.chunks
             lost = self._size - scan.end
-            self._bytes_lost = lost
+            self._bytes_lost = lost + scan.lost
             n = sum(c.count for c in conns.values())
             cut = f" ({scan.salvaged} of them from a cut-off chunk)" if scan.salvaged else ""
             self._warnings.append(
                 f"{self.path}: {reason}: read by scanning, {n} messages recovered{cut}, "
                 f"{lost} bytes at the end lost"
             )
+            self._warnings += [f"{self.path}: {line}" for line in scan.lines]
+        data_end = index_pos if not reason else self._size
+        by_pos = sorted(chunks, key=lambda c: c.pos)
+        for a, b in zip(by_pos, [c.pos for c in by_pos[1:]] + [data_end], strict=False):
+            a.length = max(0, b - a.pos)
+        self._lost_chunks: set[int] = set()
         self._chunks = sorted(chunks, key=lambda c: (c.start_ns, c.pos))
         self._connections = [
             Connection(
@@ -284,7 +288,8 @@ class Ros1BagSource(FileSource):
 
     def _read_index(
         self, index_pos: int, conn_count: int, chunk_count: int
-    ) -> tuple[dict[int, _ConnRecord], list[_Chunk]]:
+    ) -> tuple[dict[int, _ConnRecord], list[_Chunk], int]:
+        """Connections and chunk infos of the index at ``index_pos``, and where it ends."""
         conns: dict[int, _ConnRecord] = {}
         chunks: list[_Chunk] = []
         pos = index_pos
@@ -317,7 +322,7 @@ class Ros1BagSource(FileSource):
                 if cid not in conns:
                     raise _Corrupt(f"chunk info names unknown connection {cid}")
                 conns[cid].count += k
-        return conns, chunks
+        return conns, chunks, pos
 
     def _scan(self) -> _ScanResult:
         """Walk the records from the start, keeping every intact one (no index needed)."""
@@ -338,15 +343,21 @@ class Ros1BagSource(FileSource):
                         _u32(header, "size"),
                         partial=False,
                     )
-                except _Corrupt:
-                    break
-                self._index_chunk(pos, raw, res, partial=False)
+                except _Corrupt as err:
+                    # Its framing is intact: the chunk (and its index records) is lost,
+                    # the records after it are read.
+                    res.lost += end - pos
+                    res.lines.append(f"corrupt chunk at byte {pos} skipped ({err})")
+                else:
+                    self._index_chunk(pos, raw, res, partial=False)
             elif op == OP_CONNECTION:
                 try:
                     rec = _conn_record(header, data)
-                except _Corrupt:
-                    break
-                res.conns.setdefault(rec.id, rec)
+                except _Corrupt as err:
+                    res.lost += end - pos
+                    res.lines.append(f"corrupt connection record at byte {pos} skipped ({err})")
+                else:
+                    res.conns.setdefault(rec.id, rec)
             pos = end
             res.end = end
         return res
@@ -409,6 +420,10 @@ class Ros1BagSource(FileSource):
             except _Corrupt:
                 break
             off = end
+        if off < n and not partial:
+            res.lost += n - off
+            res.lines.append(f"chunk at byte {pos}: its last {n - off} bytes are not whole"
+                             " records (lost)")
         index = {
             cid: (np.asarray(t, np.int64), np.asarray(offsets[cid], np.int64))
             for cid, t in times.items()
@@ -452,6 +467,11 @@ class Ros1BagSource(FileSource):
         return list(self._warnings)
 
     @property
+    def messages_lost(self) -> int:
+        """Messages the index counts in chunks that were lost."""
+        return self._messages_lost
+
+    @property
     def chunk_count(self) -> int:
         """Number of (intact) chunks."""
         return len(self._chunks)
@@ -463,8 +483,8 @@ class Ros1BagSource(FileSource):
         One decompressed chunk is held at a time — except where chunks overlap in time
         (bags merged by tools; ``rosbag record`` never writes such), which are merged
         into one buffer so their messages still come out in time order. A chunk the index
-        points to that does not parse raises :class:`FormatError`.
-        """
+        points to that does not parse is skipped, its loss recorded (:attr:`warnings`,
+        :attr:`bytes_lost`)."""
         wanted = sorted({int(c) for c in connection_ids} & self._by_id.keys())
         if not wanted:
             return
@@ -480,32 +500,60 @@ class Ros1BagSource(FileSource):
         if group:
             yield from self._group_batches(group, wanted)
 
-    def _group_batches(self, group: list[_Chunk], wanted: list[int]) -> list[RawBatch]:
-        """Batches of a run of chunks that overlap in time (usually just one chunk)."""
+    def _group_batches(self, group: list[_Chunk], wanted: list[int]) -> Iterator[RawBatch]:
+        """Batches of a run of chunks that overlap in time (usually just one chunk), merged
+        into one buffer of at most MAX_CHUNK_BYTES beyond its first chunk (past that, the
+        run is cut: messages then come in time order within each part). A chunk that does
+        not parse is skipped and recorded as a loss."""
         bufs: list[npt.NDArray[np.uint8]] = []
         parts: dict[int, list[tuple[npt.NDArray[np.int64], ...]]] = {}
         base = 0
         for chunk in group:
             present = [c for c in wanted if chunk.counts.get(c, 0) > 0]
             try:
-                buf, index = self._load_chunk(chunk, present)
-                for cid in present:
-                    if cid in index:
-                        t, start, length = self._locate(buf, *index[cid])
-                        parts.setdefault(cid, []).append((t, start + base, length))
+                buf, located = self._chunk_messages(chunk, present)
             except _Corrupt as err:
-                raise FormatError(f"chunk at byte {chunk.pos}: {err}", self.path) from err
+                self._lose(chunk, f"corrupt chunk at byte {chunk.pos} skipped ({err})")
+                continue
+            if bufs and base + buf.shape[0] > MAX_CHUNK_BYTES:
+                yield from _merged(bufs, parts, self._by_id)
+                bufs, parts, base = [], {}, 0
+            for cid, (t, start, length) in located.items():
+                parts.setdefault(cid, []).append((t, start + base, length))
             bufs.append(buf)
             base += buf.shape[0]
-        buffer = bufs[0] if len(bufs) == 1 else np.concatenate(bufs)
-        out = []
-        for cid in sorted(parts):
-            t, start, length = (np.concatenate(col) for col in zip(*parts[cid], strict=True))
-            if t.size > 1 and bool(np.any(np.diff(t) < 0)):
-                order = np.argsort(t, kind="stable")
-                t, start, length = t[order], start[order], length[order]
-            out.append(RawBatch(self._by_id[cid], t, buffer, start, length))
-        return out
+        if bufs:
+            yield from _merged(bufs, parts, self._by_id)
+
+    def _chunk_messages(
+        self, chunk: _Chunk, present: list[int]
+    ) -> tuple[npt.NDArray[np.uint8], dict[int, tuple[npt.NDArray[np.int64], ...]]]:
+        """A chunk's buffer and, per connection, (log times, data offsets, lengths); a
+        chunk whose index records do not match its records is walked instead."""
+        buf, index = self._load_chunk(chunk, present)
+        try:
+            return buf, {cid: self._locate(buf, *index[cid]) for cid in present if cid in index}
+        except _Corrupt as err:
+            res = _ScanResult(conns={c: _ConnRecord(c, "", {}) for c in present})
+            self._index_chunk(chunk.pos, buf.tobytes(), res, partial=True)
+            if not res.chunks or res.chunks[0].index is None:
+                raise
+            self._warnings.append(
+                f"{self.path}: chunk at byte {chunk.pos}: its index does not match its records"
+                f" ({err}); records walked"
+            )
+            walked = res.chunks[0].index
+            return buf, {cid: self._locate(buf, *walked[cid]) for cid in present
+                         if cid in walked}
+
+    def _lose(self, chunk: _Chunk, line: str) -> None:
+        """Record a chunk as lost, once (every pass over the bag meets it again)."""
+        if chunk.pos in self._lost_chunks:
+            return
+        self._lost_chunks.add(chunk.pos)
+        self._bytes_lost += chunk.length
+        self._messages_lost += sum(chunk.counts.values())
+        self._warnings.append(f"{self.path}: {line}")
 
     def _load_chunk(
         self, chunk: _Chunk, present: list[int]
@@ -568,6 +616,23 @@ class Ros1BagSource(FileSource):
         if start.size and (start + dlen).max() > n:
             raise _Corrupt("message data overruns the chunk")
         return times, start, dlen
+
+
+def _merged(
+    bufs: list[npt.NDArray[np.uint8]],
+    parts: dict[int, list[tuple[npt.NDArray[np.int64], ...]]],
+    by_id: dict[int, Connection],
+) -> list[RawBatch]:
+    """One batch per connection over the buffers joined, each sorted by log time."""
+    buffer = bufs[0] if len(bufs) == 1 else np.concatenate(bufs)
+    out = []
+    for cid in sorted(parts):
+        t, start, length = (np.concatenate(col) for col in zip(*parts[cid], strict=True))
+        if t.size > 1 and bool(np.any(np.diff(t) < 0)):
+            order = np.argsort(t, kind="stable")
+            t, start, length = t[order], start[order], length[order]
+        out.append(RawBatch(by_id[cid], t, buffer, start, length))
+    return out
 
 
 def _gather_u32(buf: npt.NDArray[np.uint8], pos: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:

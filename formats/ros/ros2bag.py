@@ -11,6 +11,7 @@ decompressed to a temporary directory; per-message zstd (``MESSAGE``) on the fly
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import sqlite3
@@ -18,7 +19,7 @@ import tempfile
 import weakref
 from collections.abc import Collection, Iterator
 from dataclasses import replace
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 from typing import Any, Protocol
 from urllib.parse import quote
 
@@ -26,16 +27,46 @@ import numpy as np
 import yaml
 
 from formats.errors import FormatError
+from formats.ros.inflate import MAX_RATIO, ChunkError, inflate_message
 from formats.ros.mcap_source import McapSource
-from formats.ros.source import Connection, Encoding, RawBatch, SourceAccessors, normalize_msgtype
+from formats.ros.source import (
+    Connection,
+    Encoding,
+    RawBatch,
+    SourceAccessors,
+    messages_lost,
+    normalize_msgtype,
+)
+from formats.storage.location import Location, Url, as_location
+from formats.text_file import read_text
 
 _STORAGE_SUFFIXES = {".db3": "sqlite3", ".mcap": "mcap"}
 # Rows fetched from sqlite per batch: bounded memory whatever the bag size.
 SQLITE_BATCH_ROWS = 4096
 
 
+
+def _inside_bag(bag: Location, name: str, meta: Location) -> Location:
+    """The storage file ``name`` of ``metadata.yaml``, which must lie inside the bag
+    directory (no absolute path, no ``..``, no symlink leading out): FormatError else."""
+    if isinstance(bag, Url):  # a prefix: no symlinks, only the name can lead out
+        parts = PurePosixPath(name).parts
+        if name.startswith("/") or ".." in parts or "://" in name or not parts:
+            raise FormatError(f"metadata names a storage file outside the bag: {name!r}", meta)
+        return bag / name
+    p = bag / name
+    try:
+        inside = not Path(name).is_absolute() and p.resolve().is_relative_to(bag.resolve())
+    except (OSError, RuntimeError, ValueError):
+        inside = False
+    if not inside:
+        raise FormatError(f"metadata names a storage file outside the bag: {name!r}", meta)
+    return p
+
+
 class _StorageFile(Protocol):
-    path: Path
+    @property
+    def path(self) -> Location: ...
 
     @property
     def connections(self) -> list[Connection]: ...
@@ -61,7 +92,7 @@ class Sqlite3File(SourceAccessors):
     """One rosbag2 ``.db3`` file (old schema without definitions, or with
     ``message_definitions``); connection ids are the ``topics`` table ids."""
 
-    def __init__(self, path: Path, display: Path | None = None) -> None:
+    def __init__(self, path: Path, display: Location | None = None) -> None:
         self.path = path
         self._name = display or path  # the path to name in errors (not a temp copy)
         self._warnings: list[str] = []
@@ -70,7 +101,7 @@ class Sqlite3File(SourceAccessors):
             raise FormatError(f"{what}, not a rosbag2 sqlite3 database", self._name)
         # Read-only and immutable: sqlite neither writes -wal/-shm files next to the user's
         # bag nor needs write access to its directory (archive mounts, read-only binds).
-        uri = f"file:{quote(str(path.resolve()))}?mode=ro&immutable=1"
+        uri = f"file:{quote(os.fsencode(path.resolve()))}?mode=ro&immutable=1"
         try:
             self._db = sqlite3.connect(uri, uri=True, check_same_thread=False)
         except sqlite3.Error as err:
@@ -182,9 +213,10 @@ class Ros2BagSource(SourceAccessors):
     ``format_name`` is ``'ros2-sqlite3'`` or ``'ros2-mcap'``.
     """
 
-    def __init__(self, path: str | Path) -> None:
-        self.path = Path(path)
+    def __init__(self, path: str | Location) -> None:
+        self.path = as_location(path)
         self._warnings: list[str] = []
+        self.notes: list[str] = []  # for `info`: storage files downloaded to read them
         self._files: list[_StorageFile] = []
         self._tmpdir: Path | None = None
         self._finalizer: Any = None
@@ -203,7 +235,7 @@ class Ros2BagSource(SourceAccessors):
             meta = path / "metadata.yaml"
             if meta.is_file():
                 storage, names, compression_mode = self._read_metadata(meta)
-                files = [path / n for n in names]
+                files = [_inside_bag(path, n, meta) for n in names]
             else:
                 files = sorted(
                     (p for p in path.iterdir() if _storage_of(p) is not None),
@@ -232,21 +264,27 @@ class Ros2BagSource(SourceAccessors):
         self._message_zstd = compression_mode == "MESSAGE"
         for f in files:
             local = self._decompressed(f) if f.suffix == ".zstd" else f
+            if isinstance(local, Url):
+                if storage == "mcap":  # read by ranges where it is
+                    self._files.append(McapSource(local))
+                    continue
+                local = self._downloaded(local)
             self._files.append(
                 McapSource(local) if storage == "mcap" else Sqlite3File(local, display=f)
             )
         self._merge()
 
-    def _read_metadata(self, meta: Path) -> tuple[str, list[str], str]:
+    def _read_metadata(self, meta: Location) -> tuple[str, list[str], str]:
         try:
-            doc = yaml.safe_load(meta.read_text("utf-8"))
+            doc = yaml.safe_load(read_text(meta, "rosbag2 metadata",
+                                           errors=(FormatError, FormatError)))
             info = doc["rosbag2_bagfile_information"]
             version = int(info["version"])
             storage = str(info.get("storage_identifier") or "sqlite3")
             names = [str(n) for n in info["relative_file_paths"]]
             mode = str(info.get("compression_mode") or "").upper()
             fmt = str(info.get("compression_format") or "")
-        except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError) as err:
+        except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError, RecursionError) as err:
             raise FormatError(f"unreadable rosbag2 metadata ({_reason(err)})", meta) from err
         if version < 1 or version > 9:
             raise FormatError(f"unsupported rosbag2 metadata version {version}", meta)
@@ -258,17 +296,40 @@ class Ros2BagSource(SourceAccessors):
             raise FormatError(f"unsupported compression_format {fmt!r} (zstd)", meta)
         return storage, names, mode
 
-    def _decompressed(self, src: Path) -> Path:
-        """A zstd-compressed storage file decompressed into this source's temp dir."""
-        import zstandard
-
+    def _temp_dir(self) -> Path:
+        """This source's temporary directory, removed on close (or when it is collected)."""
         if self._tmpdir is None:
             self._tmpdir = Path(tempfile.mkdtemp(prefix="sonarmap-ros2-"))
             self._finalizer = weakref.finalize(self, shutil.rmtree, self._tmpdir, True)
-        dst = self._tmpdir / src.name[: -len(".zstd")]
+        return self._tmpdir
+
+    def _downloaded(self, src: Url) -> Path:
+        """A storage file at a URL copied into the temp dir (sqlite needs a local file)."""
+        dst = self._temp_dir() / src.name
+        src.download(dst)
+        self.notes.append(f"{src.name}: a sqlite3 storage file is read from a local copy: "
+                          f"downloaded from {src} to a temporary file, removed when closed")
+        return dst
+
+    def _decompressed(self, src: Location) -> Path:
+        """A zstd-compressed storage file decompressed into this source's temp dir."""
+        import zstandard
+
+        dst = self._temp_dir() / src.name[: -len(".zstd")]
+        # At most what zstd can inflate this many bytes to (formats/ros/inflate.py): a
+        # small file must not fill the disk.
+        limit = src.stat().st_size * MAX_RATIO["zstd"] + (1 << 20)
+        written = 0
         try:
             with src.open("rb") as fin, dst.open("wb") as fout:
-                zstandard.ZstdDecompressor().copy_stream(fin, fout)
+                reader = zstandard.ZstdDecompressor().stream_reader(fin, read_across_frames=True)
+                while piece := reader.read(1 << 20):
+                    written += len(piece)
+                    if written > limit:
+                        raise FormatError(
+                            f"zstd file inflates to more than {limit} bytes, more than zstd"
+                            f" can encode in {src.stat().st_size} bytes (corrupt)", src)
+                    fout.write(piece)
         except (OSError, zstandard.ZstdError) as err:
             raise FormatError(f"cannot decompress zstd file ({_reason(err)})", src) from err
         if dst.stat().st_size == 0:
@@ -308,6 +369,10 @@ class Ros2BagSource(SourceAccessors):
         return self._bytes_lost + sum(f.bytes_lost for f in self._files)
 
     @property
+    def messages_lost(self) -> int:
+        return sum(messages_lost(f) for f in self._files)
+
+    @property
     def warnings(self) -> list[str]:
         out = list(self._warnings)
         for f in self._files:
@@ -324,8 +389,33 @@ class Ros2BagSource(SourceAccessors):
             for raw in f.raw_batches(ids):
                 conn = self._connections[local[raw.connection.id]]
                 if self._message_zstd:
-                    raw = _decompress_messages(raw)
+                    raw = self._decompress_messages(raw, f.path.name)
                 yield RawBatch(conn, raw.log_time_ns, raw.buffer, raw.offsets, raw.lengths)
+
+    def _decompress_messages(self, raw: RawBatch, name: str) -> RawBatch:
+        """The batch with every message zstd-decompressed (``compression_mode: MESSAGE``),
+        each within the bound of formats/ros/inflate.py; a message that does not inflate
+        is skipped and recorded as a loss."""
+        out: list[bytes] = []
+        keep: list[int] = []
+        for i in range(len(raw)):
+            t = int(raw.log_time_ns[i])
+            try:
+                out.append(inflate_message(raw.message(i), f"message at log time {t} ns"))
+                keep.append(i)
+            except ChunkError as err:
+                line = f"{name}: topic {raw.connection.topic}: {err}; message skipped"
+                if line not in self._warnings:
+                    self._warnings.append(line)
+                    self._bytes_lost += int(raw.lengths[i])
+        lengths = np.fromiter(map(len, out), np.int64, len(out))
+        return RawBatch(
+            raw.connection,
+            raw.log_time_ns[keep],
+            np.frombuffer(b"".join(out), np.uint8),
+            np.cumsum(lengths) - lengths,
+            lengths,
+        )
 
     def close(self) -> None:
         for f in self._files:
@@ -341,35 +431,12 @@ class Ros2BagSource(SourceAccessors):
         self.close()
 
 
-def _decompress_messages(raw: RawBatch) -> RawBatch:
-    """The batch with every message zstd-decompressed (``compression_mode: MESSAGE``)."""
-    import zstandard
-
-    dec = zstandard.ZstdDecompressor()
-    out: list[bytes] = []
-    for i in range(len(raw)):
-        try:
-            out.append(dec.decompress(raw.message(i)))
-        except zstandard.ZstdError as err:
-            raise FormatError(
-                f"message {i} of topic {raw.connection.topic}: bad zstd compression ({err})"
-            ) from err
-    lengths = np.fromiter(map(len, out), np.int64, len(out))
-    return RawBatch(
-        raw.connection,
-        raw.log_time_ns,
-        np.frombuffer(b"".join(out), np.uint8),
-        np.cumsum(lengths) - lengths,
-        lengths,
-    )
-
-
-def _storage_of(p: Path) -> str | None:
+def _storage_of(p: Location) -> str | None:
     name = p.name[: -len(".zstd")] if p.name.endswith(".zstd") else p.name
     return _STORAGE_SUFFIXES.get(Path(name).suffix) if p.is_file() else None
 
 
-def _natural_key(p: Path) -> list[Any]:
+def _natural_key(p: Location) -> list[Any]:
     """bag_2 before bag_10."""
     return [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", p.name)]
 

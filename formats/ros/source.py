@@ -13,13 +13,13 @@ from __future__ import annotations
 
 from collections.abc import Collection, Iterator
 from dataclasses import dataclass
-from pathlib import Path
 from typing import BinaryIO, Literal, Protocol, Self
 
 import numpy as np
 import numpy.typing as npt
 
 from formats.errors import FormatError
+from formats.storage.location import Location
 
 # "other": an MCAP channel in another encoding (json, protobuf, ...): listed, not decodable.
 Encoding = Literal["ros1", "cdr", "other"]
@@ -84,6 +84,7 @@ class SourceAccessors:
     _end: int | None
     _warnings: list[str]
     _bytes_lost: int = 0
+    _messages_lost: int = 0
 
     @property
     def connections(self) -> list[Connection]:
@@ -105,11 +106,21 @@ class SourceAccessors:
     def bytes_lost(self) -> int:
         return self._bytes_lost
 
+    @property
+    def messages_lost(self) -> int:
+        """Messages the index counts in chunks that were lost (in ``connections`` counts)."""
+        return self._messages_lost
+
+
+def messages_lost(source: object) -> int:
+    """A source's ``messages_lost`` (0 for a source that does not count them)."""
+    return int(getattr(source, "messages_lost", 0))
+
 
 class MessageSource(Protocol):
     """A ROS log container (ROS 1 bag, ROS 2 bag, MCAP)."""
 
-    path: Path
+    path: Location
     format_name: str  # 'ros1', 'ros2-sqlite3', 'ros2-mcap', 'mcap'
 
     @property
@@ -142,9 +153,10 @@ class MessageSource(Protocol):
 class FileSource:
     """The life cycle of a source that reads one file: :meth:`_open_file` opens it (a file
     that cannot be opened is a FormatError naming it), keeps its size and runs the
-    source's ``_open`` parse, closing the file if that fails; a context manager."""
+    source's ``_open`` parse, closing the file if that fails; a context manager. A URL is
+    read by ranges (:meth:`formats.storage.location.Url.open`)."""
 
-    path: Path
+    path: Location
     _file: BinaryIO
     _size: int
 

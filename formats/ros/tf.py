@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from formats.angles import wrap_angle
+from formats.angles import yaw_from_quaternion as yaw_from_quaternion  # re-exported
 from formats.arrays import F64, I64
 from formats.contract import PoseBatch, SensorMount
 from formats.ros.columns import TransformColumns
@@ -38,11 +39,6 @@ class Link:
 
     def __len__(self) -> int:
         return int(self.t_ns.shape[0])
-
-
-def yaw_from_quaternion(qx: F64, qy: F64, qz: F64, qw: F64) -> F64:
-    """Yaw (rad) of quaternions: atan2(2(wz + xy), 1 − 2(y² + z²))."""
-    return np.arctan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
 
 
 def compose(a: Pose2, b: Pose2) -> Pose2:

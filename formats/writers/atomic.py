@@ -18,13 +18,18 @@ from types import TracebackType
 from typing import BinaryIO
 
 from formats.errors import OutputError
-from formats.writers.output_marker import not_replaceable_reason, write_output_marker
+from formats.writers.output_marker import (
+    not_replaceable_file_reason,
+    not_replaceable_reason,
+    write_output_marker,
+)
 
 __all__ = [
     "OutputDir",
     "atomic_open",
     "atomic_write_bytes",
     "atomic_write_text",
+    "check_output_file",
     "clean_stale_entries",
     "clean_stale_siblings",
 ]
@@ -32,6 +37,20 @@ __all__ = [
 NAME_MAX = 255  # bytes in one path component (Linux, macOS, Windows)
 # What _sibling_name adds around the name: ".", ".tmp-", a pid (up to 10 digits), "-", 8 hex.
 _SIBLING_EXTRA = len(".") + len(".tmp-") + 10 + len("-") + 8
+
+
+def check_path_names(path: Path) -> None:
+    """OutputError, before any work, when a component of ``path`` is longer than
+    NAME_MAX bytes or cannot be encoded as a file name."""
+    for part in Path(path).parts:
+        try:
+            size = len(os.fsencode(part))
+        except UnicodeEncodeError as err:
+            raise OutputError(f"a path component cannot be a file name ({err.reason})",
+                              path) from err
+        if size > NAME_MAX:
+            raise OutputError(f"a path component is too long ({size} bytes; at most "
+                              f"{NAME_MAX})", path)
 
 
 def _fsync_path(path: Path) -> None:
@@ -149,6 +168,7 @@ class OutputDir:
         final = self.final
         if final.name in ("", ".", ".."):
             raise OutputError("output directory needs a name (not '.', '..' or '/')", final)
+        check_path_names(final)
         if final.is_symlink():
             raise OutputError("output directory is a symlink; refusing to write through it", final)
         if final.parent.is_symlink():
@@ -215,7 +235,9 @@ class OutputDir:
             except FileExistsError:
                 continue
             except OSError as err:
-                raise OutputError(f"cannot create temporary directory: {err}", tmp) from err
+                # Named by OUT, the user's name, not by the hidden temporary directory.
+                raise OutputError(f"cannot create the output directory: "
+                                  f"{err.strerror or err}", self.final) from err
             except BaseException:
                 # SIGTERM/Ctrl-C right after mkdir: __exit__ will not run for a failed
                 # __enter__, so the directory is removed here.
@@ -328,6 +350,45 @@ class OutputDir:
             shutil.rmtree(old, ignore_errors=True)
 
 
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a.resolve() == b.resolve() or os.path.samefile(a, b)
+    except (OSError, RuntimeError):
+        return False
+
+
+def check_output_file(
+    path: Path,
+    *,
+    kind: str | None,
+    force: bool,
+    inputs: tuple[tuple[Path, str], ...] = (),
+) -> None:
+    """Refuse (OutputError, before any work) to write the single file ``path`` when it is,
+    or is inside, one of ``inputs`` (``(path, what)``: "the truth map"), is a symlink or not a
+    regular file, or exists and is not a sonarmap file of ``kind``
+    (:func:`~formats.writers.output_marker.stamped`; None: no existing file is replaced);
+    one that is sonarmap's is replaced only with ``force``. Messages suggest --force only
+    for that last case."""
+    path = Path(path)
+    for p, what in inputs:
+        p = Path(p)
+        inside = p.is_dir() and _inside(Path(os.path.abspath(path)).resolve(), p.resolve())
+        if inside or _same_file(path, p):
+            how = "is inside" if inside else "is"
+            raise OutputError(f"{how} {what}, an input of this command; choose another "
+                              "output file", path)
+    if not (path.exists() or path.is_symlink()):
+        return
+    reason = (not_replaceable_file_reason(path, kind) if kind is not None
+              else "exists already")
+    if reason is not None:
+        raise OutputError(f"{reason}; not replacing it, choose another output file", path)
+    if not force:
+        raise OutputError("exists already (an earlier sonarmap output); use --force to "
+                          "replace it, or choose another output file", path)
+
+
 @contextlib.contextmanager
 def atomic_open(path: Path) -> Iterator[BinaryIO]:
     """A binary file to write ``path`` through, atomically: a temporary sibling that is
@@ -359,5 +420,6 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
 
 
 def atomic_write_text(path: Path, text: str) -> None:
-    """Write UTF-8 ``text`` (``\\n`` newlines, on every OS) to ``path`` atomically."""
-    atomic_write_bytes(path, text.encode("utf-8"))
+    """Write UTF-8 ``text`` (``\\n`` newlines, on every OS) to ``path`` atomically. A file
+    name's bytes that are not UTF-8 (surrogate-escaped) are written as ``\\udcXX``."""
+    atomic_write_bytes(path, text.encode("utf-8", errors="backslashreplace"))

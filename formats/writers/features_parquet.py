@@ -103,7 +103,9 @@ def write_features(path: Path, features: FeatureTable, *, metadata: dict[str, st
 
 def _open(path: Path) -> pq.ParquetFile:
     try:
-        return pq.ParquetFile(path)
+        # Read by Python: pyarrow takes str paths as UTF-8, and a file name may be any
+        # bytes (surrogate-escaped in Python).
+        return pq.ParquetFile(pa.BufferReader(Path(path).read_bytes()))
     except FileNotFoundError as err:
         raise FormatError("no such file", path) from err
     except (OSError, pa.ArrowException) as err:

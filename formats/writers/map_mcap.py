@@ -15,7 +15,9 @@ rosbags. One message per topic, all stamped at ``stamp_ns`` (the end of the log)
 * ``/trajectory`` — ``nav_msgs/msg/Path``, the poses with their own stamps (with pose
   refinement, the refined poses);
 * ``/odometry`` — ``nav_msgs/msg/Path``, only with pose refinement: the odometry the
-  refined poses started from, so a viewer shows the two side by side.
+  refined poses started from, so a viewer shows the two side by side;
+* ``/loop_closures`` — ``visualization_msgs/msg/Marker``, a red ``LINE_LIST`` joining the
+  submap anchors of each loop closure the graph model accepted (only when there are some).
 
 The marker array and the path are serialised in bulk (:mod:`formats.writers.cdr_sequence`:
 rosbags' own bytes for a few elements, repeated with the fields patched in), byte for byte
@@ -48,6 +50,7 @@ from formats.writers.nav2_map import FREE, OCCUPIED, trinary_classes
 from formats.writers.trajectory_tum import Trajectory
 
 __all__ = [
+    "CLOSURES_TOPIC",
     "FEATURES_TOPIC",
     "MAP_TOPIC",
     "ODOMETRY_TOPIC",
@@ -60,6 +63,8 @@ MAP_TOPIC = "/map"
 FEATURES_TOPIC = "/sonar_features"
 TRAJECTORY_TOPIC = "/trajectory"
 ODOMETRY_TOPIC = "/odometry"
+CLOSURES_TOPIC = "/loop_closures"
+MARKER_TYPE = "visualization_msgs/msg/Marker"
 GRID_TYPE = "nav_msgs/msg/OccupancyGrid"
 MARKERS_TYPE = "visualization_msgs/msg/MarkerArray"
 PATH_TYPE = "nav_msgs/msg/Path"
@@ -221,6 +226,28 @@ def _marker(m: _Msgs, header: Any, v: Mapping[str, Any]) -> Any:
     )
 
 
+def _closures_msg(m: _Msgs, closures: np.ndarray, frame: str, t_ns: int) -> Any:
+    """One LINE_LIST marker: a segment per loop closure (rows x1, y1, x2, y2)."""
+    empty = np.zeros(0, dtype=np.uint8)
+    points = [m.Point(x=float(x), y=float(y), z=0.0)
+              for row in np.asarray(closures, np.float64).reshape(-1, 4)
+              for x, y in (row[:2], row[2:])]
+    return m.Marker(
+        header=m.Header(stamp=_stamp(m, t_ns), frame_id=frame), ns="loop_closures", id=0,
+        type=m.Marker.LINE_LIST, action=m.Marker.ADD,
+        pose=m.Pose(position=m.Point(x=0.0, y=0.0, z=0.0),
+                    orientation=m.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
+        scale=m.Vector3(x=0.03, y=0.0, z=0.0),
+        color=m.ColorRGBA(r=0.85, g=0.15, b=0.15, a=1.0),
+        lifetime=m.Duration(sec=0, nanosec=0), frame_locked=False, points=points, colors=[],
+        texture_resource="",
+        texture=m.CompressedImage(header=m.Header(stamp=m.Time(sec=0, nanosec=0), frame_id=""),
+                                  format="", data=empty),
+        uv_coordinates=[], text="", mesh_resource="",
+        mesh_file=m.MeshFile(filename="", data=empty), mesh_use_embedded_materials=False,
+    )
+
+
 def _markers_cdr(m: _Msgs, features: FeatureTable, frame: str, t_ns: int) -> bytes:
     header = m.Header(stamp=_stamp(m, t_ns), frame_id=frame)
     return sequence_cdr(
@@ -282,6 +309,7 @@ def write_map_mcap(
     stamp_ns: int,
     library: str = "sonarmap",
     odometry: Trajectory | None = None,
+    closures: np.ndarray | None = None,
 ) -> None:
     """Write ``map.mcap`` (see the module docstring) at ``path``, atomically.
 
@@ -289,7 +317,8 @@ def write_map_mcap(
     ``trajectory``: the poses for ``/trajectory``; ``frame_id``: the map frame (the frame
     the poses are in; ``"map"`` when the log names none); ``stamp_ns``: the stamp of every
     message and header (the end of the log); ``library``: the MCAP header's writer name;
-    ``odometry``: the poses for ``/odometry`` (None: no such topic).
+    ``odometry``: the poses for ``/odometry`` (None: no such topic); ``closures``: the
+    loop closures for ``/loop_closures`` (M×4, m; None or empty: no such topic).
     """
     from mcap.writer import CompressionType, Writer
 
@@ -308,7 +337,10 @@ def write_map_mcap(
         (FEATURES_TOPIC, MARKERS_TYPE, _markers_cdr(m, features, frame, stamp_ns)),
         (TRAJECTORY_TOPIC, PATH_TYPE, _path_cdr(m, trajectory, frame, stamp_ns)),
     ) + (() if odometry is None else (
-        (ODOMETRY_TOPIC, PATH_TYPE, _path_cdr(m, odometry, frame, stamp_ns)),))
+        (ODOMETRY_TOPIC, PATH_TYPE, _path_cdr(m, odometry, frame, stamp_ns)),)) + (
+        () if closures is None or not len(closures) else (
+            (CLOSURES_TOPIC, MARKER_TYPE, bytes(ts.serialize_cdr(
+                _closures_msg(m, closures, frame, stamp_ns), MARKER_TYPE))),))
     with atomic_open(Path(path)) as f:
         writer = Writer(f, compression=CompressionType.ZSTD)
         writer.start(profile="ros2", library=library)

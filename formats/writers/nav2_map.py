@@ -28,7 +28,9 @@ import yaml
 
 from formats.arrays import F64
 from formats.errors import FormatError
-from formats.map_types import GridSpec
+from formats.map_types import DEFAULT_MAX_CELLS, GridSpec
+from formats.ranges import CELL_M, COORD_M, Range
+from formats.text_file import read_bounded, read_text
 from formats.writers.atomic import atomic_write_bytes, atomic_write_text
 
 __all__ = [
@@ -37,6 +39,7 @@ __all__ = [
     "UNKNOWN_PIXEL",
     "Nav2Map",
     "load_nav2_map",
+    "nav2_image_path",
     "trinary_classes",
     "write_nav2_map",
 ]
@@ -47,6 +50,9 @@ UNKNOWN_PIXEL = 205
 OCCUPIED, FREE, UNKNOWN = 1, 0, -1  # classes of trinary_classes
 YAML_OCCUPIED_THRESH = 0.65
 YAML_FREE_THRESH = 0.196
+MAX_YAML_BYTES = 1 << 20  # a map YAML is a few lines
+_IMAGE_HEADER_BYTES = 1 << 20  # an image file's bytes beyond its pixels (headers, comments)
+_MAX_BYTES_PER_CELL = 8  # the most any accepted image spends on a pixel (P2: "65535 ")
 
 
 
@@ -151,8 +157,9 @@ def write_nav2_map(
 _PNM_TOKEN = re.compile(rb"\s*(?:#[^\n]*\n\s*)*(\S+)")
 
 
-def _read_pgm(path: Path, data: bytes) -> F64:
-    """Grey levels in [0, 1] of a P5 (binary) or P2 (ASCII) PGM, image row 0 first."""
+def _read_pgm(path: Path, data: bytes, max_cells: int) -> F64:
+    """Grey levels in [0, 1] of a P5 (binary) or P2 (ASCII) PGM, image row 0 first; the
+    size its header declares is checked against ``max_cells`` before anything is built."""
     magic = data[:2]
     pos = 2
     header: list[int] = []
@@ -166,6 +173,7 @@ def _read_pgm(path: Path, data: bytes) -> F64:
     if width <= 0 or height <= 0 or not 0 < maxval < 65536:
         raise FormatError(f"bad PGM header: {width}x{height}, maxval {maxval}", path)
     n = width * height
+    _check_cells(path, width, height, max_cells)
     if magic == b"P5":
         pos += 1  # exactly one whitespace byte separates the header from the raster
         dtype = np.dtype(np.uint8) if maxval < 256 else np.dtype(">u2")
@@ -187,19 +195,23 @@ def _read_pgm(path: Path, data: bytes) -> F64:
     return (values / maxval).reshape(height, width)
 
 
-def _read_image(path: Path) -> tuple[F64, F64 | None]:
+def _check_cells(path: Path, width: int, height: int, max_cells: int) -> None:
+    if width * height > max_cells:
+        raise FormatError(f"map image declares {width}x{height} pixels, more than "
+                          f"grid.max_cells = {max_cells}", path)
+
+
+def _read_image(path: Path, max_cells: int) -> tuple[F64, F64 | None]:
     """``(shade, alpha)`` in [0, 1] per pixel, image row 0 first; alpha None when opaque.
 
-    ``shade`` is the mean of the colour channels, as map_server computes it.
+    ``shade`` is the mean of the colour channels, as map_server computes it. The file is
+    read only when it is a regular file of a size ``max_cells`` pixels can have, and the
+    pixel count its header declares is checked before the pixels are decoded.
     """
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError as err:
-        raise FormatError("map image not found", path) from err
-    except OSError as err:
-        raise FormatError(f"cannot read map image: {err.strerror or err}", path) from err
+    cap = _IMAGE_HEADER_BYTES + _MAX_BYTES_PER_CELL * max_cells
+    data = read_bounded(path, "map image", cap, errors=(FormatError, FormatError))
     if data[:2] in (b"P5", b"P2"):
-        return _read_pgm(path, data), None
+        return _read_pgm(path, data, max_cells), None
 
     import io
 
@@ -207,6 +219,7 @@ def _read_image(path: Path) -> tuple[F64, F64 | None]:
 
     try:
         with Image.open(io.BytesIO(data)) as img:
+            _check_cells(path, img.width, img.height, max_cells)
             img.load()
             mode = img.mode
             if mode in ("I;16", "I;16B", "I;16L", "I"):
@@ -221,34 +234,66 @@ def _read_image(path: Path) -> tuple[F64, F64 | None]:
     return shade, alpha
 
 
+# A number YAML 1.1 reads as a string (``5e-2``: no dot, no sign in the exponent) is
+# still the number map_server (yaml-cpp) reads.
+_FLOAT_TEXT = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")
+
+
 def _get_number(doc: dict[str, Any], key: str, path: Path) -> float:
     if key not in doc:
         raise FormatError(f"map YAML has no '{key}'", path)
     value = doc[key]
+    if isinstance(value, str) and _FLOAT_TEXT.fullmatch(value.strip()):
+        value = float(value)
     if isinstance(value, bool) or not isinstance(value, int | float):
         raise FormatError(f"map YAML '{key}' is not a number: {value!r}", path)
     return float(value)
 
 
-def load_nav2_map(yaml_path: Path) -> Nav2Map:
-    """Load a nav2 map (YAML + image) with map_server's rules; see the module docstring."""
-    yaml_path = Path(yaml_path)
+THRESHOLD = Range(-1e6, 1e6)
+
+
+def _check_range(value: float, rng: Range, key: str, path: Path) -> None:
+    if not rng.holds(value):
+        raise FormatError(f"map YAML '{key}' {rng.rule()}, got {value!r}", path)
+
+
+def _read_yaml(yaml_path: Path) -> dict[str, Any]:
+    text = read_text(yaml_path, "map YAML", errors=(FormatError, FormatError),
+                     max_bytes=MAX_YAML_BYTES)
     try:
-        doc = yaml.safe_load(yaml_path.read_text(encoding="utf-8"))
-    except FileNotFoundError as err:
-        raise FormatError("no such file", yaml_path) from err
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as err:
+        doc = yaml.safe_load(text)
+    except (yaml.YAMLError, RecursionError) as err:
         reason = " ".join(str(err).split())
         raise FormatError(f"not a readable map YAML: {reason}", yaml_path) from err
     if not isinstance(doc, dict):
         raise FormatError("map YAML is not a mapping", yaml_path)
+    return doc
 
+
+def _image_path(yaml_path: Path, doc: dict[str, Any]) -> Path:
     image = doc.get("image")
     if not isinstance(image, str) or not image:
         raise FormatError("map YAML has no 'image' (or it is empty)", yaml_path)
+    return Path(image) if Path(image).is_absolute() else yaml_path.parent / image
+
+
+def nav2_image_path(yaml_path: Path) -> Path | None:
+    """The image a nav2 map YAML names, or None when the YAML cannot be read."""
+    try:
+        return _image_path(Path(yaml_path), _read_yaml(Path(yaml_path)))
+    except FormatError:
+        return None
+
+
+def load_nav2_map(yaml_path: Path, max_cells: int = DEFAULT_MAX_CELLS) -> Nav2Map:
+    """Load a nav2 map (YAML + image) with map_server's rules; see the module docstring.
+    An image of more than ``max_cells`` pixels is refused before it is decoded."""
+    yaml_path = Path(yaml_path)
+    doc = _read_yaml(yaml_path)
+    image_path = _image_path(yaml_path, doc)
     resolution = _get_number(doc, "resolution", yaml_path)
-    if not (resolution > 0 and math.isfinite(resolution)):
-        raise FormatError(f"map YAML 'resolution' must be positive, got {resolution}", yaml_path)
+    _check_range(resolution, CELL_M, "resolution", yaml_path)
     origin = doc.get("origin")
     if not isinstance(origin, list) or len(origin) != 3:
         raise FormatError(
@@ -258,10 +303,18 @@ def load_nav2_map(yaml_path: Path) -> Nav2Map:
         ox, oy, yaw = (float(v) for v in origin)
     except (TypeError, ValueError) as err:
         raise FormatError(f"map YAML 'origin' has a non-number: {origin!r}", yaml_path) from err
+    _check_range(ox, COORD_M, "origin[0]", yaml_path)
+    _check_range(oy, COORD_M, "origin[1]", yaml_path)
     if yaw != 0.0:
         raise FormatError(f"map origin yaw {yaw} rad is not supported (only 0)", yaml_path)
     occ_th = _get_number(doc, "occupied_thresh", yaml_path)
     free_th = _get_number(doc, "free_thresh", yaml_path)
+    # Thresholds beyond [0, 1] are allowed (map_server's "nothing occupied"), not NaN.
+    _check_range(occ_th, THRESHOLD, "occupied_thresh", yaml_path)
+    _check_range(free_th, THRESHOLD, "free_thresh", yaml_path)
+    if not free_th < occ_th:
+        raise FormatError(f"map YAML 'free_thresh' must be < occupied_thresh, got {free_th}"
+                          f" and {occ_th}", yaml_path)
     mode = doc.get("mode", "trinary")
     if mode not in ("trinary", "scale", "raw"):
         raise FormatError(f"map YAML 'mode' must be trinary, scale or raw, got {mode!r}", yaml_path)
@@ -269,8 +322,7 @@ def load_nav2_map(yaml_path: Path) -> Nav2Map:
         raise FormatError("map YAML 'negate' must be 0 or 1 (or a boolean)", yaml_path)
     negate = bool(doc["negate"])
 
-    image_path = Path(image) if Path(image).is_absolute() else yaml_path.parent / image
-    shade, alpha = _read_image(image_path)
+    shade, alpha = _read_image(image_path, max_cells)
     if mode == "trinary" and alpha is not None:
         # map_server averages opacity in with the colour channels in trinary mode.
         shade = (3.0 * shade + alpha) / 4.0

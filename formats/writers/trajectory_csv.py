@@ -21,7 +21,7 @@ import numpy.typing as npt
 
 from formats.errors import FormatError
 from formats.stamps import format_time_s, parse_time
-from formats.text_file import read_text
+from formats.text_file import MAX_LIST_BYTES, read_text
 from formats.writers.atomic import atomic_write_text
 from formats.writers.trajectory_tum import Trajectory, read_trajectory_tum
 
@@ -48,7 +48,7 @@ def write_trajectory_csv(path: Path, t_ns: npt.ArrayLike, x: npt.ArrayLike, y: n
 def read_trajectory_csv(path: Path) -> Trajectory:
     """A trajectory CSV as arrays; InputError when missing, FormatError (naming the file and
     the line) when malformed, unsorted or not finite."""
-    text = read_text(path, "trajectory file")
+    text = read_text(path, "trajectory file", max_bytes=MAX_LIST_BYTES)
     lines = [
         (i + 1, ln) for i, ln in enumerate(text.splitlines())
         if ln.strip() and not ln.lstrip().startswith("#")
@@ -99,7 +99,7 @@ def read_trajectory(path: Path) -> Trajectory:
     """A trajectory file of either layout sonarmap writes: the CSV ``t,x,y,yaw`` (truth
     files) or TUM (a run's ``trajectory.csv``, :mod:`formats.writers.trajectory_tum`),
     told apart by the first line that is not a comment (commas or not)."""
-    lines = read_text(path, "trajectory file").splitlines()
+    lines = read_text(path, "trajectory file", max_bytes=MAX_LIST_BYTES).splitlines()
     first = next((ln for ln in lines if ln.strip() and not ln.lstrip().startswith("#")), "")
     if "," in first or not first:
         return read_trajectory_csv(path)

@@ -1,6 +1,7 @@
 """``trajectory.png``: the odometry against the refined trajectory (``run --refine-poses``).
 
-Both tracks as polylines on white, the odometry grey and the refined poses blue, with a
+Both tracks as polylines on white, the odometry grey and the refined poses blue (and the
+graph model's loop closures as red segments between the refined anchors they join), with a
 start dot, a 1 m grid, a legend and the figure's scale in the title; +x right, +y up
 (REP 103). Deterministic: the same tracks give the same bytes.
 """
@@ -21,6 +22,7 @@ SIZE = 800  # px, long side of the drawing area
 MARGIN = 40
 ODOMETRY = (150, 150, 150)
 REFINED = (30, 90, 200)
+CLOSURE = (210, 40, 40)
 
 
 def _font() -> ImageFont.FreeTypeFont | ImageFont.ImageFont:
@@ -30,8 +32,10 @@ def _font() -> ImageFont.FreeTypeFont | ImageFont.ImageFont:
         return ImageFont.load_default()
 
 
-def trajectory_png_bytes(odometry_xy: F64, refined_xy: F64, title: str = "") -> bytes:
-    """The PNG of the two tracks (N×2 arrays, m)."""
+def trajectory_png_bytes(odometry_xy: F64, refined_xy: F64, title: str = "",
+                         closures: F64 | None = None) -> bytes:
+    """The PNG of the two tracks (N×2 arrays, m) and the loop closures (M×4: the two
+    joined anchors' x, y, m)."""
     pts = np.concatenate([odometry_xy, refined_xy])
     x0, y0 = pts.min(axis=0) - 0.5
     x1, y1 = pts.max(axis=0) + 0.5
@@ -52,6 +56,8 @@ def trajectory_png_bytes(odometry_xy: F64, refined_xy: F64, title: str = "") -> 
     for gy in np.arange(math.ceil(y0), math.floor(y1) + 1):
         v = h - MARGIN - (gy - y0) * scale
         d.line([(MARGIN, v), (w - MARGIN, v)], fill=(235, 235, 235))
+    for e in (closures if closures is not None else np.empty((0, 4))):
+        d.line(px(e.reshape(2, 2)), fill=CLOSURE, width=1)
     for xy, colour in ((odometry_xy, ODOMETRY), (refined_xy, REFINED)):
         if xy.shape[0] >= 2:
             d.line(px(xy), fill=colour, width=2)
@@ -64,11 +70,15 @@ def trajectory_png_bytes(odometry_xy: F64, refined_xy: F64, title: str = "") -> 
     d.text((w - 195, 8), "odometry", fill=(0, 0, 0), font=font)
     d.line([(w - 115, 16), (w - 85, 16)], fill=REFINED, width=3)
     d.text((w - 80, 8), "refined", fill=(0, 0, 0), font=font)
+    if closures is not None and closures.shape[0]:
+        d.line([(w - 345, 16), (w - 315, 16)], fill=CLOSURE, width=3)
+        d.text((w - 310, 8), "loop closure", fill=(0, 0, 0), font=font)
     buf = io.BytesIO()
     img.save(buf, format="PNG", optimize=False)
     return buf.getvalue()
 
 
-def write_trajectory_png(path: Path, odometry_xy: F64, refined_xy: F64, title: str = "") -> None:
+def write_trajectory_png(path: Path, odometry_xy: F64, refined_xy: F64, title: str = "",
+                         closures: F64 | None = None) -> None:
     """Write ``trajectory.png`` atomically."""
-    atomic_write_bytes(path, trajectory_png_bytes(odometry_xy, refined_xy, title))
+    atomic_write_bytes(path, trajectory_png_bytes(odometry_xy, refined_xy, title, closures))

@@ -24,10 +24,11 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from formats.angles import yaw_from_quaternion
 from formats.arrays import F64, I64
 from formats.errors import FormatError
 from formats.stamps import format_time_s, parse_time
-from formats.text_file import read_text
+from formats.text_file import MAX_LIST_BYTES, read_text
 from formats.writers.atomic import atomic_open
 
 __all__ = ["Trajectory", "read_trajectory_tum", "write_trajectory_tum"]
@@ -111,7 +112,7 @@ def read_trajectory_tum(path: Path) -> Trajectory:
     yaw from the quaternion's rotation about +z. InputError when the file is missing,
     FormatError naming the file and line when a line is not 8 numbers."""
     path = Path(path)
-    text = read_text(path, "trajectory file")
+    text = read_text(path, "trajectory file", max_bytes=MAX_LIST_BYTES)
     t: list[int] = []
     vals: list[list[float]] = []
     for lineno, line in enumerate(text.splitlines(), start=1):
@@ -132,6 +133,6 @@ def read_trajectory_tum(path: Path) -> Trajectory:
         raise FormatError("trajectory has no poses", path)
     v = np.asarray(vals, dtype=np.float64)
     qx, qy, qz, qw = v[:, 3], v[:, 4], v[:, 5], v[:, 6]
-    yaw = np.arctan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+    yaw = yaw_from_quaternion(qx, qy, qz, qw)
     yaw = np.where(yaw <= -math.pi, yaw + 2 * math.pi, yaw)
     return Trajectory(np.asarray(t, dtype=np.int64), v[:, 0].copy(), v[:, 1].copy(), yaw)

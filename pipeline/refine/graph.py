@@ -68,6 +68,7 @@ class GraphOptions:
     prior_scale: float  # σ of k
     prior_bias: float  # σ of b, rad/m
     robust_scale: float
+    linear_start: bool = False  # solve without the robust loss first (from far-off estimates)
 
 
 @dataclass(frozen=True)
@@ -133,6 +134,76 @@ class _Problem:
             parts.append(np.array([k / self.opt.prior_scale, b / self.opt.prior_bias]))
         return np.concatenate(parts)
 
+    def jacobian(self, v: F64) -> object:
+        """The residuals' Jacobian (sparse, analytic): rows as :meth:`residuals`."""
+        from scipy.sparse import coo_matrix
+
+        x, k, b = self.unpack(v)
+        rows: list[I64] = []
+        cols: list[I64] = []
+        vals: list[F64] = []
+
+        def put(r0: I64, c0: I64, block: F64) -> None:
+            """Blocks ``block[m]`` (3 × w) at rows ``r0[m]..+3``, columns ``c0[m]..+w``."""
+            w = block.shape[2]
+            rr = r0[:, None, None] + np.arange(3)[None, :, None]
+            cc = c0[:, None, None] + np.arange(w)[None, None, :]
+            rows.append(np.broadcast_to(rr, block.shape).ravel())
+            cols.append(np.broadcast_to(cc, block.shape).ravel())
+            vals.append(block.ravel())
+
+        put(np.array([0]), np.array([0]),
+            np.diag([1e3, 1e3, 1.0 / math.radians(0.01)])[None])
+        r = 3
+
+        def relative(ia: I64, ib: I64) -> tuple[F64, F64, F64]:
+            a, bb = x[ia], x[ib]
+            rel = between(a, bb)
+            c, s = np.cos(a[:, 2]), np.sin(a[:, 2])
+            m = ia.shape[0]
+            ja = np.zeros((m, 3, 3))
+            ja[:, 0, 0], ja[:, 0, 1], ja[:, 0, 2] = -c, -s, rel[:, 1]
+            ja[:, 1, 0], ja[:, 1, 1], ja[:, 1, 2] = s, -c, -rel[:, 0]
+            ja[:, 2, 2] = -1.0
+            jb = np.zeros((m, 3, 3))
+            jb[:, 0, 0], jb[:, 0, 1] = c, s
+            jb[:, 1, 0], jb[:, 1, 1] = -s, c
+            jb[:, 2, 2] = 1.0
+            return rel, ja, jb
+
+        if self.n > 1:
+            ia = np.arange(self.n - 1)
+            _, ja, jb = relative(ia, ia + 1)
+            w = self.w_odo[:, :, None]
+            r0 = r + 3 * ia
+            put(r0, 3 * ia, ja * w)
+            put(r0, 3 * ia + 3, jb * w)
+            if self.opt.calibrate:
+                d, length = self.odo.delta, self.odo.length
+                turn = -b * length / 2
+                c, s = np.cos(turn), np.sin(turn)
+                px = (c * d[:, 0] - s * d[:, 1]) / (1 + k)
+                py = (s * d[:, 0] + c * d[:, 1]) / (1 + k)
+                jc = np.zeros((self.n - 1, 3, 2))
+                jc[:, 0, 0], jc[:, 1, 0] = px / (1 + k), py / (1 + k)
+                jc[:, 0, 1], jc[:, 1, 1], jc[:, 2, 1] = -py * length / 2, px * length / 2, length
+                put(r0, np.full(self.n - 1, self.n_var - 2), jc * w)
+            r += 3 * (self.n - 1)
+        if len(self.matches):
+            mt = self.matches
+            _, ja, jb = relative(mt.i, mt.j)
+            r0 = r + 3 * np.arange(len(mt))
+            put(r0, 3 * mt.i, np.einsum("mab,mbc->mac", mt.u, ja))
+            put(r0, 3 * mt.j, np.einsum("mab,mbc->mac", mt.u, jb))
+            r += 3 * len(mt)
+        if self.opt.calibrate:
+            rows.append(np.array([r, r + 1]))
+            cols.append(np.array([self.n_var - 2, self.n_var - 1]))
+            vals.append(np.array([1.0 / self.opt.prior_scale, 1.0 / self.opt.prior_bias]))
+            r += 2
+        return coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                          shape=(r, self.n_var)).tocsr()
+
     def sparsity(self) -> object:
         from scipy.sparse import lil_matrix
 
@@ -170,6 +241,12 @@ def robust_cost(r: F64, scale: float) -> float:
     return float(0.5 * np.sum(scale**2 * np.log1p((r / scale) ** 2)))
 
 
+# The sparse trust-region steps' inner solver (lsmr) to full precision: at its default
+# tolerances the steps are too rough for the calibration's dense columns (a square graph
+# took > 200 evaluations instead of 13).
+_LSMR = {"atol": 1e-12, "btol": 1e-12}
+
+
 def solve(x0: F64, odo: Odometry, matches: MatchConstraints, opt: GraphOptions) -> Solution:
     """Optimise the anchors (and the calibration) from ``x0``."""
     from scipy.optimize import least_squares
@@ -177,9 +254,14 @@ def solve(x0: F64, odo: Odometry, matches: MatchConstraints, opt: GraphOptions) 
     prob = _Problem(x0, odo, matches, opt)
     v0 = np.concatenate([x0.ravel(), [0.0, 0.0] if opt.calibrate else []])
     cost0 = robust_cost(prob.residuals(v0), opt.robust_scale)
+    if opt.linear_start:  # least squares first: a robust loss ignores what starts far off
+        v0 = least_squares(prob.residuals, v0, jac=prob.jacobian, method="trf",
+                           x_scale="jac", max_nfev=50, xtol=1e-8, ftol=1e-8,
+                           tr_options=_LSMR).x
     res = least_squares(
-        prob.residuals, v0, jac_sparsity=prob.sparsity(), method="trf", loss="cauchy",
+        prob.residuals, v0, jac=prob.jacobian, method="trf", loss="cauchy",
         f_scale=opt.robust_scale, x_scale="jac", max_nfev=200, xtol=1e-10, ftol=1e-10,
+        tr_options=_LSMR,
     )
     x, k, b = prob.unpack(res.x)
     x = x.copy()

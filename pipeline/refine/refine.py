@@ -222,6 +222,13 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
     beyond ``max_echo_range_m``, out to ``calibration_far_range_m``, serve the scale alone)."""
     tt = np.asarray(track.t_ns)
     tx, ty, tyaw = np.asarray(track.x), np.asarray(track.y), np.asarray(track.yaw)
+    if cfg.model == "graph":
+        from pipeline.refine.slam import slam_track
+
+        gx, gy, gyaw, gm = slam_track(track, echoes, cfg)
+        gm.update(_moved(tx, ty, tyaw, gx, gy, gyaw))
+        gm["summary"] = graph_summary(gm)
+        return Refinement(tt.copy(), gx, gy, gyaw, gm)
     all_echoes, echoes = echoes, echoes.within(cfg.max_echo_range_m)
     metrics: dict[str, Any] = {"echoes": len(echoes)}
     if cfg.calibration_search and len(echoes) >= cfg.submap_min_echoes:
@@ -376,6 +383,20 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
     metrics.update(_moved(tx, ty, tyaw, rx, ry, ryaw))
     metrics["summary"] = summary(metrics, cfg)
     return Refinement(tt.copy(), rx, ry, ryaw, metrics)
+
+
+def graph_summary(metrics: dict[str, Any]) -> str:
+    """One line on what the graph model did (``run`` prints it)."""
+    head = (f"pose refinement (graph): {metrics['submaps']} submaps, "
+            f"{metrics['matches_accepted']} matches, {metrics['loop_closures_accepted']} loop "
+            f"closures ({metrics['loop_closures_rejected']} rejected)")
+    if "scale_error" in metrics:
+        head += (f"; scale error {metrics['scale_error']:+.1%}, heading bias "
+                 f"{metrics['heading_bias_deg_per_m']:+.2f}°/m")
+    verdict = ("accepted" if metrics["accepted"] else
+               f"not accepted: {metrics.get('note', 'the odometry stays')}")
+    return (f"{head}; {verdict}; poses moved {metrics.get('moved_mean_m', 0.0):.2f} m mean, "
+            f"{metrics.get('moved_max_m', 0.0):.2f} m max")
 
 
 def summary(metrics: dict[str, Any], cfg: PoseRefinementConfig) -> str:

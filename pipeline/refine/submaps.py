@@ -29,6 +29,8 @@ class Submap:
     path_m: float  # odometry path length from the start to the anchor
     px: F64  # (echoes, arc samples) points in the anchor frame, m
     py: F64
+    ox: F64 | None = None  # (echoes,) each echo's sensor position in the anchor frame, m
+    oy: F64 | None = None
 
     def __len__(self) -> int:
         return int(self.px.shape[0])
@@ -77,6 +79,9 @@ def build_submaps(
             idx = idx[np.linspace(0, idx.shape[0] - 1, max_points).round().astype(np.int64)]
         wx, wy = transform_points(echoes.odo[idx][:, None, :], echoes.bx[idx], echoes.by[idx])
         local = between(anchor, np.stack([wx, wy, np.zeros_like(wx)], axis=-1))
+        sx, sy = transform_points(echoes.odo[idx], echoes.sx[idx], echoes.sy[idx])
+        sensor = between(anchor, np.stack([sx, sy, np.zeros_like(sx)], axis=-1))
         out.append(Submap(int(echoes.t_ns[mid]), anchor, float(path_m[mid]),
-                          np.ascontiguousarray(local[..., 0]), np.ascontiguousarray(local[..., 1])))
+                          np.ascontiguousarray(local[..., 0]), np.ascontiguousarray(local[..., 1]),
+                          np.ascontiguousarray(sensor[:, 0]), np.ascontiguousarray(sensor[:, 1])))
     return out

@@ -36,6 +36,8 @@ class RangeSummary:
     t_max: int | None = None
     per_sensor: dict[int, int] = field(default_factory=dict)
     max_range_m: float = float("nan")  # largest finite r_max any reading carries
+    # the same per sensor id (sensors whose readings carry one)
+    max_range_by_sensor: dict[int, float] = field(default_factory=dict)
     backwards: int = 0  # readings whose stamp is older than an earlier one of the same sensor
 
     def add(self, b: RangeBatch, backwards: B) -> None:
@@ -50,10 +52,15 @@ class RangeSummary:
         ids, counts = np.unique(b.sensor_id, return_counts=True)
         for i, c in zip(ids.tolist(), counts.tolist(), strict=True):
             self.per_sensor[i] = self.per_sensor.get(i, 0) + c
-        finite = b.max_range_m[np.isfinite(b.max_range_m)]
-        if finite.size:
-            m = float(finite.max())
+        with np.errstate(invalid="ignore"):
+            ok = np.isfinite(b.max_range_m) & (b.max_range_m > 0)  # <= 0: none (Range)
+        if ok.any():
+            m = float(b.max_range_m[ok].max())
             self.max_range_m = m if np.isnan(self.max_range_m) else max(self.max_range_m, m)
+            sid, r = b.sensor_id[ok], b.max_range_m[ok]
+            for i in np.unique(sid).tolist():
+                v = float(r[sid == i].max())
+                self.max_range_by_sensor[i] = max(v, self.max_range_by_sensor.get(i, v))
         self.backwards += int(backwards.sum())
 
 

@@ -50,7 +50,7 @@ def _fix(reason: str, gap_s: float, median_s: float, config: Config) -> str:
 
 
 def check_mapped_share(
-    log_path: Path,
+    log_path: Path | object,
     counts: Mapping[str, int],
     dropped: Mapping[str, int],
     gap_s: float,

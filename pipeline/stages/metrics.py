@@ -14,11 +14,11 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from formats.storage.location import Location, Url
 from pipeline.mapper.types import MapSnapshot
 
 
@@ -42,13 +42,20 @@ def peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-def sha256_of(path: Path) -> str:
-    """sha256 of a file, or of a directory's files (sorted relative names and contents)."""
+def sha256_of(path: Location) -> str:
+    """sha256 of a file, or of a directory's files (sorted relative names and contents);
+    the same for a URL (object, or prefix) holding the same bytes."""
     h = hashlib.sha256()
-    files = sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir() else [path]
+    is_dir = path.is_dir()
+    files: list[Location] = []
+    if isinstance(path, Url):
+        files = [f for f in path.rglob("*") if f.name] if is_dir else [path]
+    else:
+        files = [*sorted(p for p in path.rglob("*") if p.is_file())] if is_dir else [path]
     for f in files:
-        if path.is_dir():
-            h.update(str(f.relative_to(path)).encode() + b"\0")
+        if is_dir:
+            rel = f.relative_to(path)  # type: ignore[arg-type]
+            h.update(str(rel).encode() + b"\0")
         with f.open("rb") as fh:
             for block in iter(lambda: fh.read(1 << 20), b""):
                 h.update(block)

@@ -27,7 +27,10 @@ def run_warnings(metrics: Mapping[str, Any]) -> list[str]:
     lost = {k: v for k, v in inp.items() if "lost" in k and isinstance(v, int | float) and v > 0}
     if lost:
         what = ", ".join(f"{k.replace('_', ' ')} {v:,}" for k, v in sorted(lost.items()))
-        out.append(f"data lost: the log is damaged and was read up to its intact part ({what})")
+        n = len(inp.get("losses") or [])
+        places = f" in {n} places" if n > 1 else ""
+        out.append(f"data lost: the log is damaged{places}, its intact part was read ({what};"
+                   " metrics.json input.losses names each)")
     counts = metrics.get("counts", {})
     readings = int(counts.get("readings", 0))
     dropped = {k: int(v) for k, v in metrics.get("dropped", {}).items() if int(v) > 0}

@@ -19,6 +19,7 @@ from formats.arrays import F64
 from formats.contract import RangeBatch, SensorMount
 from formats.errors import InputError
 from formats.options import FOV_MAX_DEG, FOV_MIN_DEG
+from formats.ranges import LIMIT_M
 from formats.sensor_config import sensor_setup
 from pipeline.config import Config
 
@@ -44,7 +45,10 @@ class SensorTable:
         sid = batch.sensor_id
         fov = _pick(self.fov_override[sid], batch.fov_rad, self.default_fov)
         lo = _pick(self.min_override[sid], batch.min_range_m, self.default_min)
-        hi = _pick(self.max_override[sid], batch.max_range_m, self.default_max)
+        # A logged r_max that is not > 0 is none (sensor_msgs/Range: invalid): the default.
+        with np.errstate(invalid="ignore"):
+            logged_max = np.where(batch.max_range_m > 0, batch.max_range_m, np.nan)
+        hi = _pick(self.max_override[sid], logged_max, self.default_max)
         return fov, lo, hi
 
 
@@ -58,6 +62,15 @@ def beam_problem(
     with np.errstate(invalid="ignore"):
         bad_fov = ~np.isnan(fov) & ~((fov >= lo_fov) & (fov < hi_fov))
         bad_lim = (lo > 0) & (hi > 0) & np.isfinite(lo) & ~(hi > lo)
+        # A finite limit beyond a sonar's reach is a garbage value, not a limit.
+        far = (np.isfinite(hi) & (hi > LIMIT_M.hi)) | (np.isfinite(lo) & (lo > LIMIT_M.hi))
+    if far.any():
+        i = int(np.flatnonzero(far)[0])
+        return (
+            f"sensor {names[int(sensor_id[i])]}: range limits {float(lo[i])!r}-{float(hi[i])!r}"
+            f" m are beyond a sonar's reach ({LIMIT_M.hi:g} m; {int(far.sum())} readings);"
+            " set min_range and max_range for it in [[sensors.mounts]]"
+        )
     if bad_fov.any():
         i = int(np.flatnonzero(bad_fov)[0])
         return (

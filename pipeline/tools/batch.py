@@ -43,9 +43,18 @@ from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from formats.errors import ConfigError, FormatError, InputError, OutputError, SonarmapError
+from formats.errors import (
+    ConfigError,
+    FormatError,
+    InputError,
+    OutputError,
+    SonarmapError,
+)
+from formats.storage.location import Location, Url, as_location
+from formats.storage.urls import is_url
 from formats.tables import markdown_table
-from formats.text_file import read_text
+from formats.text_file import MAX_LIST_BYTES, read_bounded, read_text
+from formats.writers.output_marker import SUMMARY_MD_TITLE
 from pipeline.config import Config, config_from_dict, load_config
 from pipeline.cores import usable_cores
 from pipeline.stages.metrics_schema import finite, read_metrics
@@ -59,10 +68,23 @@ MARKER = ".sonarmap-done.json"
 SUMMARY_PARQUET = "summary.parquet"
 SUMMARY_MD = "summary.md"
 MARKER_VERSION = 1
+MAX_MARKER_BYTES = 1 << 20  # a resume marker is a few hundred bytes
 MAX_NAME_BYTES = 200  # an output name, so that OutputDir's temporary sibling fits 255
 SCHEDULER_TIMEOUT_S = 10.0
 # Memory per local worker process: Dask's "auto" is the machine's memory / the workers.
 MEMORY_LIMIT = "auto"  # connecting to an existing scheduler (--scheduler)
+# The least --memory-limit a local worker can map with: a warmed worker holds ~270 MB
+# before its first log (imports, kernels; measured RSS), and Dask pauses a worker at 80 %
+# of its limit — below this a worker would never start a log, and the batch would wait
+# forever. Refused up front.
+MIN_MEMORY_LIMIT = 512 << 20
+# Local workers must have joined the cluster within this (s), else the batch fails.
+WORKERS_TIMEOUT_S = 120.0
+# How often a batch looks at its workers (s), and how long none may be able to run a task
+# (all paused by their memory limit, or none alive) before the logs left fail (s).
+WATCH_S = 2.0
+POLL_S = 0.1  # how often finished tasks are collected (s)
+STALL_S = 20.0
 # Local workers warm up (imports, compiled kernels) as the cluster starts, not in their
 # first log (:mod:`pipeline.tools.batch_warm`).
 WORKER_PRELOAD = "pipeline.tools.batch_warm"
@@ -70,7 +92,7 @@ WORKER_PRELOAD = "pipeline.tools.batch_warm"
 BatchProgress = Callable[[int, int], None]  # (logs finished, logs total)
 # A log: a file or bag directory, or the files of one recording (a manifest line
 # ``a.bag + b.bag``, as sonarmap names such a recording: run_input.log_label).
-LogInput = Path | tuple[Path, ...]
+LogInput = Location | tuple[Location, ...]
 # What separates the files of one recording on a manifest line: a '+' with a blank (or the
 # line's end) on each side.
 _SEPARATOR = re.compile(r"(?:^|\s)\+(?:\s|$)")
@@ -120,10 +142,10 @@ class LogOutcome:
 class BatchResult:
     """What a batch did: one outcome per log (sorted by path) and where the summary is."""
 
-    out_dir: Path
+    out_dir: Location
     outcomes: list[LogOutcome]
-    summary_parquet: Path
-    summary_md: Path
+    summary_parquet: Location
+    summary_md: Location
 
     def count(self, status: str) -> int:
         return sum(o.status == status for o in self.outcomes)
@@ -131,6 +153,11 @@ class BatchResult:
     @property
     def failures(self) -> list[LogOutcome]:
         return [o for o in self.outcomes if o.status == "failed"]
+
+    @property
+    def unread(self) -> list[LogOutcome]:
+        """Directories the search could not read (skipped rows with a reason)."""
+        return [o for o in self.outcomes if o.status == "skipped" and o.error is not None]
 
     @property
     def ok(self) -> bool:
@@ -146,7 +173,8 @@ def read_manifest(path: Path) -> list[LogInput]:
     relative paths taken relative to the manifest's directory; a line with `` + ``
     between paths names one recording in several files (a tuple of its paths)."""
     # utf-8-sig: a byte-order mark is not a path
-    text = read_text(path, "manifest", errors=(InputError, InputError), encoding="utf-8-sig")
+    text = read_text(path, "manifest", errors=(InputError, InputError), encoding="utf-8-sig",
+                     max_bytes=MAX_LIST_BYTES)
     out: list[LogInput] = []
     for number, line in enumerate(text.splitlines(), start=1):
         s = line.strip()
@@ -160,12 +188,14 @@ def read_manifest(path: Path) -> list[LogInput]:
     return out
 
 
-def _manifest_path(manifest: Path, text: str) -> Path:
+def _manifest_path(manifest: Path, text: str) -> Location:
+    if is_url(text):
+        return as_location(text)
     p = Path(text).expanduser()
     return p if p.is_absolute() else Path(manifest).parent / p
 
 
-def log_files(log_input: LogInput) -> tuple[Path, ...]:
+def log_files(log_input: LogInput) -> tuple[Location, ...]:
     """The file(s) of a log."""
     return log_input if isinstance(log_input, tuple) else (log_input,)
 
@@ -175,17 +205,6 @@ def log_text(log_input: LogInput) -> str:
     from pipeline.streaming.run_input import log_label
 
     return str(log_label(log_files(log_input)))
-
-
-def is_sonarmap_output(d: Path) -> bool:
-    """Whether a directory is an output of sonarmap (a run's or a batch's)."""
-    from formats.writers.output_marker import is_run_output
-
-    return (
-        (d / MARKER).is_file()
-        or is_run_output(d)
-        or ((d / SUMMARY_PARQUET).is_file() and (d / SUMMARY_MD).is_file())
-    )
 
 
 def _is_log_dir(d: Path, config: Config) -> bool:
@@ -232,60 +251,111 @@ def _single_header_ok(f: Path, delimiter: str) -> bool:
     return False
 
 
-def _search(d: Path, config: Config, skip: set[Path]) -> Iterator[Path]:
-    """Logs under directory ``d``, recursively, in sorted order."""
+@dataclass(frozen=True)
+class Unread:
+    """A directory the search could not read (listed as a skipped row, with its reason)."""
+
+    path: Path
+    reason: str
+
+
+def _search(
+    d: Path, config: Config, skip: set[Path], seen: set[tuple[int, int]], unread: list[Unread]
+) -> Iterator[Path]:
+    """Logs under directory ``d``, recursively, in sorted order. Each real directory is
+    walked once (``seen``: device and inode), so symlink loops end; a directory that cannot
+    be listed goes to ``unread``. In a directory sonarmap wrote (its marker, or its
+    metrics.json: :mod:`formats.writers.output_marker`), the files it wrote are not logs;
+    any other file there is searched like anywhere else."""
+    from formats.writers.output_marker import local_reader, written_files
+
     try:
+        st = d.stat()
+        if (st.st_dev, st.st_ino) in seen:
+            return
+        seen.add((st.st_dev, st.st_ino))
         entries = sorted(d.iterdir(), key=lambda p: p.name)
     except OSError as err:
-        raise InputError(f"cannot list directory: {err.strerror or err}", d) from err
+        unread.append(Unread(d, f"cannot list directory: {err.strerror or err}"))
+        return
+    ours = written_files([e.name for e in entries], local_reader(d)) or frozenset()
     for e in entries:
-        if e.name.startswith(".") or e.resolve() in skip:
+        if e.name.startswith(".") or e.name in ours or _resolved(e) in skip:
             continue  # hidden: staging and temporary dirs, VCS metadata
         if e.is_dir():
-            if is_sonarmap_output(e):
-                continue
             if _is_log_dir(e, config):
                 yield e
             else:
-                yield from _search(e, config, skip)
+                yield from _search(e, config, skip, seen, unread)
         elif e.is_file() and _is_log_file(e, config):
             yield e
 
 
+def _resolved(p: Path) -> Path:
+    try:
+        return p.resolve()
+    except (OSError, RuntimeError):  # a symlink loop
+        return Path(os.path.abspath(p))
+
+
 def find_logs(
-    inputs: Sequence[Path],
+    inputs: Sequence[Location],
     config: Config,
     *,
     manifests: Sequence[Path] = (),
-    exclude: Sequence[Path] = (),
+    exclude: Sequence[Location] = (),
+    unread: list[Unread] | None = None,
 ) -> list[LogInput]:
     """The logs a batch maps, deduplicated and sorted by absolute path.
 
     Files named directly or in a manifest are taken as they are (a failure to read them
     is that log's failure); so is a manifest's recording in several files. Directories are
     one log when they are a rosbag2 bag (a ``metadata.yaml``) or a CSV log set, else
-    searched recursively for files whose content is a log; hidden entries, ``*.truth.*`` files, sonarmap's own outputs and ``exclude``
-    (the batch's output directory) are skipped.
+    searched recursively for files whose content is a log; hidden entries, ``*.truth.*``
+    files, the files sonarmap wrote and ``exclude`` are skipped. Directories that cannot be
+    listed are appended to ``unread``.
     """
-    skip = {Path(p).resolve() for p in exclude}
-    named: list[LogInput] = [Path(p) for p in inputs]
+    skip = {_resolved(Path(p)) for p in exclude if isinstance(p, Path)}
+    named: list[LogInput] = [as_location(p) for p in inputs]
     for m in manifests:
         named += read_manifest(Path(m))
-    found: dict[Path | tuple[Path, ...], LogInput] = {}
+    found: dict[Location | tuple[Location, ...], LogInput] = {}
+    seen: set[tuple[int, int]] = set()
+    unread = [] if unread is None else unread
     for p in named:
         if isinstance(p, tuple):
             # In path order: a recording is read in time order whatever order names it,
             # so its name and row do not depend on it either.
-            files = tuple(sorted((Path(os.path.abspath(f)) for f in p), key=str))
-            found.setdefault(tuple(sorted((f.resolve() for f in files), key=str)), files)
+            files = tuple(sorted((_absolute(f) for f in p), key=str))
+            found.setdefault(tuple(sorted((_key(f) for f in files), key=str)), files)
+            continue
+        if isinstance(p, Url):  # taken as it is: a URL is not searched
+            found.setdefault(p, p)
             continue
         ap = Path(os.path.abspath(p))
-        if ap.is_dir() and not _is_log_dir(ap, config):
-            for f in _search(ap, config, skip):
-                found.setdefault(f.resolve(), Path(os.path.abspath(f)))
+        if os.path.isdir(ap) and not _is_log_dir(ap, config):  # False on any OSError
+            for f in _search(ap, config, skip, seen, unread):
+                found.setdefault(_resolved(f), Path(os.path.abspath(f)))
         else:
-            found.setdefault(ap.resolve(), ap)
+            found.setdefault(_resolved(ap), ap)
     return sorted(found.values(), key=log_text)
+
+
+def _absolute(f: Location) -> Location:
+    return f if isinstance(f, Url) else Path(os.path.abspath(f))
+
+
+def _key(f: Location) -> Location:
+    """What tells two logs apart: a path resolved, a URL as it is."""
+    return f if isinstance(f, Url) else _resolved(f)
+
+
+def _base_name(f: Location) -> str:
+    """A log's output name: a file's stem, a directory's name (a URL's without asking the
+    server: its stem when it has a suffix and no trailing '/')."""
+    if isinstance(f, Url):
+        return f.stem if f.suffix and not f.text.endswith("/") else f.name
+    return f.name if os.path.isdir(f) else f.stem
 
 
 def output_names(paths: Sequence[LogInput]) -> dict[LogInput, str]:
@@ -295,8 +365,7 @@ def output_names(paths: Sequence[LogInput]) -> dict[LogInput, str]:
     path>``, so a name depends only on its own path and its peers; a name longer than
     MAX_NAME_BYTES is cut and gets the same suffix (its output directory and the temporary
     sibling must fit the file system's 255-byte limit)."""
-    base = {p: "+".join((f.name if f.is_dir() else f.stem) or "log" for f in log_files(p))
-            for p in paths}
+    base = {p: "+".join(_base_name(f) or "log" for f in log_files(p)) for p in paths}
     counts: dict[str, int] = {}
     for n in base.values():
         counts[n.casefold()] = counts.get(n.casefold(), 0) + 1
@@ -329,10 +398,10 @@ def _map_one(
     exceptions.
     """
     t0 = time.perf_counter()
-    files = tuple(Path(p) for p in ([path] if isinstance(path, str) else path))
+    files = tuple(as_location(p) for p in ([path] if isinstance(path, str) else path))
     label = log_text(files)
     try:
-        row = _map_one_checked(files, Path(out_dir), name, config, rerun)
+        row = _map_one_checked(files, as_location(out_dir), name, config, rerun)
     except SonarmapError as err:
         row = LogOutcome(label, name, "failed", error=str(err))
     except Exception as err:  # a bug or an unforeseen library error: record, go on
@@ -345,14 +414,18 @@ def _map_one(
 
 
 def _map_one_checked(
-    files: tuple[Path, ...], out_dir: Path, name: str, config: dict[str, Any], rerun: bool
+    files: tuple[Location, ...], out_dir: Location, name: str, config: dict[str, Any],
+    rerun: bool
 ) -> LogOutcome:
+    from formats.storage.options import configure
     from pipeline.run import run
     from pipeline.streaming.run_input import files_sha256, hashes_sha256
 
     cfg = config_from_dict(config)
+    configure(cfg.storage)  # this worker reaches URLs with the batch's options
     for f in files:
-        if not f.exists():
+        # False on any OSError (a name too long: run says why); a URL asks its server
+        if not (f.exists() if isinstance(f, Url) else os.path.lexists(f)):
             raise InputError("no such file or directory", f)
     path = log_text(files)
     final = out_dir / name
@@ -409,11 +482,18 @@ def _map_one_checked(
     return outcome[0]
 
 
-def read_marker(run_dir: Path) -> dict[str, Any] | None:
-    """The resume marker of a finished log's output directory, or None (absent/unreadable)."""
+def read_marker(run_dir: Location) -> dict[str, Any] | None:
+    """The resume marker of a finished log's output directory, or None (absent/unreadable;
+    under a URL prefix also when the prefix is incomplete: an interrupted upload is never
+    taken as done)."""
+    if isinstance(run_dir, Url):
+        from formats.writers.remote_output import remote_state
+
+        if not remote_state(run_dir).complete:
+            return None
     try:
-        data = json.loads((run_dir / MARKER).read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        data = json.loads(read_bounded(run_dir / MARKER, "resume marker", MAX_MARKER_BYTES))
+    except (SonarmapError, ValueError, RecursionError):
         return None
     return data if isinstance(data, dict) else None
 
@@ -434,6 +514,8 @@ def _client(
 def _quiet_dask() -> Iterator[None]:
     """Dask logs cluster life (INFO) to the root handler; keep only its errors unless
     sonarmap itself logs at DEBUG (``-vv``)."""
+    import distributed  # noqa: F401  (its import configures its loggers: before the level is set)
+
     dlog = logging.getLogger("distributed")
     old = dlog.level
     if logging.getLogger("sonarmap").getEffectiveLevel() > logging.DEBUG:
@@ -442,6 +524,27 @@ def _quiet_dask() -> Iterator[None]:
         yield
     finally:
         dlog.setLevel(old)
+
+
+def parse_memory_limit(memory_limit: str | int) -> str | int:
+    """``--memory-limit`` as Dask takes it: "auto", or bytes (0: no limit); ConfigError
+    for a size no worker can start a log under (:data:`MIN_MEMORY_LIMIT`)."""
+    if memory_limit == "auto":
+        return memory_limit
+    from dask.utils import format_bytes, parse_bytes
+
+    try:
+        value = parse_bytes(memory_limit)
+    except (ValueError, TypeError) as err:
+        raise ConfigError(
+            f"--memory-limit must be 'auto' or a size like 4GB, got {memory_limit!r}"
+        ) from err
+    if 0 < value < MIN_MEMORY_LIMIT:  # 0: no limit (Dask)
+        raise ConfigError(
+            f"--memory-limit {format_bytes(value)} is below what a worker holds before its "
+            f"first log; give at least {format_bytes(MIN_MEMORY_LIMIT)} (or auto)"
+        )
+    return value
 
 
 def _client_inner(
@@ -462,15 +565,7 @@ def _client_inner(
     n = workers if workers is not None else usable_cores()
     if n < 1:
         raise ConfigError(f"--workers must be >= 1, got {n}")
-    if memory_limit != "auto":
-        from dask.utils import parse_bytes
-
-        try:
-            memory_limit = parse_bytes(memory_limit)
-        except (ValueError, TypeError) as err:
-            raise ConfigError(
-                f"--memory-limit must be 'auto' or a size like 4GB, got {memory_limit!r}"
-            ) from err
+    memory_limit = parse_memory_limit(memory_limit)
     with (
         LocalCluster(
             n_workers=n,
@@ -489,12 +584,17 @@ def _client_inner(
         ) as cluster,
         Client(cluster, set_as_default=False) as client,
     ):
+        try:
+            client.wait_for_workers(n, timeout=WORKERS_TIMEOUT_S)
+        except TimeoutError as err:
+            raise ConfigError(f"the {n} local Dask worker(s) did not start within "
+                              f"{WORKERS_TIMEOUT_S:.0f} s") from err
         yield client
 
 
 def run_batch(
-    inputs: list[Path],
-    out_dir: Path,
+    inputs: Sequence[Location],
+    out_dir: Location,
     config_path: Path | None,
     *,
     workers: int | None = None,
@@ -510,25 +610,35 @@ def run_batch(
     Raises SonarmapError only for problems of the whole batch (bad configuration, no logs
     found, unreachable scheduler, unwritable output directory); a log's failure is a row.
     """
-    from distributed import as_completed
+    from formats.storage.options import configure
 
     cfg = load_config(config_path)
-    out_dir = Path(os.path.abspath(out_dir))
-    if out_dir.exists() and not out_dir.is_dir():
+    configure(cfg.storage)
+    if scheduler is None:
+        memory_limit = parse_memory_limit(memory_limit)
+    out_dir = _absolute(out_dir)
+    if isinstance(out_dir, Path) and out_dir.exists() and not out_dir.is_dir():
         raise OutputError("exists and is not a directory", out_dir)
-    logs = find_logs(inputs, cfg, manifests=manifests, exclude=[out_dir])
+    check_summary_replaceable(out_dir)
+    unread: list[Unread] = []
+    # OUT itself is searched too: a user's logs there are mapped (sonarmap's files are not
+    # logs, :func:`_search`).
+    logs = find_logs(inputs, cfg, manifests=manifests, unread=unread)
     if not logs:
         where = ", ".join(str(p) for p in [*inputs, *manifests]) or "(no inputs)"
-        raise InputError(f"no logs found in {where}")
-    try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise OutputError(f"cannot create output directory: {err.strerror or err}", out_dir) from err
-    from formats.writers.atomic import clean_stale_entries
+        also = f" ({unread[0].path}: {unread[0].reason})" if unread else ""
+        raise InputError(f"no logs found in {where}{also}")
+    if isinstance(out_dir, Path):
+        try:
+            out_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise OutputError(f"cannot create output directory: {err.strerror or err}",
+                              out_dir) from err
+        from formats.writers.atomic import clean_stale_entries
 
-    # Staging left by interrupted batches (their processes are dead), whatever log it
-    # was for; a concurrent batch's live staging stays.
-    clean_stale_entries(out_dir)
+        # Staging left by interrupted batches (their processes are dead), whatever log it
+        # was for; a concurrent batch's live staging stays.
+        clean_stale_entries(out_dir)
     names = output_names(logs)
     # One thread per worker (mapper.threads = 1): the workers already share the cores.
     cfg_dict = cfg.replace(mapper=dataclasses.replace(cfg.mapper, threads=1)).to_dict()
@@ -538,23 +648,82 @@ def run_batch(
         progress(0, total)
     with _client(workers, scheduler, memory_limit) as client:
         futures = {
-            client.submit(_map_one, [str(f) for f in log_files(p)], str(out_dir), names[p],
+            # URLs travel as given (a worker needs their credentials); never printed.
+            client.submit(_map_one, [_wire(f) for f in log_files(p)], _wire(out_dir), names[p],
                           cfg_dict, rerun, pure=False,
-                          key=f"sonarmap-{names[p]}-{secrets.token_hex(4)}"): p
+                          key=f"sonarmap-{_utf8(names[p])}-{secrets.token_hex(4)}"): p
             for p in logs
         }
         try:
-            for fut in as_completed(futures, loop=client.loop):
+            for fut, stalled in _finished(client, list(futures)):
                 p = futures[fut]
-                rows.append(_collect(fut, p, names[p]))
+                rows.append(_collect(fut, p, names[p]) if stalled is None
+                            else LogOutcome(log_text(p), names[p], "failed", error=stalled))
                 if progress is not None:
                     progress(len(rows), total)
         except BaseException:
             client.cancel(list(futures))  # interrupted: finished logs keep their markers
             raise
+    rows += [LogOutcome(str(u.path), u.path.name, "skipped", error=u.reason) for u in unread]
     rows.sort(key=lambda r: r.path)
     pq_path, md_path = write_summary(out_dir, rows)
     return BatchResult(out_dir, rows, pq_path, md_path)
+
+
+def _wire(where: Location) -> str:
+    return where.text if isinstance(where, Url) else str(where)
+
+
+def _finished(client: Any, futures: list[Any]) -> Iterator[tuple[Any, str | None]]:
+    """``(future, None)`` as each task finishes; when no worker can make progress for
+    :data:`STALL_S` — every worker paused by Dask's memory limit with nothing executing,
+    or none alive — ``(future, reason)`` for each task left (cancelled), so a batch never
+    waits forever."""
+    pending = list(futures)
+    stalled_since: float | None = None
+    looked = time.monotonic()
+    while pending:
+        done = [f.done() for f in pending]
+        for fut, d in zip(pending, done, strict=True):
+            if d:
+                yield fut, None
+        pending = [f for f, d in zip(pending, done, strict=True) if not d]
+        done_any = any(done)
+        now = time.monotonic()
+        if done_any or not pending:
+            stalled_since = None
+            continue
+        time.sleep(POLL_S)
+        if now - looked < WATCH_S:
+            continue
+        looked = now
+        reason = _stall_reason(client)
+        if reason is None:
+            stalled_since = None
+            continue
+        stalled_since = now if stalled_since is None else stalled_since
+        if now - stalled_since >= STALL_S:
+            client.cancel(list(pending))
+            for fut in sorted(pending, key=lambda f: str(f.key)):
+                yield fut, reason
+            return
+
+
+def _stall_reason(client: Any) -> str | None:
+    """Why no worker can run a task now, or None when one can."""
+    from dask.utils import format_bytes
+
+    workers = client.scheduler_info().get("workers", {}).values()
+    if not workers:
+        return "no Dask worker stayed alive to map it (killed at its memory limit?)"
+    for w in workers:
+        executing = w.get("metrics", {}).get("task_counts", {}).get("executing", 0)
+        if w.get("status") == "running" or executing:
+            return None
+    w = next(iter(workers))
+    return (f"no Dask worker could start it: a worker holds {format_bytes(w['metrics']['memory'])}"
+            f" before any log, above the pause threshold of its memory limit "
+            f"{format_bytes(w['memory_limit'])}; give a larger --memory-limit")
 
 
 def _collect(fut: Any, path: LogInput, name: str) -> LogOutcome:
@@ -592,18 +761,65 @@ def summary_table(rows: Sequence[LogOutcome]) -> Any:
         pa.field("seconds", pa.float64(), nullable=False, metadata={"unit": "s"}),
         pa.field("warnings", pa.string()),
     ])
-    cols = {f.name: [getattr(r, f.name) for r in rows] for f in schema}
+    cols = {f.name: [_utf8(getattr(r, f.name)) for r in rows] for f in schema}
     return pa.table(cols, schema=schema)
 
 
-def write_summary(out_dir: Path, rows: Sequence[LogOutcome]) -> tuple[Path, Path]:
-    """Write ``summary.parquet`` and ``summary.md`` atomically; return their paths."""
+def _utf8(v: Any) -> Any:
+    """A string Arrow can hold: a file name's non-UTF-8 bytes (surrogate-escaped) as
+    ``\\udcXX`` text, as the Markdown summary shows them."""
+    if isinstance(v, str):
+        return v.encode("utf-8", errors="backslashreplace").decode("utf-8")
+    return v
+
+
+def check_summary_replaceable(out_dir: Location) -> None:
+    """Refuse (OutputError, before any work) a ``summary.md`` or ``summary.parquet`` in
+    ``out_dir`` that sonarmap did not write: a batch replaces only its own summaries (under
+    a URL prefix: judged by the same rule, :func:`output_marker.stamped`, on its bytes)."""
+    from formats.writers.output_marker import not_replaceable_file_reason, stamped
+
+    if isinstance(out_dir, Url):
+        from formats.writers.remote_output import url_reader
+
+        for name, kind in ((SUMMARY_MD, "summary_md"), (SUMMARY_PARQUET, "summary_parquet")):
+            if (out_dir / name).exists() and not stamped(kind, name, url_reader(out_dir)):
+                raise OutputError("exists and sonarmap did not write it; not replacing it "
+                                  "with the batch summary, choose another output prefix",
+                                  out_dir / name)
+        return
+    for name, kind in ((SUMMARY_MD, "summary_md"), (SUMMARY_PARQUET, "summary_parquet")):
+        p = out_dir / name
+        if p.exists() or p.is_symlink():
+            reason = not_replaceable_file_reason(p, kind)
+            if reason is not None:
+                raise OutputError(f"{reason}; not replacing it with the batch summary, "
+                                  "choose another output directory", p)
+
+
+def write_summary(out_dir: Location, rows: Sequence[LogOutcome]) -> tuple[Location, Location]:
+    """Write ``summary.parquet`` and ``summary.md`` atomically (under a URL prefix: each
+    object appears whole or not at all); return their locations. Only summaries sonarmap
+    wrote are replaced (:func:`check_summary_replaceable`, again: a file may have appeared
+    while the logs were mapped)."""
     import pyarrow.parquet as pq
 
     from formats.writers.atomic import atomic_write_bytes, atomic_write_text
 
+    check_summary_replaceable(out_dir)
     buf = io.BytesIO()
     pq.write_table(summary_table(rows), buf, compression="zstd")
+    if isinstance(out_dir, Url):
+        fs = out_dir.fs
+        for name, data in ((SUMMARY_PARQUET, buf.getvalue()),
+                           (SUMMARY_MD, summary_markdown(rows).encode())):
+            target = out_dir / name
+
+            def put(t: Url = target, d: bytes = data) -> None:
+                fs.pipe_file(t.fs_path, d)
+
+            target.call("cannot upload", put)
+        return out_dir / SUMMARY_PARQUET, out_dir / SUMMARY_MD
     pq_path, md_path = out_dir / SUMMARY_PARQUET, out_dir / SUMMARY_MD
     atomic_write_bytes(pq_path, buf.getvalue())
     atomic_write_text(md_path, summary_markdown(rows))
@@ -613,11 +829,13 @@ def write_summary(out_dir: Path, rows: Sequence[LogOutcome]) -> tuple[Path, Path
 def summary_markdown(rows: Sequence[LogOutcome]) -> str:
     """The summary as a Markdown document with one table row per log."""
     counts = {s: sum(r.status == s for r in rows) for s in ("ok", "skipped", "failed")}
+    unread = sum(r.status == "skipped" and r.error is not None for r in rows)
     lines = [
-        "# sonarmap batch summary",
+        SUMMARY_MD_TITLE,
         "",
-        f"{len(rows)} logs: {counts['ok']} mapped, {counts['skipped']} skipped (unchanged), "
-        f"{counts['failed']} failed.",
+        f"{len(rows)} logs: {counts['ok']} mapped, {counts['skipped'] - unread} skipped "
+        f"(unchanged), {counts['failed']} failed"
+        + (f", {unread} directories not read." if unread else "."),
         "",
     ]
     header = ["log", "status", "duration (s)", "readings", "features",

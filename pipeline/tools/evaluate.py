@@ -51,7 +51,7 @@ import numpy.typing as npt
 
 from formats.arrays import F64, I8, B
 from formats.errors import ConfigError, FormatError, InputError
-from formats.map_types import GridSpec
+from formats.map_types import DEFAULT_MAX_CELLS, GridSpec
 from formats.tables import text_table
 from formats.writers.trajectory_csv import read_trajectory
 from pipeline.se2 import inverse, transform_points
@@ -223,6 +223,20 @@ class Evaluation:
 # --------------------------------------------------------------------------- inputs
 
 
+def run_max_cells(run_dir: Path) -> int:
+    """The run's own ``[grid] max_cells`` (its config.toml), else the default: the bound of
+    every grid evaluate builds."""
+    cfg_path = run_dir / "config.toml"
+    if not cfg_path.is_file():
+        return DEFAULT_MAX_CELLS
+    from pipeline.config import load_config
+
+    try:
+        return load_config(cfg_path).grid.max_cells
+    except ConfigError as err:
+        raise FormatError(f"run configuration is unreadable: {err.reason}", cfg_path) from err
+
+
 def run_sensor_reach(run_dir: Path, metrics: Metrics) -> tuple[float | None, str]:
     """The run's largest sensor range, m, and where it came from.
 
@@ -290,7 +304,8 @@ def resample_classes(
 
 
 def move_classes(
-    classes: I8, grid: GridSpec, motion: tuple[float, float, float]
+    classes: I8, grid: GridSpec, motion: tuple[float, float, float],
+    max_cells: int = DEFAULT_MAX_CELLS,
 ) -> tuple[I8, GridSpec]:
     """``classes`` moved rigidly by ``motion`` = ``(tx, ty, θ)`` (a point p goes to
     R(θ)·p + t), on an axis-aligned grid of the same resolution that covers the moved map:
@@ -305,6 +320,7 @@ def move_classes(
     oy = math.floor(my.min() / res + 1e-9) * res
     dst = GridSpec(ox, oy, res, math.ceil((mx.max() - ox) / res - 1e-9),
                    math.ceil((my.max() - oy) / res - 1e-9))
+    check_cells(dst, max_cells, "the aligned run map")
     # Each cell centre moved back into the source map.
     sx, sy = transform_points(inverse(motion), _centres(ox, res, dst.width)[None, :],
                               _centres(oy, res, dst.height)[:, None])
@@ -320,6 +336,15 @@ def move_classes(
     dr, rin = _index(qy, oy, res, dst.height)
     out[dr[cin & rin], dc[cin & rin]] = OCCUPIED
     return out, dst
+
+
+def check_cells(grid: GridSpec, max_cells: int, what: str) -> None:
+    """ConfigError (before anything is allocated) when ``grid`` exceeds ``max_cells``."""
+    if grid.width * grid.height > max_cells:
+        raise ConfigError(
+            f"{what} would have {grid.width}x{grid.height} cells at {grid.resolution:g} m, "
+            f"more than grid.max_cells = {max_cells}: are the two maps in the same frame?"
+        )
 
 
 def _extended(truth: GridSpec, run: GridSpec) -> tuple[GridSpec, tuple[slice, slice]]:
@@ -384,10 +409,14 @@ def evaluate_maps(
     poses_xy: F64 | None,
     reach_m: float | None,
     feature_xy: F64,
+    max_cells: int = DEFAULT_MAX_CELLS,
 ) -> tuple[dict[str, Any], tuple[str, ...]]:
-    """The map and feature scores (the numeric fields of :class:`Evaluation`) and notes."""
+    """The map and feature scores (the numeric fields of :class:`Evaluation`) and notes.
+    ConfigError when the grid covering both maps (at the truth's resolution) would have
+    more than ``max_cells`` cells."""
     notes: list[str] = []
     grid, window = _extended(truth_grid, run_grid)
+    check_cells(grid, max_cells, "the grid covering the run and the truth map")
     truth_classes_ext = np.full(grid.shape, UNKNOWN, dtype=np.int8)
     truth_classes_ext[window] = truth_classes
     truth_classes = truth_classes_ext
@@ -555,8 +584,9 @@ def evaluate_run(
         raise InputError(f"not a complete run directory: missing {', '.join(missing)}", run_dir)
 
     metrics = read_metrics(run_dir / "metrics.json")
-    run_map = load_nav2_map(run_dir / "map.yaml")
-    truth = load_nav2_map(truth_yaml)
+    max_cells = run_max_cells(run_dir)
+    run_map = load_nav2_map(run_dir / "map.yaml", max_cells)
+    truth = load_nav2_map(truth_yaml, max_cells)
     features = read_features(run_dir / "features.parquet")
     reach: float | None
     if sensor_reach_m is not None:
@@ -568,18 +598,19 @@ def evaluate_run(
     values, notes = evaluate_maps(
         run_map.classes, run_map.grid, truth.classes, truth.grid,
         tolerance_m=tolerance_m, poses_xy=poses, reach_m=reach,
-        feature_xy=np.column_stack([features.x, features.y]),
+        feature_xy=np.column_stack([features.x, features.y]), max_cells=max_cells,
     )
     traj_err = aligned = None
     if truth_trajectory is not None:
         traj_err = _trajectory_error(run_dir, Path(truth_trajectory), rpe_delta, rpe_unit)
         motion = (float(traj_err["alignment"][0]), float(traj_err["alignment"][1]),
                   float(traj_err["alignment"][2]))
-        moved, moved_grid = move_classes(run_map.classes, run_map.grid, motion)
+        moved, moved_grid = move_classes(run_map.classes, run_map.grid, motion, max_cells)
         fx, fy = transform_points(motion, features.x, features.y)
         scores, _ = evaluate_maps(
             moved, moved_grid, truth.classes, truth.grid, tolerance_m=tolerance_m,
             poses_xy=poses, reach_m=reach, feature_xy=np.column_stack([fx, fy]),
+            max_cells=max_cells,
         )
         aligned = {"precision": scores["precision"], "recall": scores["recall"],
                    "f1": scores["f1"], "alignment": list(motion)}

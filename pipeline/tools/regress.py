@@ -207,8 +207,11 @@ def _relative_row(
 
 def _compare_maps(run_yaml: Path, golden_yaml: Path, tol: Tolerances) -> list[RegressionRow]:
     from formats.writers.nav2_map import load_nav2_map
+    from pipeline.tools.evaluate import run_max_cells
 
-    run, gold = load_nav2_map(run_yaml), load_nav2_map(golden_yaml)
+    # Each map within its own run's [grid] max_cells (checked before its image is read).
+    run = load_nav2_map(run_yaml, run_max_cells(run_yaml.parent))
+    gold = load_nav2_map(golden_yaml, run_max_cells(golden_yaml.parent))
     g, c = gold.grid, run.grid
 
     def describe(grid: Any) -> str:
@@ -247,7 +250,8 @@ def _resolve(text: str, golden_dir: Path) -> Path:
 
 
 def _f1_row(
-    run_dir: Path, golden_dir: Path, tol: Tolerances, notes: list[str]
+    run_dir: Path, golden_dir: Path, tol: Tolerances, notes: list[str],
+    truth_files: tuple[Path, Path | None] | None = None,
 ) -> RegressionRow | None:
     from pipeline.tools.evaluate import Evaluation, evaluate_run
 
@@ -257,17 +261,23 @@ def _f1_row(
         return None
     import json
 
+    from formats.text_file import read_text
+
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        doc = json.loads(read_text(path, "golden evaluation", errors=(FormatError, FormatError)))
+    except (json.JSONDecodeError, RecursionError) as err:
         raise FormatError(f"cannot read golden evaluation: {err}", path) from err
     golden = Evaluation.from_dict(doc, path)
-    truth = _resolve(golden.truth, golden_dir)
+    if truth_files is not None:
+        truth, named_traj = truth_files
+    else:
+        truth = _resolve(golden.truth, golden_dir)
+        named_traj = _resolve(golden.trajectory, golden_dir) if golden.trajectory else None
     if not truth.exists():
         raise InputError(f"golden evaluation names a truth map that is not found: {truth}", path)
     # The golden's own scope: its reach, or no trajectory when it scored all true cells.
     within = golden.recall_scope == "within_reach" and golden.trajectory is not None
-    traj = _resolve(golden.trajectory, golden_dir) if within and golden.trajectory else None
+    traj = named_traj if within else None
     current = evaluate_run(
         run_dir, truth, trajectory=traj, tolerance_m=golden.tolerance_m,
         sensor_reach_m=golden.reach_m if within else None,
@@ -280,9 +290,13 @@ def _f1_row(
 
 
 def regress(
-    run_dir: str | Path, golden_dir: str | Path, tolerances: Tolerances | None = None
+    run_dir: str | Path, golden_dir: str | Path, tolerances: Tolerances | None = None,
+    *, truth_files: tuple[Path, Path | None] | None = None,
 ) -> Regression:
     """Compare ``run_dir`` with ``golden_dir`` (same layout); see the module docstring.
+
+    ``truth_files``: (truth map, true trajectory or None) to score F1 with instead of the
+    paths the golden's evaluation.json names (a suite names them itself).
 
     InputError when either directory lacks metrics.json or map.yaml; FormatError when a
     file is unreadable.
@@ -300,7 +314,7 @@ def regress(
     notes: list[str] = []
     rows: list[RegressionRow] = []
 
-    f1 = _f1_row(run_dir, golden_dir, tol, notes)
+    f1 = _f1_row(run_dir, golden_dir, tol, notes, truth_files)
     if f1 is not None:
         rows.append(f1)
     g_feat = _count(gold, "features", gold_path)

@@ -476,6 +476,7 @@ def validate_log(reader: LogReader, config: Config) -> ValidationReport:
                 )
             )
 
+    info = reader.info()  # again: losses found while reading the chunks are in it now
     if info.losses:
         findings.append(
             Finding(

@@ -34,7 +34,7 @@ def test_runner_smoke_prints_every_section(tmp_path: Path) -> None:
     rows = [line.split("|")[1:-1] for line in out.splitlines() if line.startswith("| ")]
     rows = [[c.strip() for c in r] for r in rows if r[0].strip() != "section"]
     sections = {r[0] for r in rows}
-    assert sections == {"readers", "mapper", "e2e", "scaling", "batch"}
+    assert sections == {"readers", "mapper", "e2e", "scaling", "batch", "regress", "storage"}
     by_case = {r[1]: r for r in rows}
     # Readers: 6 s ROS 1 bags (16 × 10 Hz + 50 Hz odometry) and the 5k-message ROS 2 bag.
     assert "ros1 lz4: 1260 msgs, sonarmap" in by_case
@@ -61,6 +61,9 @@ def test_runner_smoke_prints_every_section(tmp_path: Path) -> None:
     # Batch: 2 smoke logs of 200 steps × 8 sonars, on 1 and on 2 workers.
     assert float(by_case["2 logs x 1600 readings, 1 worker"][2]) > 0
     assert by_case["2 workers"][4].endswith("x of 1 worker")
+    # Regress: the suite of the slow-odometry sample beside a batch of it, 2 workers.
+    assert float(by_case["sonarmap batch, 1 sample logs, 2 workers"][2]) > 0
+    assert by_case["regress --suite, same logs (F1 with truths), 2 workers"][4].endswith("x batch")
     text = results.read_text(encoding="utf-8")
     assert text.startswith("# Benchmark results") and "Machine: " in text
     assert "load average" in text.splitlines()[2]

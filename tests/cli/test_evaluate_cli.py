@@ -50,7 +50,7 @@ def test_evaluate_output_file_and_immutable_run_dir(tmp_path: Path) -> None:
     assert code == 1 and "exists already" in err
     code, _, err = invoke("evaluate", str(run), "--truth", str(truth),
                           "-o", str(run / "evaluation.json"))
-    assert code == 1 and "will not write into the run directory" in err
+    assert code == 1 and "is inside the run directory, an input of this command" in err
     assert sorted(p.name for p in run.iterdir()) == before
 
 

@@ -204,7 +204,8 @@ def test_bad_input_exits_1_with_one_line_and_no_output(runner, tmp_path, content
 
 def test_a_log_map_mcap_cannot_stamp_fails_before_it_is_mapped(runner, tmp_path, monkeypatch):
     # The office's CSV set moved past 2^31 s (ROS 2's int32 seconds): refused at ingest,
-    # from its poses, in one line naming map.mcap; the mapping pass never starts.
+    # from its poses, in one line naming the log (map.mcap is never written); the mapping
+    # pass never starts.
     import pipeline.run
 
     log = tmp_path / "late"
@@ -225,7 +226,7 @@ def test_a_log_map_mcap_cannot_stamp_fails_before_it_is_mapped(runner, tmp_path,
     assert result.exit_code == 1, result.output
     lines = [line for line in result.output.splitlines() if line.strip()]
     assert len(lines) == 1
-    assert re.search(r"map\.mcap: stamps 2200000000\.000 … 2200000\d{3}\.\d{3} s \(the map's "
+    assert re.search(rf"{re.escape(str(log))}: the log's stamps 2200000000\.000 … 2200000\d{{3}}\.\d{{3}} s \(the map's "
                      r"2200000\d{3}\.\d{3} s\) cannot be written to MCAP: a header stamp holds "
                      r"-2147483648 … 2147483647 s", lines[0]), lines[0]
     assert not out.exists()

@@ -55,10 +55,10 @@ def test_method_is_the_one_typed_choice():
         ({"mapperx": {}}, r"unknown key 'mapperx'"),
         ({"mapper": {"n_particles": "many"}}, r"'mapper.n_particles' must be an integer"),
         ({"mapper": {"feature_correction": 1}}, r"must be true or false"),
-        ({"mapper": {"p_free": 0.7}}, r"'mapper.p_free' must be < 0.5"),
-        ({"mapper": {"p_occ": 1.5}}, r"'mapper.p_occ' must be a probability"),
+        ({"mapper": {"p_free": 0.7}}, r"'mapper.p_free' must be in \(0, 0.5\), got 0.7"),
+        ({"mapper": {"p_occ": 1.5}}, r"'mapper.p_occ' must be in \(0.5, 1\), got 1.5"),
         ({"mapper": {"method": "magic"}}, r"'mapper.method' must be one of"),
-        ({"grid": {"resolution": 0}}, r"'grid.resolution' must be > 0"),
+        ({"grid": {"resolution": 0}}, r"'grid.resolution' must be in \[0.001, 100\] m, got 0"),
         ({"grid": {"extent": [0, 0, -1, 1]}}, r"xmin < xmax"),
         ({"sensors": {"min_range": 3.0, "max_range": 1.0}}, r"min_range' must be < max_range"),
         ({"sensors": {"preset": "roomba"}}, r"'sensors.preset' must be one of"),
@@ -83,7 +83,7 @@ def test_file_errors_name_the_file(tmp_path):
     with pytest.raises(ConfigError, match=r"bad\.toml: invalid TOML"):
         load_config(p)
     p.write_text("[mapper]\nk_d = -1\n")
-    with pytest.raises(ConfigError, match=r"bad\.toml: 'mapper.k_d' must be >= 0"):
+    with pytest.raises(ConfigError, match=r"bad\.toml: 'mapper.k_d' must be in \[0, 1\], got -1"):
         load_config(p)
     with pytest.raises(ConfigError, match=r"missing\.toml: configuration file not found"):
         load_config(tmp_path / "missing.toml")
@@ -94,3 +94,42 @@ def test_refinement_reaches_the_farther_of_its_matched_and_scale_echoes():
     assert (pr.max_echo_range_m, pr.calibration_far_range_m, pr.echo_reach_m) == (3.0, 5.0, 5.0)
     near_only = config_from_dict({"pose_refinement": {"calibration_far_range_m": 0.0}})
     assert near_only.pose_refinement.echo_reach_m == 3.0
+
+
+def test_every_numeric_key_has_a_physical_range_and_the_defaults_lie_in_it():
+    from formats.options import MountConfig, SensorsConfig
+    from pipeline.config import RANGES, GridConfig, numeric_keys
+
+    cfg = Config(sensors=SensorsConfig(mounts=(MountConfig("a"),)),
+                 grid=GridConfig(extent=(0.0, 0.0, 1.0, 1.0)))
+    found = {generic: value for _, generic, value in numeric_keys(cfg)}
+    assert set(found) == set(RANGES)  # every key has one, no range names a missing key
+    outside = {k: v for k, v in found.items() if k != "grid.extent" and not RANGES[k].holds(v)}
+    assert outside == {}
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        ({"pose_sync": {"time_offset_s": 1e10}},
+         r"'pose_sync.time_offset_s' must be in \[-4e\+09, 4e\+09\] s, got 10000000000.0"),
+        ({"pose_sync": {"max_pose_gap_s": 1e300}},
+         r"'pose_sync.max_pose_gap_s' must be in \[0, 86400\] s \(0 = automatic\)"),
+        ({"scans": {"window_s": 1e12}}, r"'scans.window_s' must be in \[1e-06, 3600\] s"),
+        ({"mapper": {"n_particles": 10**12}}, r"'mapper.n_particles' must be in \[3, 100000\]"),
+        ({"mapper": {"attr_threshold": -0.5}}, r"'mapper.attr_threshold' must be in \[0, 1e\+06\]"),
+        ({"mapper": {"attr_free_weight": -1}}, r"'mapper.attr_free_weight' must be in"),
+        ({"mapper": {"p_clamp_max": 0.4}}, r"'mapper.p_clamp_max' must be in \(0.5, 1\)"),
+        ({"mapper": {"sigma_d0": 0}}, r"'mapper.sigma_d0' must be in \(0, 1\] m"),
+        ({"mapper": {"attr_dilution": 2}}, r"'mapper.attr_dilution' must be in \[0, 1\]"),
+        ({"grid": {"max_cells": 2**40}}, r"'grid.max_cells' must be in \[1, 2\*\*31 - 1\]"),
+        ({"input": {"csv": {"no_echo_value": 1e300}}}, r"'input.csv.no_echo_value' must be in"),
+        ({"sensors": {"mounts": [{"name": "a"}, {"name": "b", "x": 1e300}]}},
+         r"'sensors.mounts\[1\].x' must be in \[-100, 100\] m, got 1e\+300"),
+        ({"grid": {"extent": [0, 0, 1e300, 1]}}, r"'grid.extent\[2\]' must be in \[-1e\+07, 1e\+07\] m"),
+        ({"sensors": {"mounts": [{"name": "s" * 300}]}}, r"name' must be at most 256 characters"),
+    ],
+)
+def test_numbers_beyond_their_physical_range_are_refused_naming_the_key(data, message):
+    with pytest.raises(ConfigError, match=message):
+        config_from_dict(data)

@@ -122,3 +122,38 @@ def test_many_models_at_once_give_the_same_bits_as_one_at_a_time() -> None:
             assert a.tobytes() == b[j].tobytes()
     assert many[0].shape == (4, 200)
     assert np.array_equal(many[0][1], x)  # the zero model: the poses themselves
+
+
+def test_the_newer_terms_at_zero_draw_what_the_model_drew_before_them() -> None:
+    n = 200
+    x, y, yaw = np.linspace(0, 20, n), np.zeros(n), np.zeros(n)
+    rng_a, rng_b = np.random.default_rng(3), np.random.default_rng(3)
+    apply_drift(x, y, yaw, DriftModel(0.03, 0.8, 0.01, 0.01), rng_a)
+    rng_b.standard_normal((3, n - 1))  # the one draw of the four-term model
+    assert rng_a.random() == rng_b.random()
+
+
+def test_the_heading_walk_grows_as_the_root_of_the_distance() -> None:
+    n = 401
+    x, y, yaw = np.linspace(0, 100, n), np.zeros(n), np.zeros(n)
+    ends = [apply_drift(x, y, yaw, DriftModel(heading_walk=0.01),
+                        np.random.default_rng(s))[2][-1] for s in range(300)]
+    assert np.std(ends) == pytest.approx(0.01 * 10, rel=0.15)
+
+
+def test_slips_turn_the_heading_only_where_they_happen() -> None:
+    n = 1001
+    x, y, yaw = np.linspace(0, 100, n), np.zeros(n), np.zeros(n)
+    model = DriftModel(slips_per_100m=3, slip_yaw_deg=2.0, slip_length_m=0.5)
+    _, _, oyaw = apply_drift(x, y, yaw, model, np.random.default_rng(0))
+    turning = np.abs(np.diff(oyaw)) > 1e-12
+    assert 0 < turning.sum() <= 3 * 8  # a few bursts of ~0.5 m (0.1 m steps)
+    assert DriftModel(slips_per_100m=3).is_zero  # a slip without error changes nothing
+
+
+def test_typical_wheel_odometry_fills_only_the_terms_left_at_zero() -> None:
+    m = DriftModel(scale_error=0.01).or_typical()
+    assert m.scale_error == 0.01
+    assert m.heading_walk == DriftModel.wheel_odometry().heading_walk > 0
+    with pytest.raises(ConfigError, match="heading_walk"):
+        DriftModel(heading_walk=-1).validate()

@@ -54,3 +54,62 @@ def test_batch_summary_row_carries_the_loss(tmp_path: Path) -> None:
     row = _map_one(str(log), str(tmp_path / "out"), "cut", Config().to_dict(), False)
     assert row["status"] == "ok", row
     assert row["warnings"].startswith("data lost: the log is damaged")
+
+
+BAG = ROOT / "sample_logs" / "office" / "office.bag"
+
+
+def _zeroed_bag(tmp_path: Path, chunk: int) -> Path:
+    """office.bag with 256 zero bytes inside its ``chunk``-th lz4 chunk (0-based)."""
+    data = bytearray(BAG.read_bytes())
+    at = -1
+    for _ in range(chunk + 1):
+        at = data.index(b"compression=lz4", at + 1)
+    data[at + 3000 : at + 3256] = bytes(256)
+    log = tmp_path / "zeroed.bag"
+    log.write_bytes(bytes(data))
+    return log
+
+
+def test_a_corrupt_chunk_loses_that_chunk_not_the_log(tmp_path: Path) -> None:
+    log = _zeroed_bag(tmp_path, 1)
+    out = tmp_path / "out"
+    res = CliRunner().invoke(app, ["run", str(log), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "warning: data lost: the log is damaged" in res.output
+    m = json.loads((out / "metrics.json").read_text())
+    inp = m["input"]
+    (loss,) = inp["losses"]
+    assert loss.startswith(f"{log}: corrupt chunk at byte 168904 skipped (")
+    assert inp["bytes_lost"] == 163_477  # the chunk and its index records
+    assert 0 < inp["messages_recovered"] < 10_589
+    assert 0 < m["counts"]["readings_used"] < 8469
+    res = CliRunner().invoke(app, ["validate", str(log), "--json"])
+    assert res.exit_code == 0, res.output
+    found = {f["code"]: f for f in json.loads(res.stdout)["findings"]}
+    assert found["damaged_log"]["counts"]["bytes_lost"] == 163_477
+
+
+def test_a_lost_chunk_that_held_the_mounts_is_named_in_the_error(tmp_path: Path) -> None:
+    log = _zeroed_bag(tmp_path, 0)
+    out = tmp_path / "out"
+    res = CliRunner().invoke(app, ["run", str(log), "-o", str(out), "-q"])
+    assert res.exit_code == 1 and not out.exists()
+    (line,) = res.stderr.splitlines()
+    assert "no mount for range sensor(s)" in line
+    assert "the log is damaged, 164795 bytes lost (" in line and "corrupt chunk at byte 4109" in line
+
+
+def test_trailing_bytes_that_are_no_record_are_a_loss(tmp_path: Path) -> None:
+    from formats import open_log
+
+    junk = b"\x07not a record at all" * 10
+    for src in (BAG, OFFICE):
+        log = tmp_path / f"tail{src.suffix}"
+        log.write_bytes(src.read_bytes() + junk)
+        with open_log(log) as reader:
+            info = reader.info()
+        assert info.bytes_lost == len(junk), src
+        (loss,) = [w for w in info.losses if "not a record" in w]
+        assert loss.startswith(f"{log.name}: ") or loss.startswith(f"{log}: ")
+        assert f"{len(junk)} bytes after the" in loss

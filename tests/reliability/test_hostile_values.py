@@ -104,7 +104,7 @@ def test_max_range_not_above_min_range_from_the_log_is_refused(tmp_path: Path) -
 
 def test_config_refuses_absurd_beam_widths() -> None:
     for fov in (0.1, 180.0, -3.0):
-        with pytest.raises(ConfigError, match=r"fov_deg' must be 0 \(from the log\) or in"):
+        with pytest.raises(ConfigError, match=r"fov_deg' must be in \[0.5, 180\) deg \(0 = from the log\)"):
             config_from_dict({"sensors": {"mounts": [{"name": "a", "fov_deg": fov}]}})
 
 

@@ -73,8 +73,8 @@ class Emulation:
         note = (
             f"odometry drifted: scale error {model.scale_error:g}, heading bias "
             f"{model.heading_bias_deg_per_m:g} deg/m, noise {model.noise_xy:g} m/√m and "
-            f"{model.noise_yaw:g} rad/√rad (seed {seed}); the truth trajectory keeps the "
-            "poses before drift"
+            f"{model.noise_yaw:g} rad/√rad{model.describe_random_walk()} (seed {seed}); the truth "
+            "trajectory keeps the poses before drift"
         )
         return self._logging(drifted, note)
 

@@ -9,15 +9,16 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from formats.errors import ConfigError, FormatError, InputError
+from formats.errors import ConfigError, FormatError, InputError, SonarmapError
 from formats.laser_log import LaserLog, read_carmen_laser_log, read_ros_laser_scans, sorted_by_time
 from formats.ros.reader import RosLogReader
+from formats.storage.location import Location, Url, as_location
 from pipeline.config import Config
 from pipeline.stages.pose_sync import POSE_OK, build_pose_track, interpolate_poses, pose_gap_limit_s
 
 
 def load_laser_log(
-    path: str | Path,
+    path: str | Location,
     config: Config | None = None,
     *,
     max_scans: int | None = None,
@@ -32,15 +33,20 @@ def load_laser_log(
     """
     from formats import detect_format
     from formats.carmen import looks_like_carmen
-    from formats.magic import ROS1_MAGIC
+    from formats.magic import MCAP_MAGIC, ROS1_MAGIC
 
     cfg = config if config is not None else Config()
-    p = Path(path)
+    p = as_location(path)
     if max_scans is not None and max_scans < 1:
         raise ConfigError(f"max_scans must be >= 1, got {max_scans}")
     if not p.exists():
         raise FormatError("no such file or directory", p)
-    if p.is_file():
+    if isinstance(p, Url) and p.is_file():
+        with p.open("rb") as f:
+            head = f.read(16)
+        if not head.startswith((ROS1_MAGIC, MCAP_MAGIC)):  # CARMEN text: read from a copy
+            return _from_local_copy(p, cfg, max_scans, laser_topic, laser_max_range)
+    if isinstance(p, Path) and p.is_file():
         with p.open("rb") as f:
             head = f.read(16)
         if not head.startswith(ROS1_MAGIC) and looks_like_carmen(p):
@@ -62,8 +68,26 @@ def load_laser_log(
     return sorted_by_time(_load_ros(p, fmt, cfg, max_scans, laser_topic))
 
 
+def _from_local_copy(
+    url: Url, cfg: Config, max_scans: int | None, laser_topic: str | None,
+    laser_max_range: float | None,
+) -> LaserLog:
+    """A laser log at a URL that is not read by ranges, downloaded to a temporary file
+    (removed after); errors name the URL."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="sonarmap-laser-") as d:
+        local = Path(d) / url.name
+        url.download(local)
+        try:
+            return load_laser_log(local, cfg, max_scans=max_scans, laser_topic=laser_topic,
+                                  laser_max_range=laser_max_range)
+        except SonarmapError as err:
+            raise type(err)(err.reason, url) from None
+
+
 def _load_ros(
-    p: Path, fmt: str, cfg: Config, max_scans: int | None, laser_topic: str | None
+    p: Location, fmt: str, cfg: Config, max_scans: int | None, laser_topic: str | None
 ) -> LaserLog:
     """Scans of a ROS log with the robot pose interpolated at each scan stamp."""
     from formats import FORMATS

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from formats.errors import ConfigError, InputError, OutputError
+from formats.storage.location import Location
 from pipeline.config import Config
 from pipeline.drift import DriftModel
 from pipeline.tools.emulate.emulation import Emulation, emulate
@@ -82,7 +83,7 @@ class EmulationResult:
 
 
 def run_emulation(
-    laser_path: str | Path,
+    laser_path: str | Location,
     out_path: str | Path,
     fmt: str = "mcap",
     *,

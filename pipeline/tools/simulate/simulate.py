@@ -14,6 +14,7 @@ log carries the drifted odometry and ``<stem>.truth.csv`` the true trajectory.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -63,6 +64,10 @@ class SimOptions:
     drift_yaw: float = 0.0  # std of yaw error after 1 rad turned, rad (grows as √rad)
     drift_scale: float = 0.0  # odometry scale error (0.03: 3 % too long), see pipeline.drift
     drift_heading_bias_deg_per_m: float = 0.0  # odometry heading bias, deg per metre driven
+    drift_heading_walk: float = 0.0  # heading random walk, rad per √m driven
+    drift_slips_per_100m: float = 0.0  # wheel slips per 100 m (see pipeline.drift)
+    drift_slip_yaw_deg: float = 0.0  # std of one slip's heading error, deg
+    drift_slip_scale: float = 0.0  # std of one slip's scale error, fraction
     truth_resolution: float = 0.05  # m, cell size of the ground-truth map
     # The sonar: "realistic" (pipeline.tools.sonar with ``physics``) or "ideal" (the
     # closest echo under one specular cut-off, with the noise, misses and crosstalk above).
@@ -77,7 +82,20 @@ class SimOptions:
             heading_bias_deg_per_m=self.drift_heading_bias_deg_per_m,
             noise_xy=self.drift_xy,
             noise_yaw=self.drift_yaw,
+            heading_walk=self.drift_heading_walk,
+            slips_per_100m=self.drift_slips_per_100m,
+            slip_yaw_deg=self.drift_slip_yaw_deg,
+            slip_scale=self.drift_slip_scale,
         )
+
+    def with_drift(self, model: DriftModel) -> SimOptions:
+        """These options with ``model``'s drift terms."""
+        return dataclasses.replace(
+            self, drift_scale=model.scale_error,
+            drift_heading_bias_deg_per_m=model.heading_bias_deg_per_m, drift_xy=model.noise_xy,
+            drift_yaw=model.noise_yaw, drift_heading_walk=model.heading_walk,
+            drift_slips_per_100m=model.slips_per_100m, drift_slip_yaw_deg=model.slip_yaw_deg,
+            drift_slip_scale=model.slip_scale)
 
     def validate(self) -> SimOptions:
         """Raise ConfigError naming the option when a value is out of range."""

@@ -8,7 +8,6 @@ Yaw is the heading of the current leg (REP 103: counter-clockwise from +x).
 from __future__ import annotations
 
 import csv
-import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,6 +19,7 @@ from formats.arrays import F64
 from formats.errors import ConfigError
 from formats.text_file import read_text
 from formats.writers.trajectory_tum import Trajectory  # the one stamped-pose type
+from pipeline.tools.simulate.world import WORLD_M
 
 
 @dataclass(frozen=True)
@@ -114,8 +114,8 @@ def load_waypoints(path: str | Path) -> F64:
             if len(row) != 2:
                 raise ValueError(f"expected 2 columns x,y, got {len(row)}")
             xv, yv = float(row[0]), float(row[1])
-            if not (math.isfinite(xv) and math.isfinite(yv)):
-                raise ValueError("not finite")
+            if not (WORLD_M.holds(xv) and WORLD_M.holds(yv)):
+                raise ValueError(f"a coordinate {WORLD_M.rule()}")
         except ValueError as err:
             raise ConfigError(f"bad waypoint row {i + 1} {row!r}: {err}", p) from err
         rows.append((xv, yv))

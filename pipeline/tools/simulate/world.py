@@ -19,7 +19,15 @@ import numpy.typing as npt
 from formats.arrays import F32, F64
 from formats.errors import ConfigError
 from formats.map_types import GridSpec
+from formats.ranges import Range
 from formats.toml_file import read_toml
+
+# A simulated world is a building or a site: its coordinates within 10 km of its origin,
+# its trunks and pillars at most 1 km across, its truth grid at most as many cells as a
+# run's grid may have (grid.max_cells' default).
+WORLD_M = Range(-1e4, 1e4, "m")
+RADIUS_M = Range(0, 500, "m", lo_open=True)
+MAX_WORLD_CELLS = 40_000_000
 
 # Rasterising samples each segment this many times per cell: a segment that clips a cell
 # corner by less than resolution/8 may leave that cell free (documented approximation).
@@ -51,6 +59,12 @@ class World:
     def grid(self, resolution: float, margin: float = 0.0) -> GridSpec:
         """The grid covering ``bounds`` plus ``margin`` (m) at ``resolution`` (m)."""
         x0, y0, x1, y1 = self.bounds
+        cells = ((x1 - x0 + 2 * margin) / resolution + 2) * ((y1 - y0 + 2 * margin) / resolution + 2)
+        if not cells <= MAX_WORLD_CELLS:
+            raise ConfigError(
+                f"world of {x1 - x0:g} x {y1 - y0:g} m needs {cells:.3g} cells at {resolution:g} m,"
+                f" more than {MAX_WORLD_CELLS}"
+            )
         return GridSpec.covering(x0 - margin, y0 - margin, x1 + margin, y1 + margin, resolution)
 
     def rasterize(self, grid: GridSpec) -> F32:
@@ -147,9 +161,7 @@ def world_from_dict(data: dict[str, Any], default_name: str = "") -> World:
     for i, item in enumerate(_tables(data, "circle")):
         key = f"circle[{i}]"
         c = _point(item.get("center"), f"{key}.center")
-        r = _number(item.get("radius"), f"{key}.radius")
-        if not r > 0:
-            raise ConfigError(f"'{key}.radius' must be > 0, got {r!r}")
+        r = _number(item.get("radius"), f"{key}.radius", RADIUS_M)
         circles.append([*c, r])
     for i, item in enumerate(_tables(data, "polygon")):
         key = f"polygon[{i}].points"
@@ -187,9 +199,11 @@ def _tables(data: dict[str, Any], key: str) -> list[dict[str, Any]]:
     return items
 
 
-def _number(v: Any, key: str) -> float:
+def _number(v: Any, key: str, rng: Range = WORLD_M) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
         raise ConfigError(f"'{key}' must be a finite number, got {v!r}")
+    if not rng.holds(v):
+        raise ConfigError(f"'{key}' {rng.rule()}, got {v!r}")
     return float(v)
 
 

@@ -97,20 +97,30 @@ def test_an_output_holding_the_users_files_is_not_replaced(tmp_path: Path) -> No
     assert (final / "notes.txt").read_text() == "mine"
 
 
-def test_legacy_output_without_marker_is_replaced_only_when_it_holds_run_files(
+def test_legacy_output_without_marker_is_replaced_only_when_its_content_is_sonarmaps(
     tmp_path: Path,
 ) -> None:
+    """File names prove nothing: a marker-less directory is sonarmap's only when its
+    metrics.json says so (run.tool_version and run.config_hash), and then only while it
+    holds nothing but a run's files."""
     final = tmp_path / "run"
     final.mkdir()
     for f in ("metrics.json", "features.parquet", "map.pgm"):
         (final / f).write_text("old")
+    with pytest.raises(OutputError, match="is not a sonarmap output"), OutputDir(final, force=True):
+        pass
+    assert (final / "metrics.json").read_text() == "old"
+    (final / "metrics.json").write_text('{"run": {"tool_version": "0.1.0", "config_hash": "ab"}}')
     with OutputDir(final, force=True) as out:
         out.path("metrics.json").write_text("new")
     assert (final / "metrics.json").read_text() == "new"
     (final / OUTPUT_MARKER).unlink()
+    (final / "metrics.json").write_text('{"run": {"tool_version": "0.1.0", "config_hash": "ab"}}')
     (final / "thesis.tex").write_text("mine")
-    with pytest.raises(OutputError, match="is not a sonarmap output"), OutputDir(final, force=True):
+    with pytest.raises(OutputError, match=r"holds files sonarmap did not write \(thesis\.tex\)"), \
+            OutputDir(final, force=True):
         pass
+    assert (final / "thesis.tex").read_text() == "mine"
 
 
 def test_directory_holding_the_input_or_the_cwd_is_refused(

@@ -199,7 +199,7 @@ def test_mode_defaults_to_trinary_and_absolute_image(tmp_path: Path) -> None:
     [
         ({"image": None}, "has no 'image'"),
         ({"resolution": "fine"}, "'resolution' is not a number"),
-        ({"resolution": 0}, "'resolution' must be positive"),
+        ({"resolution": 0}, r"'resolution' must be in \[0.001, 100\] m, got 0"),
         ({"origin": [0, 0]}, "'origin' must be a list of 3 numbers"),
         ({"origin": [0, 0, 0.5]}, "yaw 0.5 rad is not supported"),
         ({"mode": "fancy"}, "'mode' must be trinary, scale or raw"),
@@ -220,7 +220,7 @@ def test_bad_yaml_is_format_error(
 
 
 def test_broken_files_are_format_errors(tmp_path: Path) -> None:
-    with pytest.raises(FormatError, match=r"nope\.yaml: no such file"):
+    with pytest.raises(FormatError, match=r"nope\.yaml: map YAML not found"):
         load_nav2_map(tmp_path / "nope.yaml")
     (tmp_path / "list.yaml").write_text("- 1\n- 2\n")
     with pytest.raises(FormatError, match=r"list\.yaml: map YAML is not a mapping"):

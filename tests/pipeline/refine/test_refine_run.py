@@ -55,7 +55,7 @@ def test_refined_run_corrects_the_drift_and_is_deterministic(drifted_log: Path,
     assert ref_ate < odo_ate / 2
     pr = a.metrics.pose_refinement
     assert pr is not None
-    assert pr["submaps"] >= 5 and pr["moved_max_m"] > 0.05
+    assert pr["submaps"] >= 2 and pr["moved_max_m"] > 0.05
     assert pr["search_heading_bias_deg_per_m"] == pytest.approx(0.8, abs=0.3)
     assert "Pose refinement" in (tmp_path / "a" / "report.md").read_text()
     assert pr["summary"].startswith("pose refinement: ") and "°/m" in pr["summary"]

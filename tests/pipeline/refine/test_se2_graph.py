@@ -71,5 +71,6 @@ def test_a_wrong_loop_closure_has_a_large_chi2() -> None:
     u = sqrt_information(np.diag([0.05**2, 0.05**2, math.radians(2) ** 2]))[None]
     sol = solve(truth.copy(), odo, MatchConstraints(np.array([15]), np.array([0]), z, u),
                 opts(False))
-    assert sol.match_chi2[0] > 16.0
-    np.testing.assert_allclose(sol.anchors[:, :2], truth[:, :2], atol=0.3)
+    assert sol.match_chi2[0] > 16.0  # what drops it (slam.CHI2_OUTLIER) before the last solve
+    # the Cauchy loss bounds its pull: a closure 2.2 m off moves no anchor by as much
+    assert np.abs(sol.anchors[:, :2] - truth[:, :2]).max() < 1.5

@@ -52,7 +52,7 @@ radius = 0.25
 @pytest.mark.parametrize(
     ("text", "match"),
     [
-        ("[[circle]]\ncenter = [0, 0]\nradius = -1\n", r"circle\[0\]\.radius' must be > 0"),
+        ("[[circle]]\ncenter = [0, 0]\nradius = -1\n", r"circle\[0\]\.radius' must be in \(0, 500\] m, got -1"),
         ("[[segment]]\nfrom = [0, 0]\nto = [1]\n", r"segment\[0\]\.to' must be \[x, y\]"),
         ("name = 'x'\n", "no obstacles"),
         ("wall = 1\n", "unknown key 'wall'"),

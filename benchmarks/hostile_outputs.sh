@@ -1,0 +1,63 @@
+#!/usr/bin/env bash
+# Issue 58 (data loss, side files, hangs, paths): each case's exit code, stderr lines (batch
+# progress excluded), wall seconds and the command's max RSS (MB; a batch's workers are
+# separate processes). Usage: benchmarks/hostile_outputs.sh [SCRATCH_DIR]
+set -u
+ROOT=$(cd "$(dirname "$0")/.." && pwd)
+S=$ROOT/.venv/bin/sonarmap
+R=$ROOT/sample_logs
+T=${1:-$(mktemp -d)}
+mkdir -p "$T"
+m() {
+  local name=$1; shift
+  /usr/bin/time -f "%e %M" -o "$T/t" "$@" > /dev/null 2> "$T/e"; local rc=$?
+  read -r s kb < <(tail -1 "$T/t")
+  printf "| %-34s | %d | %d | %5.1f | %4d |\n" "$name" $rc \
+    "$(grep -vc '^sonarmap: batch:' "$T/e")" "$s" $((kb / 1024))
+}
+echo "| case | exit | stderr lines | wall (s) | max RSS (MB) |"
+echo "| --- | --: | --: | --: | --: |"
+mkdir -p "$T/r/logs" && cp "$R/office/office.mcap" "$T/r/logs/" && echo notes > "$T/r/logs/summary.md"
+m "1 batch, user summary.md in -o" "$S" batch "$T/r/logs" -o "$T/r/logs" --workers 1 -q
+mkdir -p "$T/r2/office" && echo '{"acc":0.9}' > "$T/r2/office/metrics.json"
+echo x > "$T/r2/office/features.parquet"
+m "2 run --force on a names-only dir" "$S" run "$R/office/office.mcap" -o "$T/r2/office" --force -q
+m "2 batch onto a names-only dir" "$S" batch "$R/office/office.mcap" -o "$T/r2" --workers 1 -q
+cp "$R"/office/office.truth.* "$T/" && "$S" run "$R/office/office.mcap" -o "$T/run" -q
+m "3 evaluate -o truth.yaml --force" "$S" evaluate "$T/run" --truth "$T/office.truth.yaml" \
+  -o "$T/office.truth.yaml" --force
+m "5 -c /dev/zero" "$S" run "$R/office/office.mcap" -o "$T/x" -c /dev/zero -q
+m "5 @/dev/zero manifest" "$S" batch @/dev/zero -o "$T/x"
+printf 'P5\n100000 100000\n255\n' > "$T/huge.pgm"
+sed 's/office.truth.pgm/huge.pgm/' "$T/office.truth.yaml" > "$T/huge.yaml"
+m "5 truth PGM 100000x100000" "$S" evaluate "$T/run" --truth "$T/huge.yaml"
+sed 's/origin: \[/origin: [100000.0, 100000.0, 0.0] #/' "$T/office.truth.yaml" > "$T/far.yaml"
+m "6 truth map 100 km away" "$S" evaluate "$T/run" --truth "$T/far.yaml"
+m "7 --memory-limit 100MB" "$S" batch "$R/office/office.mcap" -o "$T/ml" --workers 1 \
+  --memory-limit 100MB -q
+mkdir -p "$T/loop/a" && cp "$R/office/office.mcap" "$T/loop/a" && ln -s .. "$T/loop/a/up"
+ln -s a "$T/loop/b"
+m "8 symlink loop tree" "$S" batch "$T/loop" -o "$T/loopout" --workers 1 -q
+m "11 -o name of 300 bytes" "$S" run "$R/office/office.mcap" -o "$T/$(printf 'a%.0s' $(seq 300))" -q
+cp -r "$R/office/office_csv" "$T/neg"
+for f in poses ranges; do
+  awk -F, 'NR==1{print;next}{OFS=",";$1=$1-1700000200;print}' "$T/neg/$f.csv" > "$T/n.csv"
+  mv "$T/n.csv" "$T/neg/$f.csv"
+done
+m "14 CSV times before 0" "$S" run "$T/neg" -o "$T/negout" -q
+cp -r "$R/office/office_csv" "$T/far200" && sed -i '2,$s/,5.0$/,200.0/' "$T/far200/sensors.csv"
+python3 - "$T" <<'EOF'
+import math, sys
+t = sys.argv[1]
+out = ["[grid]", "max_cells = 2000000"]
+for line in open(f"{t}/far200/sensors.csv").read().split("\n")[1:]:
+    if line.strip():
+        n, x, y, yaw = line.split(",")[:4]
+        out += ["[[sensors.mounts]]", f'name = "{n}"', f"x = {x}", f"y = {y}",
+                f"yaw_deg = {math.degrees(float(yaw))}", "max_range = 5.0"]
+open(f"{t}/c200.toml", "w").write("\n".join(out) + "\n")
+EOF
+m "13 mounts 5 m, log claims 200 m" "$S" run "$T/far200" -o "$T/f200" -c "$T/c200.toml" -q
+cp -r "$R/office/office_ros2" "$T/bag" && mv "$T/bag/office_ros2.db3.zstd" "$T/x.db3.zstd"
+sed -i 's#  - office_ros2.db3.zstd#  - ../x.db3.zstd#' "$T/bag/metadata.yaml"
+m "16 metadata names ../x.db3" "$S" info "$T/bag"

@@ -1,0 +1,181 @@
+"""Correlative scan-to-submap matching that reports a distribution, not a best cell.
+
+The reference points (earlier submaps placed by the current estimate) become a blurred
+evidence field (:meth:`pipeline.refine.matcher.LikelihoodField.of_points`, values in
+[0, 1)). A candidate pose ``p`` of the query submap gets the log-likelihood
+
+    ℓ(p) = Σ_e log(ε + max_arc f(p ⊕ e)),   ε = OUTLIER
+
+over its echoes ``e`` (an echo lies somewhere on its arc; ``ε`` is the chance that an
+echo hits nothing the reference saw). Where the reference's beams never looked (outside
+the cones from its sensors to its echoes) ``f`` is the occupancy prior ½ instead: a query
+echo there is neither confirmed nor contradicted, which keeps the search from pulling new
+wall onto the reference's old wall. Every pose of a grid ``± window`` around the
+prediction is evaluated (Olson 2009: exhaustive, so no local minimum), coarse to fine:
+first on a field blurred to the coarse step with poses every coarse step, then on the
+ The match is the posterior
+over the fine grid, ``w ∝ exp(ℓ − ℓ_max)``:
+
+* ``pose`` and ``cov``: the weighted mean and covariance of the grid poses (plus each
+  step's quantisation ``step²/12``): a corridor's flat direction gives a wide covariance
+  instead of an arbitrary peak;
+* ``score``: the mean field value at the best pose (how much of the query the reference
+  explains), ``ambiguity``: the best coarse ℓ farther than two coarse steps from the
+  optimum, as a likelihood ratio ``exp(ℓ_other − ℓ_max)`` (near 1: another pose fits as
+  well: a repeated structure).
+
+All numpy, no randomness: the same input gives the same bits.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from formats.angles import wrap_angle
+from formats.arrays import F64
+from pipeline.refine.matcher import LikelihoodField
+
+OUTLIER = 0.05  # field value an echo gets where the reference saw nothing (a floor)
+UNSEEN = 0.5  # field value where the reference's beams never looked (the occupancy prior)
+
+
+@dataclass(frozen=True)
+class Window:
+    """Half-widths of a search (m, rad) and its coarse steps (m, rad)."""
+
+    xy: float
+    yaw: float
+    step_xy: float
+    step_yaw: float
+
+
+@dataclass(frozen=True)
+class Correlation:
+    pose: F64  # (3,) weighted mean pose of the query frame in the field's frame
+    cov: F64  # (3, 3)
+    score: float  # mean field value of the echoes at the best pose
+    ambiguity: float  # likelihood ratio of the best distinct pose, in [0, 1]
+
+
+def _coverage(fld: LikelihoodField, rx: F64, ry: F64, sx: F64, sy: F64, sigma: float
+              ) -> np.ndarray:
+    """Cells the reference's beams looked at: along each ray from an echo's sensor to each
+    of its arc points and ``2σ`` beyond (a wall there would have answered; behind it the
+    echo says nothing)."""
+    h, w = fld.values.shape
+    dx, dy = rx - sx[:, None], ry - sy[:, None]
+    length = np.hypot(dx, dy)
+    reach = length + 2 * sigma
+    n = max(2, math.ceil(float(reach.max()) / (0.5 * fld.res)) + 1)
+    u = np.linspace(0.0, 1.0, n)
+    scale = (reach / np.maximum(length, 1e-9))[..., None] * u
+    px = sx[:, None, None] + dx[..., None] * scale
+    py = sy[:, None, None] + dy[..., None] * scale
+    ix = np.floor((px - fld.origin_x) / fld.res).astype(np.int64).ravel()
+    iy = np.floor((py - fld.origin_y) / fld.res).astype(np.int64).ravel()
+    ok = (ix >= 0) & (ix < w) & (iy >= 0) & (iy < h)
+    cover = np.zeros(h * w, bool)
+    cover[iy[ok] * w + ix[ok]] = True
+    return cover.reshape(h, w)
+
+
+def _loglik(fld: LikelihoodField, cover: np.ndarray, neutral: float, qx: F64, qy: F64,
+            centre: F64, dyaw: F64, offsets: F64) -> F64:
+    """ℓ over poses ``centre + (offsets[a], offsets[b], dyaw[k])``: (yaw, x, y)."""
+    n_echo, n_arc = qx.shape
+    fx, fy = qx.ravel(), qy.ravel()
+    h, w = fld.values.shape
+    table = np.where(cover, np.log(OUTLIER + fld.values.astype(np.float64)), neutral).ravel()
+    table = np.concatenate([table, [neutral]])
+    cells = np.round(offsets / fld.res).astype(np.int64)
+    out = np.empty((dyaw.shape[0], cells.shape[0], cells.shape[0]))
+    for k, da in enumerate(dyaw.tolist()):
+        th = centre[2] + da
+        c, s = math.cos(th), math.sin(th)
+        ix = np.floor((centre[0] + c * fx - s * fy - fld.origin_x) / fld.res).astype(np.int64)
+        iy = np.floor((centre[1] + s * fx + c * fy - fld.origin_y) / fld.res).astype(np.int64)
+        cx = ix[:, None, None] + cells[None, :, None]
+        cy = iy[:, None, None] + cells[None, None, :]
+        idx = np.where((cx >= 0) & (cx < w) & (cy >= 0) & (cy < h), cy * w + cx, h * w)
+        best = table[idx].reshape(n_echo, n_arc, cells.shape[0], cells.shape[0]).max(axis=1)
+        out[k] = best.sum(axis=0)
+    return out
+
+
+def _evidence(ref_x: F64, ref_y: F64, ref_sx: F64, ref_sy: F64, res: float, sigma: float,
+              margin: float) -> tuple[LikelihoodField, np.ndarray, float]:
+    """The reference's field, the cells its beams covered, and the value of a place they
+    did not: an unobserved place is occupied with the prior probability ``UNSEEN``."""
+    fld = LikelihoodField.of_points(ref_x, ref_y, res=res, sigma=sigma, margin=margin)
+    cover = _coverage(fld, ref_x, ref_y, ref_sx, ref_sy, sigma)
+    return fld, cover, math.log(OUTLIER + UNSEEN)
+
+
+def _grid(half: float, step: float) -> F64:
+    n = max(1, round(half / step))
+    return np.arange(-n, n + 1, dtype=np.float64) * step
+
+
+def correlate(ref_x: F64, ref_y: F64, ref_sx: F64, ref_sy: F64, qx: F64, qy: F64,
+              prediction: F64, window: Window, *, res: float, sigma: float
+              ) -> Correlation | None:
+    """Match the query arcs ``qx, qy`` (echoes × arc samples, in the query frame) against
+    the reference arcs ``ref_x, ref_y`` (world, echoes × arc samples) seen from sensors at
+    ``ref_sx, ref_sy`` around ``prediction`` (see the module docstring); None when either
+    side has fewer than 3 echoes."""
+    if ref_x.shape[0] < 3 or qx.shape[0] < 3:
+        return None
+    reach = float(np.sqrt(qx**2 + qy**2).max())
+    margin = window.xy + 3 * window.step_xy + reach
+    coarse, cover_c, neutral_c = _evidence(ref_x, ref_y, ref_sx, ref_sy, window.step_xy,
+                                           max(sigma, window.step_xy), margin)
+    dyaw_c, off_c = _grid(window.yaw, window.step_yaw), _grid(window.xy, window.step_xy)
+    mid = qx.shape[1] // 2  # a field blurred wider than the arc: its middle point scores it
+    cx_, cy_ = ((qx[:, mid:mid + 1], qy[:, mid:mid + 1]) if window.step_xy >= 4 * res
+                else (qx, qy))
+    ll_c = _loglik(coarse, cover_c, neutral_c, cx_, cy_, prediction, dyaw_c, off_c)
+    k, a, b = np.unravel_index(int(np.argmax(ll_c)), ll_c.shape)
+    if k in (0, len(dyaw_c) - 1) or a in (0, len(off_c) - 1) or b in (0, len(off_c) - 1):
+        return None  # the optimum lies on the window's edge: the true pose may be outside
+    centre = prediction + np.array([off_c[a], off_c[b], dyaw_c[k]])
+    # ambiguity: the best coarse pose two coarse steps or more away from the optimum
+    ga = np.abs(dyaw_c - dyaw_c[k])[:, None, None] > 2 * window.step_yaw
+    gxy = np.hypot(off_c[:, None] - off_c[a], off_c[None, :] - off_c[b])[None] > 2 * window.step_xy
+    far = np.broadcast_to(ga | gxy, ll_c.shape)
+    ambiguity = float(np.exp(ll_c[far].max() - ll_c[k, a, b])) if far.any() else 0.0
+    fine, ll, dyaw_f, off_f = coarse, ll_c, dyaw_c, off_c
+    step_xy, step_yaw = window.step_xy, window.step_yaw
+    if res >= step_xy:  # one level: the coarse grid is the posterior
+        centre = prediction
+    while res < step_xy:  # the next level: ± two steps of this one, steps a quarter as long
+        dyaw_f, off_f = _grid(2 * step_yaw, step_yaw / 4), _grid(2 * step_xy, max(res, step_xy / 4))
+        step_xy, step_yaw = max(res, step_xy / 4), step_yaw / 4
+        fine, cover, neutral = _evidence(ref_x, ref_y, ref_sx, ref_sy, step_xy,
+                                         max(sigma, step_xy), margin)
+        ll = _loglik(fine, cover, neutral, qx, qy, centre, dyaw_f, off_f)
+        if res < step_xy:
+            k, a, b = np.unravel_index(int(np.argmax(ll)), ll.shape)
+            centre = centre + np.array([off_f[a], off_f[b], dyaw_f[k]])
+    wts = np.exp(ll - ll.max())
+    wts /= wts.sum()
+    d = [np.broadcast_to(off_f[None, :, None], ll.shape), np.broadcast_to(off_f[None, None, :],
+         ll.shape), np.broadcast_to(dyaw_f[:, None, None], ll.shape)]
+    mean = np.array([float((wts * v).sum()) for v in d])
+    cov = np.empty((3, 3))
+    for i in range(3):
+        for j in range(i, 3):
+            cov[i, j] = cov[j, i] = float((wts * (d[i] - mean[i]) * (d[j] - mean[j])).sum())
+    step_yaw, step = float(dyaw_f[1] - dyaw_f[0]), float(off_f[1] - off_f[0])
+    cov += np.diag([step**2 / 12 + (0.5 * step) ** 2, step**2 / 12 + (0.5 * step) ** 2,
+                    step_yaw**2 / 12 + (0.5 * step_yaw) ** 2])
+    pose = centre + mean
+    pose[2] = float(wrap_angle(pose[2]))
+    kb = np.unravel_index(int(np.argmax(ll)), ll.shape)
+    best = centre + np.array([off_f[kb[1]], off_f[kb[2]], dyaw_f[kb[0]]])
+    c, s = math.cos(best[2]), math.sin(best[2])
+    vals = fine.sample(best[0] + c * qx - s * qy, best[1] + s * qx + c * qy)
+    score = float(vals.reshape(qx.shape).max(axis=1).mean())
+    return Correlation(pose, cov, score, ambiguity)

@@ -1,0 +1,256 @@
+"""Pose refinement as one model: graph SLAM on the sonar echoes.
+
+1. **Submaps** (:mod:`~pipeline.refine.submaps`): echoes pooled over ``submap_travel_m``
+   of odometry, rigid in their anchor's frame.
+2. **Scan-to-map matching**, in travel order: submap ``j`` is correlated
+   (:mod:`~pipeline.refine.correlative`) against the previous ``local_map_submaps``
+   submaps placed by their estimates, around the odometry's prediction (± ``search_xy_m``,
+   ``search_yaw_deg``); the match's posterior mean and covariance become a constraint.
+3. **Loop closures**: earlier submaps (``loop_min_path_m`` of travel back) whose estimate
+   lies within ``loop_radius_m`` are correlated over ± ``loop_search_xy_m``,
+   ``loop_search_yaw_deg``; kept when the score reaches ``min_score`` and the best
+   distinct pose's likelihood ratio stays below ``max_ambiguity``. Each kept closure
+   re-solves the graph, so the next search starts from the corrected estimate.
+4. **Pose graph** (:mod:`~pipeline.refine.graph`): odometry (σ ``odometry_sigma_xy`` m/√m,
+   ``odometry_sigma_yaw_deg`` °/√m), matches and closures under a Cauchy loss, the
+   odometry's scale error and heading bias as two more variables (priors
+   ``prior_scale``, ``prior_bias_deg_per_m``); constraints whose χ² at the solution
+   exceeds the 3-dof 99.9 % quantile are dropped and the graph solved again.
+5. **Acceptance** (a likelihood-ratio test): the same graph's cost at the odometry
+   against at the solution. Were the odometry right, twice the difference would be χ²
+   with one degree of freedom per anchor coordinate and calibration term the solution
+   moves; the solution replaces the odometry only beyond that χ²'s 99 % quantile.
+6. **Back onto every pose**: the odometry re-integrated with the estimated calibration,
+   then each pose moved by the anchors' corrections interpolated in time.
+
+scipy's ``least_squares`` with a sparse Jacobian pattern solves the graph (deterministic).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from formats.angles import wrap_angle
+from formats.arrays import F64
+from pipeline.config import PoseRefinementConfig
+from pipeline.drift import DriftModel, apply_drift
+from pipeline.refine.correlative import Correlation, Window, correlate
+from pipeline.refine.echoes import Echoes
+from pipeline.refine.graph import (
+    GraphOptions,
+    MatchConstraints,
+    Odometry,
+    cost_at,
+    solve,
+    sqrt_information,
+)
+from pipeline.refine.submaps import Submap, build_submaps, path_length_at
+from pipeline.se2 import between, compose, inverse, transform_points
+from pipeline.stages.pose_sync import POSE_OK, PoseTrack, interpolate_poses
+
+ARC_STRIDE = 1  # the query scores every point of an echo's arc
+CHI2_OUTLIER = 16.27  # χ² with 3 degrees of freedom at 99.9 %: a constraint the solution rejects
+Z99 = 2.326  # the standard normal's 99 % quantile (χ²(dof) ≈ dof + z·√(2·dof))
+
+
+@dataclass
+class _Graph:
+    submaps: list[Submap]
+    odo: Odometry
+    opt: GraphOptions
+    est: F64
+    i: list[int] = field(default_factory=list)
+    j: list[int] = field(default_factory=list)
+    z: list[F64] = field(default_factory=list)
+    u: list[F64] = field(default_factory=list)
+    loop: list[bool] = field(default_factory=list)
+    scale: float = 0.0
+    bias: float = 0.0
+
+    def add(self, i: int, j: int, pose_j: F64, cov: F64, loop: bool) -> None:
+        """A measured pose of anchor ``j`` (world) with the world covariance ``cov``, as a
+        constraint relative to anchor ``i``'s current estimate."""
+        c, s = math.cos(self.est[i][2]), math.sin(self.est[i][2])
+        r = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+        self.i.append(i)
+        self.j.append(j)
+        self.z.append(between(self.est[i], pose_j))
+        self.u.append(sqrt_information(r @ cov @ r.T))
+        self.loop.append(loop)
+
+    def constraints(self, keep: np.ndarray | None = None) -> MatchConstraints:
+        mc = MatchConstraints(np.array(self.i, np.int64), np.array(self.j, np.int64),
+                              np.array(self.z).reshape(-1, 3), np.array(self.u).reshape(-1, 3, 3))
+        return mc if keep is None else mc.take(keep)
+
+    def solve_upto(self, last: int, keep: np.ndarray | None = None) -> np.ndarray:
+        """Solve the graph of anchors ``0..last``; the later ones follow by odometry.
+        Returns the constraints' χ² at the solution."""
+        mc = self.constraints(keep)
+        inside = (mc.i <= last) & (mc.j <= last)
+        mc = mc.take(inside)
+        n = last + 1
+        odo = Odometry(self.odo.delta[:last], self.odo.length[:last])
+        sol = solve(self.est[:n].copy(), odo, mc, self.opt)
+        self.est[:n] = sol.anchors
+        self.scale, self.bias = sol.scale_error, sol.heading_bias
+        ahead = calibrated(self.odo.delta[last:], self.odo.length[last:], self.scale, self.bias)
+        for k in range(n, self.est.shape[0]):
+            self.est[k] = compose(self.est[k - 1], ahead[k - n])
+        chi2 = np.zeros(len(self.i))
+        idx = np.flatnonzero(inside) if keep is None else np.flatnonzero(keep)[inside]
+        chi2[idx] = sol.match_chi2
+        return chi2
+
+
+def calibrated(delta: F64, length: F64, scale: float, bias: float) -> F64:
+    """Odometry steps (earlier anchor's frame) with the scale error ``scale`` and heading
+    bias ``bias`` (rad per metre) taken out, as the graph's odometry residual does."""
+    turn = -bias * length / 2
+    c, s = np.cos(turn), np.sin(turn)
+    return np.column_stack([(c * delta[:, 0] - s * delta[:, 1]) / (1 + scale),
+                            (s * delta[:, 0] + c * delta[:, 1]) / (1 + scale),
+                            delta[:, 2] - bias * length])
+
+
+def _window(xy: float, yaw_deg: float, res: float) -> Window:
+    """A search of ± ``xy`` m, ± ``yaw_deg``: its coarse level ~15 steps each side (at least
+    two field cells, one degree)."""
+    return Window(xy, math.radians(yaw_deg), max(2 * res, xy / 15),
+                  math.radians(max(1.0, yaw_deg / 10)))
+
+
+def _points(submaps: list[Submap], refs: list[int], est: F64) -> tuple[F64, F64, F64, F64]:
+    """The reference submaps' arcs (echoes × arc samples) and sensors placed at ``est``."""
+    parts = []
+    for r in refs:
+        sm = submaps[r]
+        assert sm.ox is not None and sm.oy is not None
+        parts.append((*transform_points(est[r], sm.px, sm.py),
+                      *transform_points(est[r], sm.ox, sm.oy)))
+    return tuple(np.concatenate([p[k] for p in parts]) for k in range(4))  # type: ignore[return-value]
+
+
+def _match(g: _Graph, refs: list[int], j: int, prediction: F64, window: Window,
+           cfg: PoseRefinementConfig) -> Correlation | None:
+    rx, ry, sx, sy = _points(g.submaps, refs, g.est)
+    q = g.submaps[j]
+    return correlate(rx, ry, sx, sy, q.px[:, ::ARC_STRIDE], q.py[:, ::ARC_STRIDE], prediction,
+                     window,
+                     res=cfg.field_resolution_m, sigma=cfg.field_sigma_m)
+
+
+def slam_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig
+               ) -> tuple[F64, F64, F64, dict[str, Any]]:
+    """The refined poses of ``track`` (same stamps) and what the graph did."""
+    tt = np.asarray(track.t_ns)
+    tx, ty, tyaw = np.asarray(track.x), np.asarray(track.y), np.asarray(track.yaw)
+    echoes = echoes.within(cfg.max_echo_range_m)
+    path = path_length_at(tt, tx, ty, echoes.t_ns) if len(echoes) else np.empty(0)
+    submaps = build_submaps(echoes, path, travel_m=cfg.submap_travel_m,
+                            min_echoes=cfg.submap_min_echoes, max_points=cfg.submap_max_points)
+    metrics: dict[str, Any] = {"model": "graph", "echoes": len(echoes), "submaps": len(submaps)}
+    zero = {"matches_accepted": 0, "matches_rejected": 0, "loop_closures_accepted": 0,
+            "loop_closures_rejected": 0, "accepted": False}
+    if len(submaps) < 2:
+        metrics.update(zero, note="fewer than 2 submaps: the odometry")
+        return tx.copy(), ty.copy(), tyaw.copy(), metrics
+    odo_anchor = np.array([s.anchor for s in submaps])
+    anchor_path = np.array([s.path_m for s in submaps])
+    opt = GraphOptions(cfg.odometry_sigma_xy, math.radians(cfg.odometry_sigma_yaw_deg), True,
+                       cfg.prior_scale, math.radians(cfg.prior_bias_deg_per_m), 1.0, True)
+    odo = Odometry(between(odo_anchor[:-1], odo_anchor[1:]), np.diff(anchor_path))
+    g = _Graph(submaps, odo, opt, odo_anchor.copy())
+    seq = _window(cfg.search_xy_m, cfg.search_yaw_deg, cfg.field_resolution_m)
+    wide = _window(cfg.loop_search_xy_m, cfg.loop_search_yaw_deg, cfg.field_resolution_m)
+    seq_ok = seq_bad = loop_tried = loop_gated = 0
+    for j in range(1, len(submaps)):
+        pred = compose(g.est[j - 1], calibrated(odo.delta[j - 1:j], odo.length[j - 1:j],
+                                                g.scale, g.bias)[0])
+        refs = list(range(max(0, j - cfg.local_map_submaps), j))
+        m = _match(g, refs, j, pred, seq, cfg)
+        if m is not None and m.score >= cfg.min_score:
+            g.add(j - 1, j, m.pose, m.cov, loop=False)
+            g.est[j] = m.pose
+            seq_ok += 1
+        else:
+            g.est[j] = pred
+            seq_bad += 1
+        d = np.hypot(g.est[:j, 0] - g.est[j, 0], g.est[:j, 1] - g.est[j, 1])
+        far = anchor_path[j] - anchor_path[:j] >= cfg.loop_min_path_m
+        cand = np.flatnonzero((d <= cfg.loop_radius_m) & far)
+        cand = cand[np.argsort(d[cand], kind="stable")][: cfg.loop_max_per_submap]
+        closed = False
+        for i in cand.tolist():
+            loop_tried += 1
+            refs = [r for r in (i - 1, i, i + 1) if 0 <= r < j]
+            m = _match(g, refs, j, g.est[j], wide, cfg)
+            if m is None or m.score < cfg.min_score or m.ambiguity > cfg.max_ambiguity:
+                loop_gated += 1
+                continue
+            g.add(i, j, m.pose, m.cov, loop=True)
+            closed = True
+        if closed:
+            g.solve_upto(j)
+    keep = np.ones(len(g.i), bool)
+    chi2 = g.solve_upto(len(submaps) - 1)
+    bad = chi2 > CHI2_OUTLIER
+    if bad.any():
+        keep = ~bad
+        chi2 = g.solve_upto(len(submaps) - 1, keep)
+    loop = np.array(g.loop, bool)
+    mc = g.constraints(keep)
+    cost_odometry = cost_at(odo_anchor, odo, mc, opt)
+    cost_solution = _cost_with(g, mc, opt)
+    dof = 3 * (len(submaps) - 1) + 2  # the anchors the solution moves, and the calibration
+    # likelihood ratio: were the odometry right, 2·(its cost − the solution's) would be χ²(dof)
+    accepted = 2 * (cost_odometry - cost_solution) > dof + Z99 * math.sqrt(2 * dof)
+    metrics.update({
+        "matches_accepted": int((keep & ~loop).sum()),
+        "matches_rejected": seq_bad + int((~keep & ~loop).sum()),
+        "loop_closures_tried": loop_tried,
+        "loop_closures_accepted": int((keep & loop).sum()),
+        "loop_closures_rejected": loop_gated + int((~keep & loop).sum()),
+        "cost_odometry": cost_odometry, "cost_final": cost_solution,
+        "scale_error": g.scale, "heading_bias_deg_per_m": math.degrees(g.bias),
+        "accepted": bool(accepted),
+        "loop_closure_edges": [[*g.est[a, :2].tolist(), *g.est[b, :2].tolist()] for a, b, k, lp
+                               in zip(g.i, g.j, keep.tolist(), g.loop, strict=True) if k and lp],
+        "match_chi2_mean": float(chi2[keep].mean()) if keep.any() else None,
+        "match_chi2_max": float(chi2[keep].max()) if keep.any() else None,
+    })
+    if not accepted:
+        metrics["loop_closure_edges"] = []  # the odometry stays: no solution to draw them on
+        metrics["note"] = "the graph does not explain the echoes better than the odometry"
+        return tx.copy(), ty.copy(), tyaw.copy(), metrics
+    rx, ry, ryaw = _onto_poses(tt, tx, ty, tyaw, submaps, g)
+    return rx, ry, ryaw, metrics
+
+
+def _cost_with(g: _Graph, mc: MatchConstraints, opt: GraphOptions) -> float:
+    from pipeline.refine.graph import _Problem, robust_cost
+
+    prob = _Problem(g.est, g.odo, mc, opt)
+    v = np.concatenate([g.est.ravel(), [g.scale, g.bias]])
+    return robust_cost(prob.residuals(v), opt.robust_scale)
+
+
+def _onto_poses(tt: np.ndarray, tx: F64, ty: F64, tyaw: F64, submaps: list[Submap],
+                g: _Graph) -> tuple[F64, F64, F64]:
+    """Odometry re-integrated with the calibration, then moved by the anchors' corrections
+    interpolated in time (linear, yaw unwrapped)."""
+    cx, cy, cyaw = apply_drift(tx, ty, tyaw, DriftModel.removing(g.scale, g.bias))
+    t_anchor = np.array([s.t_ns for s in submaps], np.int64)
+    look = interpolate_poses(PoseTrack(tt, cx, cy, cyaw, "", ""), t_anchor,
+                             np.iinfo(np.int64).max)
+    assert (look.reason == POSE_OK).all()
+    corr = compose(g.est, inverse(np.column_stack([look.x, look.y, look.yaw])))
+    corr[:, 2] = np.unwrap(corr[:, 2])
+    ct = [np.interp(tt.astype(np.float64), t_anchor.astype(np.float64), corr[:, k])
+          for k in range(3)]
+    out = compose(np.column_stack(ct), np.column_stack([cx, cy, cyaw]))
+    return out[:, 0].copy(), out[:, 1].copy(), wrap_angle(out[:, 2])

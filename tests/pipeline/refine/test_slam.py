@@ -1,0 +1,133 @@
+"""The graph model (``[pose_refinement] model = "graph"``): correlative matching, the
+pose graph's analytic Jacobian, and a drifted loop refined end to end."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from formats.writers.trajectory_csv import read_trajectory
+from pipeline.config import Config, PoseRefinementConfig
+from pipeline.refine.correlative import Window, correlate
+from pipeline.refine.graph import GraphOptions, MatchConstraints, Odometry, _Problem
+from pipeline.tools.simulate import SimOptions
+from pipeline.tools.trajectory_error import trajectory_error
+
+GRAPH = dataclasses.replace(
+    PoseRefinementConfig(), enabled=True, model="graph", submap_travel_m=3.0,
+    submap_min_echoes=20, search_xy_m=0.5, search_yaw_deg=8.0, loop_radius_m=3.0,
+    loop_min_path_m=10.0, loop_search_xy_m=1.5, loop_search_yaw_deg=20.0,
+    loop_max_per_submap=1, min_score=0.7, max_ambiguity=0.99)
+
+LOOP = Path(__file__).resolve().parents[3] / "sample_logs" / "worlds" / "loop.toml"
+
+
+def _room(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Arcs (echoes × 3) on the walls of an L-shaped room seen from sensors near (0, 0)."""
+    t = rng.uniform(0, 1, 300)
+    wall = np.where(t < 0.5, 0, 1)
+    x = np.where(wall == 0, -2 + 6 * t, 4.0)
+    y = np.where(wall == 0, 2.0, -1 + 6 * (t - 0.5))
+    ax = np.stack([x, x + 0.01, x - 0.01], axis=1)
+    ay = np.stack([y, y, y], axis=1)
+    return ax, ay, np.zeros(300), np.zeros(300)
+
+
+def test_correlation_finds_the_offset_and_reports_its_spread() -> None:
+    rng = np.random.default_rng(0)
+    rx, ry, sx, sy = _room(rng)
+    qx, qy, _, _ = _room(np.random.default_rng(1))
+    truth = np.array([0.3, -0.2, math.radians(3)])
+    c, s = math.cos(-truth[2]), math.sin(-truth[2])
+    # the query points in the frame of the true pose
+    px, py = qx - truth[0], qy - truth[1]
+    qx, qy = c * px - s * py, s * px + c * py
+    m = correlate(rx, ry, sx, sy, qx, qy, np.zeros(3), Window(0.6, math.radians(8), 0.1,
+                  math.radians(1)), res=0.05, sigma=0.1)
+    assert m is not None
+    assert m.pose[:2] == pytest.approx(truth[:2], abs=0.06)
+    assert m.pose[2] == pytest.approx(truth[2], abs=math.radians(1))
+    assert m.score > 0.8 and 0 <= m.ambiguity < 1
+    assert np.all(np.linalg.eigvalsh(m.cov) > 0)
+
+
+def test_a_window_that_misses_the_pose_gives_no_match() -> None:
+    rx, ry, sx, sy = _room(np.random.default_rng(0))
+    qx, qy, _, _ = _room(np.random.default_rng(1))
+    m = correlate(rx, ry, sx, sy, qx - 1.0, qy - 1.0, np.zeros(3),
+                  Window(0.3, math.radians(4), 0.1, math.radians(1)), res=0.05, sigma=0.1)
+    assert m is None  # the optimum lies on the window's edge
+
+
+def test_the_graphs_jacobian_is_its_residuals_derivative() -> None:
+    from scipy.optimize._numdiff import approx_derivative
+
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(6, 3))
+    odo = Odometry(rng.normal(size=(5, 3)), rng.uniform(0.5, 3, 5))
+    u = np.triu(rng.normal(size=(2, 3, 3))) + 3 * np.eye(3)
+    mc = MatchConstraints(np.array([0, 2]), np.array([3, 5]), rng.normal(size=(2, 3)), u)
+    p = _Problem(x, odo, mc, GraphOptions(0.02, 0.01, True, 0.1, 0.03, 1.0))
+    v = np.concatenate([x.ravel(), [0.03, 0.01]])
+    numeric = approx_derivative(p.residuals, v)
+    assert np.abs(p.jacobian(v).toarray() - numeric).max() < 1e-5 * np.abs(numeric).max()
+
+
+@pytest.fixture(scope="module")
+def loop_logs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """The loop corridor world (84 m, four revisits), true and with wheel odometry's drift."""
+    from pipeline.tools.simulate import run_simulation
+
+    d = tmp_path_factory.mktemp("loop")
+    opts = SimOptions(seed=1, speed=0.5, ring_rate_hz=5.0)
+    run_simulation(LOOP, d / "true.mcap", "mcap", options=opts)
+    drifted = dataclasses.replace(opts, drift_scale=-0.02, drift_heading_bias_deg_per_m=-0.5,
+                                  drift_heading_walk=0.01, drift_xy=0.01)
+    run_simulation(LOOP, d / "walk.mcap", "mcap", options=drifted)
+    return d / "true.mcap", d / "walk.mcap"
+
+
+def _ate(run_dir: Path, name: str, truth: Path) -> float:
+    return trajectory_error(read_trajectory(run_dir / name),
+                            read_trajectory(truth)).ate_rmse_m
+
+
+def test_the_graph_closes_the_loops_of_a_random_walk(loop_logs: tuple[Path, Path],
+                                                     tmp_path: Path) -> None:
+    from pipeline.run import run
+
+    _, walk = loop_logs
+    cfg = Config(pose_refinement=GRAPH)
+    a = run(walk, tmp_path / "a", cfg)
+    run(walk, tmp_path / "b", cfg)
+    for name in ("trajectory.csv", "map.pgm", "trajectory.png"):
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
+    truth = walk.with_name("walk.truth.csv")
+    before, after = (_ate(tmp_path / "a", "odometry.csv", truth),
+                     _ate(tmp_path / "a", "trajectory.csv", truth))
+    assert before > 0.5 and after < before / 3
+    pr = a.metrics.pose_refinement
+    assert pr is not None and pr["accepted"] is True
+    assert pr["loop_closures_accepted"] >= 3 and len(pr["loop_closure_edges"]) >= 3
+    assert pr["heading_bias_deg_per_m"] == pytest.approx(-0.5, abs=0.15)
+    assert "graph" in pr["summary"]
+    from mcap.reader import make_reader
+
+    with (tmp_path / "a" / "map.mcap").open("rb") as f:
+        topics = {c.topic: c.message_encoding for c in make_reader(f).get_summary().channels.values()}
+    assert "/loop_closures" in topics and "/odometry" in topics
+
+
+def test_the_graph_leaves_correct_poses_alone(loop_logs: tuple[Path, Path],
+                                             tmp_path: Path) -> None:
+    from pipeline.run import run
+
+    true, _ = loop_logs
+    r = run(true, tmp_path / "t", Config(pose_refinement=GRAPH))
+    pr = r.metrics.pose_refinement
+    assert pr is not None
+    assert pr["moved_max_m"] < 0.05 or pr["accepted"] is False
