@@ -102,7 +102,8 @@ def mapper_rows(smoke: bool, quick: bool, verbose: bool) -> list[Row]:
     n = int(f["readings"])
     rows: list[Row] = []
     for name, label in (
-        ("attribution (default)", "default method (echo attribution, 2 passes)"),
+        ("specular (default)", "default method (specular echo attribution, 4 passes)"),
+        ("attribution", "echo attribution (§9, 2 passes)"),
         ("andersone+correction", "paper's method (correction on)"),
         ("andersone", "without correction"),
         ("classic", "classic log-odds baseline"),

@@ -134,7 +134,8 @@ def run_octomap(scans: list[Scan], resolution: float) -> float | None:
 
 
 METHODS = [
-    ("attribution (default)", MapperConfig(method="attribution")),
+    ("specular (default)", MapperConfig(method="specular")),
+    ("attribution", MapperConfig(method="attribution")),
     ("andersone+correction", MapperConfig(method="andersone")),
     ("andersone+correction+split_guard", MapperConfig(method="andersone", split_guard=True)),
     ("andersone", MapperConfig(method="andersone", feature_correction=False)),

@@ -6,8 +6,8 @@ Usage::
         [--figure compare.png] [--tolerance 0.10] [--reach M] [--config TOML] [--keep DIR]
         [--summary FILE.md]
 
-Each log is mapped with ``pipeline.run.run`` by (1) the default method (echo attribution,
-ALGORITHM.md §9), (2) the paper's method with feature correction, (3) the paper's method
+Each log is mapped with ``pipeline.run.run`` by (1) the default method (specular echo
+attribution, ALGORITHM.md §10; and §9's echo attribution beside it), (2) the paper's method with feature correction, (3) the paper's method
 without it (the paper's ablation), (4) the classic log-odds grid, into a temporary
 directory (``--keep DIR`` keeps the runs), and (5) by OctoMap from the same readings
 (:mod:`benchmarks.octomap_baseline`; skipped without the ``bench`` extra). Every map is
@@ -56,20 +56,22 @@ REPO = Path(__file__).resolve().parents[1]
 LOG_SUFFIXES = {".mcap", ".bag", ".db3", ".csv", ".txt", ".zst"}
 
 METHODS: tuple[tuple[str, Method, bool], ...] = (
+    ("default", Method.SPECULAR, True),
     ("attribution", Method.ATTRIBUTION, True),
     ("with_correction", Method.ANDERSONE, True),
     ("without_correction", Method.ANDERSONE, False),
     ("classic", Method.CLASSIC, True),
 )
 LABELS = {
-    "attribution": "sonarmap default (echo attribution)",
+    "default": "sonarmap default (specular echo attribution)",
+    "attribution": "echo attribution (§9)",
     "with_correction": "Andersone, with feature correction",
     "without_correction": "Andersone, without correction",
     "classic": "classic log-odds grid",
     "octomap": "OctoMap",
 }
 # Shown in the figure (the ablation without correction is in the tables only).
-FIGURE_KEYS = ("attribution", "with_correction", "classic", "octomap")
+FIGURE_KEYS = ("default", "attribution", "with_correction", "classic", "octomap")
 
 
 @dataclass
@@ -280,7 +282,7 @@ def markdown(rows: list[Row], caption: str) -> str:
 def summary(results: list[tuple[list[Row], str]]) -> str:
     """One table: F1 (precision / recall) of every method on every log, the paper's metric
     with and without correction, and the default's F1 margin over OctoMap."""
-    keys = ["attribution", "with_correction", "without_correction", "classic", "octomap"]
+    keys = ["default", "attribution", "with_correction", "without_correction", "classic", "octomap"]
     head = ["log", *(LABELS[k] for k in keys), "default − OctoMap",
             "mean feature variance with / without correction (m²)"]
     lines = ["| " + " | ".join(head) + " |", "|---" + "|---:" * (len(head) - 1) + "|"]
@@ -291,8 +293,8 @@ def summary(results: list[tuple[list[Row], str]]) -> str:
             r = by.get(k)
             cells.append("–" if r is None else
                          f"**{r.f1:.3f}** ({r.precision:.2f} / {r.recall:.2f})"
-                         if k == "attribution" else f"{r.f1:.3f} ({r.precision:.2f} / {r.recall:.2f})")
-        margin = (by["attribution"].f1 - by["octomap"].f1) if "octomap" in by else None
+                         if k == "default" else f"{r.f1:.3f} ({r.precision:.2f} / {r.recall:.2f})")
+        margin = (by["default"].f1 - by["octomap"].f1) if "octomap" in by else None
         cells.append("–" if margin is None else f"{margin:+.3f}")
         on, off = by["with_correction"].mean_variance, by["without_correction"].mean_variance
         cells.append("–" if on is None or off is None else f"{on:.2e} / {off:.2e}")
@@ -323,7 +325,7 @@ def sonar_models(results: list[tuple[list[Row], str]]) -> str:
         ideal = by_name.get(base, {})
         cells = [base]
         for rows in (ideal, real):
-            d, o = rows.get("attribution"), rows.get("octomap")
+            d, o = rows.get("default"), rows.get("octomap")
             cells += ["–" if d is None else f"{d.f1:.3f}", "–" if o is None else f"{o.f1:.3f}",
                       "–" if d is None or o is None else f"{d.f1 - o.f1:+.3f}"]
         lines.append("| " + " | ".join(cells) + " |")
@@ -333,7 +335,7 @@ def sonar_models(results: list[tuple[list[Row], str]]) -> str:
 def thickness(results: list[tuple[list[Row], str]]) -> str:
     """F1 with every method's walls grown by one cell, beside its own: a scorer that does
     not reward thick walls gains (almost) nothing from the growth."""
-    keys = ["attribution", "with_correction", "without_correction", "classic", "octomap"]
+    keys = ["default", "attribution", "with_correction", "without_correction", "classic", "octomap"]
     head = ["log (F1 → F1 with walls grown one cell)", *(LABELS[k] for k in keys)]
     lines = ["| " + " | ".join(head) + " |", "|---" + "|---:" * (len(head) - 1) + "|"]
     worst = -math.inf

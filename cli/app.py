@@ -139,9 +139,10 @@ def run(
         Method | None,
         typer.Option(
             "--method", "-m", metavar="METHOD", case_sensitive=True,
-            help="attribution (echo attribution, the best maps), andersone (the paper's "
-            "method as published) or classic (log-odds grid).",
-            show_default="[mapper] method, attribution",
+            help="specular (echo attribution with specular surfaces, the best maps), "
+            "attribution (echo attribution without them), andersone (the paper's method as "
+            "published) or classic (log-odds grid).",
+            show_default="[mapper] method, specular",
         ),
     ] = None,
     resolution: Annotated[

@@ -48,9 +48,10 @@ class MapperConfig:
     """Parameters of the mapping method (ALGORITHM.md), with its documented defaults."""
 
     method: Method = doc_field(  # noqa: RUF009 - doc_field is dataclasses.field with a doc
-        "mapping method: 'attribution' (echo attribution, §9; the default), 'andersone' "
-        "(the paper's, §1-5) or 'classic' (log-odds baseline, §8)",
-        default=Method.ATTRIBUTION,
+        "mapping method: 'specular' (echo attribution with specular surfaces, §10; the "
+        "default), 'attribution' (echo attribution, §9), 'andersone' (the paper's, §1-5) or "
+        "'classic' (log-odds baseline, §8)",
+        default=Method.SPECULAR,
     )
     sigma_d0: float = doc_field("σ_d0, distance uncertainty at zero range, m (eq. 2)", default=0.01)
     k_d: float = doc_field("k_d, growth of distance uncertainty with range (eq. 2)", default=0.01)
@@ -134,6 +135,25 @@ class MapperConfig:
         "attribution (§9): the evidence floor, as a fraction of the log's median "
         "attributed weight per cell",
         default=0.35,
+    )
+    spec_critical_angle_deg: float = doc_field(
+        "specular (§10): median critical angle of a surface, deg: a ray that meets a smooth "
+        "surface farther than this from its normal is reflected away and returns no echo",
+        default=25.0,
+    )
+    spec_critical_spread: float = doc_field(
+        "specular (§10): spread of the critical angle across surfaces (σ of its logarithm), 1",
+        default=0.35,
+    )
+    spec_normal_radius_m: float = doc_field(
+        "specular (§10): radius over which the bearings of the echo arcs covering a cell are "
+        "pooled into its surface normal, m",
+        default=0.05,
+    )
+    spec_max_range_free: bool = doc_field(
+        "specular (§10): readings with no echo are free evidence out to r_max, weighted like "
+        "any ray by the chance that a surface there would have answered",
+        default=True,
     )
     seed: int = doc_field("seed of the particle generator (runs are reproducible)", default=0)
     threads: int = doc_field(
@@ -515,6 +535,9 @@ RANGES: dict[str, Range] = {
     "mapper.attr_dilution": Range(0, 1),
     "mapper.attr_free_weight": Range(0, 1e6),
     "mapper.attr_threshold": Range(0, 1e6),
+    "mapper.spec_critical_angle_deg": Range(0.1, 90),
+    "mapper.spec_critical_spread": Range(0.001, 5),
+    "mapper.spec_normal_radius_m": Range(0, 10),
     "mapper.seed": Range(0, 2**63, hi_open=True),
     "mapper.threads": Range(1, 2),
     "grid.resolution": CELL_M,

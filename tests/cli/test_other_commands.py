@@ -47,7 +47,7 @@ def test_run_help_names_its_values_and_shows_defaults(runner):
                  "-f, --format FORMAT", "-r, --resolution METRES"):
         assert line in out, line
     assert "[default: ([grid] resolution, 0.05)]" in out
-    assert "[default: ([mapper] method, attribution)]" in out
+    assert "[default: ([mapper] method, specular)]" in out
     assert "[default: (detected from the content)]" in out
 
 

@@ -45,7 +45,7 @@ def _pos(hi: float = 1e3) -> st.SearchStrategy[float]:
 def _configs(draw: st.DrawFn) -> Config:
     p_clamp_min = draw(st.floats(0.01, 0.49))
     mapper = MapperConfig(
-        method=draw(st.sampled_from(["attribution", "andersone", "classic"])),
+        method=draw(st.sampled_from(["specular", "attribution", "andersone", "classic"])),
         sigma_d0=draw(_pos()),
         k_d=draw(st.floats(0, 10)),
         c_a=draw(_pos()),

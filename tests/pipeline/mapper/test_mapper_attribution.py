@@ -21,7 +21,7 @@ from pipeline.mapper.synthetic import ring_scans, room_grid, room_segments
 from pipeline.mapper.types import GridSpec
 
 GRID = GridSpec(-5.0, -5.0, 0.05, 200, 200)
-CFG = MapperConfig()  # the default method is attribution
+CFG = MapperConfig(method="attribution")  # §9
 
 
 def _table(ox, oy, alpha, hf, r_outer):  # type: ignore[no-untyped-def]

@@ -1,0 +1,157 @@
+"""Compiled per-reading loop of the specular method (ALGORITHM.md §10).
+
+One reading's cone out to ``cones[i, 2]`` (the far edge of its echo's arc, or ``r_max``
+for a reading with no echo) is visited cell by cell (the cell rule of
+:mod:`pipeline.mapper.kernels.cone`). A cell of the surfaces grid ``occ`` whose unit normal
+``(nx, ny)`` is met by the ray at incidence θ answers with probability ``visible(θ)``
+(:func:`visible`); where the cell's normal is consistent (``q = cons``) and
+``q·(1 − visible(θ)) > ½`` the surface is silent to the ray and reflects it away, so the
+ray stops: farther cells within the cell's angular width (bins uniform in the tangent of
+the bearing off the axis) get no evidence from the reading. An unoccluded cell closer than ``r_free`` gets free evidence
+``q·visible(θ) + (1 − q)·v_unknown`` (``q`` = the consistency of its pooled normal,
+``v_unknown`` = visibility of a surface of unknown orientation); arc cells
+(``r_inner ≤ dist``) are counted (``attribute = False``) or, with ``attribute``, are an
+echo's candidates unless ``free_in > ratio·arcs_in`` (as §9); the echo is spread over its
+``n`` candidates, ``1/n**dilution`` each. In ``attribute`` mode every arc cell also adds
+its bearing φ from the sonar as a doubled angle (``cos 2φ, sin 2φ``: an axial direction)
+to ``arc_c, arc_s``, from which the normals are pooled.
+
+Loops run in reading order and add in that order, so results are deterministic.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from pipeline.mapper.kernels.cone import edge_sector_spans, max_sector_spans
+from pipeline.mapper.types import F32, F64, I32, B
+
+MAX_BINS = 2048  # angular bins of one cone's occlusion profile
+
+
+@njit(cache=True, inline="always")
+def visible(dx: float, dy: float, dist: float, nx: float, ny: float, table: F64) -> float:
+    """The probability that a surface with unit normal ``(nx, ny)`` echoes the ray
+    ``(dx, dy)`` of length ``dist``: ``table`` (the critical angle's survival function)
+    sampled at cos θ = 0, 1/(n − 1), … 1, θ the incidence."""
+    x = abs(dx * nx + dy * ny) / max(dist, 1e-12) * (table.shape[0] - 1)
+    k = min(int(x), table.shape[0] - 2)
+    f = x - k
+    return table[k] * (1.0 - f) + table[k + 1] * f
+
+
+@njit(cache=True)
+def _reach_cells(cones: F64, res: float) -> int:
+    reach = 0.0
+    for i in range(cones.shape[0]):
+        reach = max(reach, cones[i, 2])
+    return 2 * math.ceil(reach / res) + 3
+
+
+@njit(cache=True)
+def trace_readings(
+    cones: F64, up_down: B, r_inner: F64, r_free: F64, alpha: F64, half_fov: F64,
+    gx: float, gy: float, res: float, occ: B, occ_rows: I32, nx: F32, ny: F32, cons: F32,
+    table: F64, v_unknown: float, attribute: bool, free_in: F32,
+    arcs_in: F32, ratio: float, dilution: float, free_out: F32, arcs_out: F32,
+    hits: F32, arc_c: F32, arc_s: F32,
+) -> int:
+    """One pass over the readings (module doc); returns, with ``attribute``, the echoes
+    with no candidate cell. ``occ_rows`` is the running count of ``occ`` along each row
+    (one leading zero column), so rows of a span without a surface are skipped."""
+    height, width = free_out.shape
+    reach = _reach_cells(cones, res)
+    size = max_sector_spans(reach * res, res)
+    rows = np.empty(size, dtype=np.int64)
+    c0s = np.empty(size, dtype=np.int64)
+    c1s = np.empty(size, dtype=np.int64)
+    cand_r = np.empty(reach * reach, dtype=np.int64)
+    cand_c = np.empty(reach * reach, dtype=np.int64)
+    stop = np.empty(MAX_BINS, dtype=np.float64)
+    lost = 0
+    for i in range(cones.shape[0]):
+        ox, oy, r_out = cones[i, 0], cones[i, 1], cones[i, 2]
+        a, hb = alpha[i], half_fov[i]
+        n = edge_sector_spans(ox, oy, cones[i, 3], cones[i, 4], cones[i, 5], cones[i, 6],
+                              up_down[i, 0], up_down[i, 1], 0.0, r_out, gx, gy, res, width,
+                              height, rows, c0s, c1s)
+        ca, sa = math.cos(a), math.sin(a)
+        t_edge = math.tan(hb)  # bins uniform in tan(bearing − α) across the cone
+        nb = min(MAX_BINS, math.ceil(2.0 * hb * r_out / res) + 1)
+        bin_w = 2.0 * t_edge / nb
+        stopped = False
+        for k in range(n):  # the silent surfaces in the cone and their shadows
+            r = rows[k]
+            if occ_rows[r, c1s[k] + 1] == occ_rows[r, c0s[k]]:
+                continue
+            for c in range(c0s[k], c1s[k] + 1):
+                if not occ[r, c]:
+                    continue
+                dx = gx + (c + 0.5) * res - ox
+                dy = gy + (r + 0.5) * res - oy
+                dist = math.sqrt(dx * dx + dy * dy)
+                # Silent with probability q·(1 − visible): a ray stops only at a surface
+                # whose orientation is known and that it meets obliquely.
+                if cons[r, c] * (1.0 - visible(dx, dy, dist, nx[r, c], ny[r, c], table)) <= 0.5:
+                    continue
+                along = dx * ca + dy * sa
+                if along <= 0.0:
+                    continue
+                if not stopped:
+                    stop[:nb] = np.inf
+                    stopped = True
+                t = (dy * ca - dx * sa) / along
+                rel = t + t_edge
+                hw = 0.5 * res / max(dist, res) * (1.0 + t * t)
+                k0 = max(0, math.floor((rel - hw) / bin_w))
+                k1 = min(nb - 1, math.floor((rel + hw) / bin_w))
+                for kb in range(k0, k1 + 1):
+                    stop[kb] = min(stop[kb], dist)
+        m = 0
+        rf, ri = r_free[i], r_inner[i]
+        if attribute:  # only the arc's cells matter: the annulus' spans
+            if not ri < r_out:
+                n = 0
+            elif ri > 0.0:
+                n = edge_sector_spans(ox, oy, cones[i, 3], cones[i, 4], cones[i, 5],
+                                      cones[i, 6], up_down[i, 0], up_down[i, 1], ri, r_out,
+                                      gx, gy, res, width, height, rows, c0s, c1s)
+        for k in range(n):
+            r = rows[k]
+            for c in range(c0s[k], c1s[k] + 1):
+                dx = gx + (c + 0.5) * res - ox
+                dy = gy + (r + 0.5) * res - oy
+                d2 = dx * dx + dy * dy
+                dist = math.sqrt(d2)
+                if stopped:
+                    along = max(dx * ca + dy * sa, 1e-12)
+                    kb = math.floor(((dy * ca - dx * sa) / along + t_edge) / bin_w)
+                    if dist > stop[min(max(kb, 0), nb - 1)]:
+                        continue
+                if dist < rf and not attribute:
+                    q = cons[r, c]
+                    free_out[r, c] += (q * visible(dx, dy, dist, nx[r, c], ny[r, c], table)
+                                       + (1.0 - q) * v_unknown)
+                if dist >= ri:
+                    if not attribute:
+                        arcs_out[r, c] += 1.0
+                        continue
+                    inv = 1.0 / max(d2, 1e-24)
+                    arc_c[r, c] += (dx * dx - dy * dy) * inv  # cos 2φ
+                    arc_s[r, c] += 2.0 * dx * dy * inv  # sin 2φ
+                    if free_in[r, c] <= ratio * arcs_in[r, c]:
+                        cand_r[m] = r
+                        cand_c[m] = c
+                        m += 1
+        if not attribute:
+            continue
+        if m == 0:
+            lost += 1
+            continue
+        w = 1.0 / float(m) ** dilution
+        for k in range(m):
+            hits[cand_r[k], cand_c[k]] += w
+    return lost

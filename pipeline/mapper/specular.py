@@ -1,0 +1,187 @@
+"""The default method: echo attribution with specular surfaces (ALGORITHM.md §10).
+
+A sonar hears a smooth surface only near its normal: beyond the surface's critical angle
+θc the pulse is reflected away, the surface is silent and the echo (if any) comes from
+farther. So a ray that passes a surface obliquely says nothing against it, and cannot
+reach what lies behind it. θc varies between surfaces: log-normal, median
+``spec_critical_angle_deg``, spread ``spec_critical_spread``; ``visible(θ) = P(θc > θ)``.
+
+Four passes over the log's scans, in the same order:
+
+0. §9's evidence: free and arc counts per cell (and the paper's features).
+1. §9's attribution → a first map; every echo arc also adds its bearing (a doubled angle)
+   to the cells it covers. Pooled over ``spec_normal_radius_m``, the bearings give each
+   cell a normal line ψ and a consistency q ∈ [0, 1] (their mean resultant length).
+2. Free and arc counts again: free evidence of a ray at any cell is ``q·visible(θ) + (1 − q)·v̄`` (v̄ = the mean of
+   ``visible`` over incidences: a surface of unknown orientation), and a ray stops at a
+   cell the first map holds occupied when ``q·(1 − visible(θ)) > ½`` (a surface of known orientation that it
+   meets obliquely). With ``spec_max_range_free`` readings with no echo add free evidence
+   out to ``r_max`` the same way.
+3. §9's attribution with these counts and the same stops; the map is §9's linear test.
+
+Memory: §9's grids and eight more float32 / bool grids; nothing grows with the log.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.special import ndtr
+
+from pipeline.config import MapperConfig
+from pipeline.mapper.attribution import AttributionMapper
+from pipeline.mapper.free_space import cone_table
+from pipeline.mapper.kernels.attribution import empty_grid
+from pipeline.mapper.kernels.specular import trace_readings
+from pipeline.mapper.reading_features import distance_sigma
+from pipeline.mapper.scan_group import ScanGroup
+from pipeline.mapper.types import F32, F64, I32, B, GridSpec, MapperCounters, MapSnapshot
+from pipeline.stages import reading_quality as rq
+
+TABLE_STEP = math.radians(0.25)  # sampling of the visibility table, rad
+COS_SAMPLES = 4097  # samples of the kernel's visibility table, uniform in cos θ
+
+
+def visibility_table(median_deg: float, spread: float) -> F64:
+    """``visible(θ) = P(θc > θ)`` for θ = 0, step, … just past π/2, θc log-normal."""
+    theta = np.arange(0.0, 0.5 * math.pi + 2 * TABLE_STEP, TABLE_STEP)
+    with np.errstate(divide="ignore"):
+        z = (np.log(theta) - math.log(math.radians(median_deg))) / max(spread, 1e-9)
+    out: F64 = 1.0 - ndtr(z)
+    return out
+
+
+def mean_visibility(table: F64) -> float:
+    """v̄: ``visible`` averaged over incidences uniform in [0, π/2]."""
+    return float(np.mean(table[: round(0.5 * math.pi / TABLE_STEP) + 1]))
+
+
+def cos_table(table: F64) -> F64:
+    """``visible`` at cos θ = 0, 1/(COS_SAMPLES − 1), … 1 (the kernel's table)."""
+    theta = np.arccos(np.linspace(0.0, 1.0, COS_SAMPLES))
+    out: F64 = np.interp(theta, np.arange(len(table)) * TABLE_STEP, table)
+    return out
+
+
+def box_sum(a: F32, radius: int) -> F64:
+    """Sum of ``a`` over the (2·radius + 1)² box around each cell (zero outside)."""
+    p = np.pad(a.astype(np.float64), radius)
+    c = np.zeros((p.shape[0] + 1, p.shape[1] + 1))
+    np.cumsum(np.cumsum(p, axis=0), axis=1, out=c[1:, 1:])
+    k = 2 * radius + 1
+    h, w = a.shape
+    out: F64 = c[k:k + h, k:k + w] - c[0:h, k:k + w] - c[k:k + h, 0:w] + c[0:h, 0:w]
+    return out
+
+
+def normal_lines(arc_c: F32, arc_s: F32, arcs: F32, radius: int) -> tuple[F32, F32]:
+    """Each cell's normal line ψ (rad) and its consistency q ∈ [0, 1] from the doubled
+    bearings of the arcs covering the cells within ``radius`` cells."""
+    c, s, n = box_sum(arc_c, radius), box_sum(arc_s, radius), box_sum(arcs, radius)
+    psi = (0.5 * np.arctan2(s, c)).astype(np.float32)
+    q = np.hypot(c, s) / np.maximum(n, 1.0)
+    return psi, np.clip(np.where(n > 0, q, 0.0), 0.0, 1.0).astype(np.float32)
+
+
+class SpecularMapper(AttributionMapper):
+    """§9's two passes, then both again with the first map's surfaces (module doc)."""
+
+    passes = 4
+
+    def __init__(self, config: MapperConfig, grid: GridSpec) -> None:
+        super().__init__(config, grid)
+        self.table = visibility_table(config.spec_critical_angle_deg,
+                                      config.spec_critical_spread)
+        self.v_unknown = mean_visibility(self.table)
+        self.cos_table = cos_table(self.table)
+        self.arc_c: F32 = empty_grid(grid.shape)
+        self.arc_s: F32 = empty_grid(grid.shape)
+        self.surfaces: B = np.zeros(grid.shape, dtype=bool)
+        self.surface_rows: I32 = np.zeros((grid.shape[0], grid.shape[1] + 1), dtype=np.int32)
+        self.nx: F32 = empty_grid(grid.shape)
+        self.ny: F32 = empty_grid(grid.shape)
+        self.consistency: F32 = empty_grid(grid.shape)
+        self.free2: F32 = empty_grid(grid.shape)
+        self.arcs2: F32 = empty_grid(grid.shape)
+        self.hits2: F32 = empty_grid(grid.shape)
+        self._unattributed2 = 0
+
+    def begin_pass(self, index: int) -> None:
+        """Start pass ``index`` (module doc) over the same scans."""
+        if index not in range(self.passes):
+            raise ValueError(f"the specular method has passes 0 to 3, not {index}")
+        if index == 1:
+            self._settle_counts()
+        if index == 2:
+            self._find_surfaces()
+        self.pass_index = index
+        self._group_index = 0
+
+    def _find_surfaces(self) -> None:
+        """The first map's occupied cells, their normal lines and consistency."""
+        self.surfaces = AttributionMapper.occupied(self)
+        radius = max(0, round(self.config.spec_normal_radius_m / self.grid.resolution))
+        psi, self.consistency = normal_lines(self.arc_c, self.arc_s, self.arcs, radius)
+        self.nx, self.ny = np.cos(psi), np.sin(psi)
+        np.cumsum(self.surfaces, axis=1, out=self.surface_rows[:, 1:])
+
+    def _integrate_group(self, group: ScanGroup) -> None:
+        if self.pass_index == 0:
+            super()._integrate_group(group)
+            return
+        if self.pass_index == 1 and self._paper_thread is not None:
+            self._paper_thread.give(self._group_index, group)
+        g, cfg = self.grid, self.config
+        cat = group.cat
+        d: F64 = np.where(group.codes == rq.OK, cat.range_m, 0.0)
+        band = np.maximum(cfg.attr_band_sigmas * distance_sigma(d, cfg), 0.5 * g.resolution)
+        outer: F64 = np.where(d > 0.0, d + band, 0.0)
+        free_r: F64 = group.free_radius
+        if self.pass_index >= 2 and cfg.spec_max_range_free:
+            silent = (group.codes == rq.MAX_RANGE) & np.isfinite(cat.max_range)
+            free_r = np.where(silent, cat.max_range - cfg.eps_max, free_r)
+            outer = np.where(silent, free_r, outer)
+        rows, cones, up_down = cone_table(cat, outer)
+        r_inner = np.where(d > 0.0, np.maximum(d - band, 0.0), np.inf)[rows]
+        half = np.minimum(0.5 * cat.fov[rows], 0.5 * math.pi - 1e-9)
+        first = self.pass_index == 1
+        attribute = self.pass_index != 2
+        lost = trace_readings(
+            cones, up_down, r_inner, free_r[rows], cat.alpha[rows], half,
+            g.origin_x, g.origin_y, g.resolution, self.surfaces, self.surface_rows,
+            self.nx, self.ny, self.consistency, self.cos_table, self.v_unknown, attribute,
+            self.free if first else self.free2, self.arcs if first else self.arcs2,
+            cfg.attr_candidate_ratio, cfg.attr_dilution, self.free2, self.arcs2,
+            self.hits if first else self.hits2, self.arc_c, self.arc_s,
+        )
+        if first:
+            self._unattributed += int(lost)
+        elif attribute:
+            # readings with no echo have no arc: not unattributed echoes
+            self._unattributed2 += int(lost) - int(np.count_nonzero(d[rows] <= 0.0))
+
+    def occupied(self) -> B:
+        """§9's linear test on the second attribution and the surface-aware free counts."""
+        self._settle_counts()
+        hits = self.hits2
+        positive = hits[hits > 0]
+        scale = float(np.median(positive)) if positive.size else 0.0
+        threshold = self.config.attr_free_weight * self.free2 + self.config.attr_threshold * scale
+        out: B = hits > threshold
+        return out
+
+    @property
+    def counters(self) -> MapperCounters:
+        """§9's counters, with the echoes the second attribution left unattributed."""
+        counters = AttributionMapper.counters.fget(self)  # type: ignore[attr-defined]
+        counters.echoes_unattributed = self._unattributed2
+        return counters
+
+    def snapshot(self) -> MapSnapshot:
+        """§9's snapshot with the surface-aware free counts."""
+        first, self.free = self.free, self.free2
+        try:
+            return super().snapshot()
+        finally:
+            self.free = first
