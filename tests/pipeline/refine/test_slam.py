@@ -83,7 +83,7 @@ def loop_logs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     from pipeline.tools.simulate import run_simulation
 
     d = tmp_path_factory.mktemp("loop")
-    opts = SimOptions(seed=1, speed=0.5, ring_rate_hz=5.0)
+    opts = SimOptions(sonar_model="ideal", seed=1, speed=0.5, ring_rate_hz=5.0)
     run_simulation(LOOP, d / "true.mcap", "mcap", options=opts)
     drifted = dataclasses.replace(opts, drift_scale=-0.02, drift_heading_bias_deg_per_m=-0.5,
                                   drift_heading_walk=0.01, drift_xy=0.01)
