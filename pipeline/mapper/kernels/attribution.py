@@ -47,7 +47,7 @@ def count_free(cones: F64, up_down: B, gx: float, gy: float, res: float, diff: I
 
 
 @njit(cache=True)
-def _reach_cells(cones: F64, res: float) -> int:
+def reach_cells(cones: F64, res: float) -> int:
     """Cells across the bounding box of the table's largest cone."""
     reach = 0.0
     for i in range(cones.shape[0]):
@@ -58,7 +58,7 @@ def _reach_cells(cones: F64, res: float) -> int:
 @njit(cache=True)
 def _span_buffers(cones: F64, res: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Span buffers large enough for the widest arc of the table."""
-    size = max_sector_spans(_reach_cells(cones, res) * res, res)
+    size = max_sector_spans(reach_cells(cones, res) * res, res)
     return (np.empty(size, dtype=np.int64), np.empty(size, dtype=np.int64),
             np.empty(size, dtype=np.int64))
 
@@ -99,7 +99,7 @@ def attribute_echoes(cones: F64, up_down: B, r_inner: F64, gx: float, gy: float,
     """
     height, width = hits.shape
     rows, c0s, c1s = _span_buffers(cones, res)
-    size = _reach_cells(cones, res) ** 2
+    size = reach_cells(cones, res) ** 2
     cand_r = np.empty(size, dtype=np.int64)
     cand_c = np.empty(size, dtype=np.int64)
     lost = 0

@@ -26,6 +26,7 @@ import math
 import numpy as np
 from numba import njit
 
+from pipeline.mapper.kernels.attribution import reach_cells
 from pipeline.mapper.kernels.cone import edge_sector_spans, max_sector_spans
 from pipeline.mapper.types import F32, F64, I32, B
 
@@ -44,14 +45,6 @@ def visible(dx: float, dy: float, dist: float, nx: float, ny: float, table: F64)
 
 
 @njit(cache=True)
-def _reach_cells(cones: F64, res: float) -> int:
-    reach = 0.0
-    for i in range(cones.shape[0]):
-        reach = max(reach, cones[i, 2])
-    return 2 * math.ceil(reach / res) + 3
-
-
-@njit(cache=True)
 def trace_readings(
     cones: F64, up_down: B, r_inner: F64, r_free: F64, alpha: F64, half_fov: F64,
     gx: float, gy: float, res: float, occ: B, occ_rows: I32, nx: F32, ny: F32, cons: F32,
@@ -63,7 +56,7 @@ def trace_readings(
     with no candidate cell. ``occ_rows`` is the running count of ``occ`` along each row
     (one leading zero column), so rows of a span without a surface are skipped."""
     height, width = free_out.shape
-    reach = _reach_cells(cones, res)
+    reach = reach_cells(cones, res)
     size = max_sector_spans(reach * res, res)
     rows = np.empty(size, dtype=np.int64)
     c0s = np.empty(size, dtype=np.int64)
