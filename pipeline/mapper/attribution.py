@@ -159,10 +159,13 @@ class AttributionMapper:
     def occupied(self) -> B:
         """Cells whose attributed echo weight beats their free count (the linear test)."""
         self._settle_counts()
-        hits = self.hits
+        return self._linear_test(self.hits, self.free)
+
+    def _linear_test(self, hits: F32, free: F32) -> B:
+        """``hits > attr_free_weight · free + attr_threshold · median(hits > 0)``."""
         positive = hits[hits > 0]
         scale = float(np.median(positive)) if positive.size else 0.0
-        threshold = self.config.attr_free_weight * self.free + self.config.attr_threshold * scale
+        threshold = self.config.attr_free_weight * free + self.config.attr_threshold * scale
         out: B = hits > threshold
         return out
 

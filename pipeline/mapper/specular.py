@@ -164,12 +164,7 @@ class SpecularMapper(AttributionMapper):
     def occupied(self) -> B:
         """§9's linear test on the second attribution and the surface-aware free counts."""
         self._settle_counts()
-        hits = self.hits2
-        positive = hits[hits > 0]
-        scale = float(np.median(positive)) if positive.size else 0.0
-        threshold = self.config.attr_free_weight * self.free2 + self.config.attr_threshold * scale
-        out: B = hits > threshold
-        return out
+        return self._linear_test(self.hits2, self.free2)
 
     @property
     def counters(self) -> MapperCounters:
