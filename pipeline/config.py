@@ -35,6 +35,7 @@ from formats.options import (
 from formats.presets import PRESETS
 from formats.ranges import CELL_M, COORD_M, LIMIT_M, MOUNT_M, Range, above, open_range
 from formats.storage.options import StorageConfig
+from formats.path_text import path_text_problem
 from formats.toml_file import read_toml
 from pipeline.methods import Method
 
@@ -386,6 +387,10 @@ class Config:
         """Check cross-field rules; raise ConfigError naming the key. Returns self."""
         _check_ranges(self)
         self.storage.check()
+        for key in ("ranges_file", "poses_file", "sensors_file"):
+            problem = path_text_problem(getattr(self.input.csv, key))
+            if problem is not None:
+                raise ConfigError(f"'input.csv.{key}' {problem}")
         return self
 
     def to_dict(self) -> dict[str, Any]:
@@ -481,6 +486,8 @@ def _coerce(tp: Any, value: Any, key: str) -> Any:
     if tp is str:
         if not isinstance(value, str):
             raise ConfigError(f"'{key}' must be a string, got {value!r}")
+        if "\x00" in value:  # no name sonarmap matches or opens can hold one
+            raise ConfigError(f"'{key}' must not contain a NUL byte, got {value!r}")
         return value
     raise ConfigError(f"'{key}': unsupported type {tp}")  # pragma: no cover
 

@@ -27,6 +27,7 @@ import numpy as np
 import yaml
 
 from formats.errors import FormatError
+from formats.path_text import path_text_problem, shown
 from formats.ros.inflate import MAX_RATIO, ChunkError, inflate_message
 from formats.ros.mcap_source import McapSource
 from formats.ros.source import (
@@ -49,6 +50,9 @@ SQLITE_BATCH_ROWS = 4096
 def _inside_bag(bag: Location, name: str, meta: Location) -> Location:
     """The storage file ``name`` of ``metadata.yaml``, which must lie inside the bag
     directory (no absolute path, no ``..``, no symlink leading out): FormatError else."""
+    problem = path_text_problem(name)
+    if problem is not None:
+        raise FormatError(f"metadata names a storage file {shown(name)} that {problem}", meta)
     if isinstance(bag, Url):  # a prefix: no symlinks, only the name can lead out
         parts = PurePosixPath(name).parts
         if name.startswith("/") or ".." in parts or "://" in name or not parts:

@@ -17,7 +17,8 @@ from pathlib import Path, PurePath
 from types import TracebackType
 from typing import BinaryIO
 
-from formats.errors import OutputError
+from formats.errors import InputError, OutputError
+from formats.path_text import NAME_MAX
 from formats.writers.output_marker import (
     not_replaceable_file_reason,
     not_replaceable_reason,
@@ -34,7 +35,6 @@ __all__ = [
     "clean_stale_siblings",
 ]
 
-NAME_MAX = 255  # bytes in one path component (Linux, macOS, Windows)
 # What _sibling_name adds around the name: ".", ".tmp-", a pid (up to 10 digits), "-", 8 hex.
 _SIBLING_EXTRA = len(".") + len(".tmp-") + 10 + len("-") + 8
 
@@ -51,6 +51,14 @@ def check_path_names(path: Path) -> None:
         if size > NAME_MAX:
             raise OutputError(f"a path component is too long ({size} bytes; at most "
                               f"{NAME_MAX})", path)
+
+
+def _names_other_file(err: OSError, tmp: Path) -> bool:
+    """Whether ``err`` names a file outside the temporary directory ``tmp`` (one the work
+    read: everything an output directory writes is inside ``tmp``)."""
+    name = err.filename
+    return isinstance(name, str) and not _inside(Path(os.path.abspath(name)),
+                                                 Path(os.path.abspath(tmp)))
 
 
 def _fsync_path(path: Path) -> None:
@@ -221,8 +229,10 @@ class OutputDir:
         self._check_final()
         try:
             self.final.parent.mkdir(parents=True, exist_ok=True)
-        except OSError as err:
-            raise OutputError(f"cannot create parent directory: {err}", self.final.parent) from err
+        except OSError as err:  # named by OUT, the user's name, and where it failed
+            where = f" (at {err.filename})" if isinstance(err.filename, str) else ""
+            raise OutputError(f"cannot create the output directory: "
+                              f"{err.strerror or err}{where}", self.final) from err
         # The symlink check again: mkdir may have just created the parent.
         self._check_final()
         clean_stale_siblings(self.final)
@@ -259,6 +269,9 @@ class OutputDir:
             return
         if exc_type is not None:
             _remove(tmp)
+            if isinstance(exc, OSError) and _names_other_file(exc, tmp):
+                # Not the output's: a file the work read (a name too long, EACCES ...).
+                raise InputError(f"cannot open: {exc.strerror or exc}", exc.filename) from exc
             if isinstance(exc, OSError) or (
                 isinstance(exc, OutputError) and exc.path and _inside(Path(exc.path), tmp)
             ):
@@ -404,6 +417,12 @@ def atomic_open(path: Path) -> Iterator[BinaryIO]:
         os.replace(tmp, path)
     except OSError as err:
         tmp.unlink(missing_ok=True)
+        if _names_other_file(err, tmp) and Path(os.path.abspath(err.filename)) != Path(
+                os.path.abspath(path)):
+            # Not the output's: a file the work read (a name too long, EACCES ...).
+            raise InputError(f"cannot open: {err.strerror or err}", err.filename) from err
+        if isinstance(err, FileNotFoundError) and not path.parent.is_dir():
+            raise OutputError("parent directory does not exist", path) from err
         raise OutputError(f"cannot write: {err.strerror or err}", path) from err
     except BaseException:
         tmp.unlink(missing_ok=True)
