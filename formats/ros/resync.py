@@ -23,7 +23,7 @@ import numpy.typing as npt
 
 __all__ = ["WINDOW", "mcap_candidates", "next_record", "ros1_candidates"]
 
-WINDOW = 1 << 20  # bytes searched per read
+WINDOW = 1 << 18  # bytes searched per read
 _LOOKAHEAD = 16  # bytes past the window a candidate's first fields need
 
 # A ROS 1 record header this long or longer is not taken when resynchronising (the
@@ -37,9 +37,14 @@ Candidates = Callable[[npt.NDArray[np.uint8], int, int], npt.NDArray[np.int64]]
 
 
 def _uint_at(buf: npt.NDArray[np.uint8], count: int, dtype: str) -> npt.NDArray[np.uint64]:
-    """The ``dtype`` values starting at byte 0..count-1 of ``buf`` (a 1-byte-stride view)."""
-    view = np.ndarray(shape=(count,), dtype=dtype, buffer=buf, strides=(1,))
-    return view.astype(np.uint64)
+    """A view of the ``dtype`` values starting at byte 0..count-1 of ``buf`` (1-byte
+    stride: no copy)."""
+    return np.ndarray(shape=(count,), dtype=dtype, buffer=buf, strides=(1,))
+
+
+def _room(count: int, remaining: int, head: int) -> npt.NDArray[np.int64]:
+    """Bytes left after a ``head``-byte record head at offsets 0..count-1 (may be < 0)."""
+    return remaining - head - np.arange(count, dtype=np.int64)
 
 
 def ros1_candidates(buf: npt.NDArray[np.uint8], n: int, remaining: int) -> npt.NDArray[np.int64]:
@@ -51,11 +56,10 @@ def ros1_candidates(buf: npt.NDArray[np.uint8], n: int, remaining: int) -> npt.N
         return np.empty(0, np.int64)
     hlen = _uint_at(buf, m, "<u4")
     first = _uint_at(buf[4:], m, "<u4")
-    at = np.arange(m, dtype=np.uint64)
-    ok = (hlen >= 8) & (hlen <= ROS1_MAX_HEADER) & (first >= 4) & (first + 4 <= hlen)
-    ok &= at + 8 + hlen <= remaining
+    ok = (hlen >= 8) & (hlen <= ROS1_MAX_HEADER) & (first >= 4) & (first <= hlen - 4)
     ok &= np.isin(buf[8 : 8 + m], _ROS1_FIELD_FIRST)
-    return np.flatnonzero(ok).astype(np.int64)
+    at = np.flatnonzero(ok)
+    return at[hlen[at].astype(np.int64) <= _room(m, remaining, 8)[at]]
 
 
 def mcap_candidates(
@@ -68,15 +72,11 @@ def mcap_candidates(
         m = min(n, buf.shape[0] - 8)
         if m <= 0:
             return np.empty(0, np.int64)
-        ok = np.isin(buf[:m], ops)
-        if not ok.any():
-            return np.empty(0, np.int64)
-        length = _uint_at(buf[1:], m, "<u8")
-        at = np.arange(m, dtype=np.uint64)
-        # Compared without adding to length: a garbage length near 2**64 would wrap.
-        ok &= length <= np.uint64(remaining) - np.minimum(at + 9, np.uint64(remaining))
-        ok &= at + 9 <= remaining
-        return np.flatnonzero(ok).astype(np.int64)
+        at = np.flatnonzero(np.isin(buf[:m], ops))
+        room = _room(m, remaining, 9)[at]
+        at, room = at[room >= 0], room[room >= 0]
+        # Compared as uint64: a garbage length near 2**64 must not wrap or round.
+        return at[_uint_at(buf[1:], m, "<u8")[at] <= room.astype(np.uint64)]
 
     return find
 
