@@ -32,10 +32,10 @@ from formats.options import (
     SensorsConfig,
     doc_field,
 )
+from formats.path_text import path_text_problem
 from formats.presets import PRESETS
 from formats.ranges import CELL_M, COORD_M, LIMIT_M, MOUNT_M, Range, above, open_range
 from formats.storage.options import StorageConfig
-from formats.path_text import path_text_problem
 from formats.toml_file import read_toml
 from pipeline.methods import Method
 

@@ -96,7 +96,8 @@ def next_record(
         data = read_at(pos, n + _LOOKAHEAD)
         buf = np.frombuffer(data, np.uint8)
         for off in candidates(buf, n, size - pos).tolist():
-            if accept(pos + off):
-                return pos + off
+            at = pos + int(off)
+            if accept(at):
+                return at
         pos += n
     return None

@@ -28,8 +28,8 @@ import yaml
 
 from formats.arrays import F64
 from formats.errors import FormatError
-from formats.path_text import path_text_problem, shown
 from formats.map_types import DEFAULT_MAX_CELLS, GridSpec
+from formats.path_text import path_text_problem, shown
 from formats.ranges import CELL_M, COORD_M, Range
 from formats.text_file import read_bounded, read_text
 from formats.writers.atomic import atomic_write_bytes, atomic_write_text

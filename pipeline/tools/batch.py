@@ -50,11 +50,11 @@ from formats.errors import (
     OutputError,
     SonarmapError,
 )
+from formats.path_text import path_text_problem, shown
 from formats.storage.location import Location, Url, as_location
 from formats.storage.urls import is_url
 from formats.tables import markdown_table
 from formats.text_file import MAX_LIST_BYTES, read_bounded, read_text
-from formats.path_text import path_text_problem, shown
 from formats.writers.output_marker import SUMMARY_MD_TITLE
 from pipeline.config import Config, config_from_dict, load_config
 from pipeline.cores import usable_cores

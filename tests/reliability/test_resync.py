@@ -84,7 +84,7 @@ def test_a_garbage_record_header_loses_that_record_only(tmp_path: Path, n: int, 
     assert len(chunks) == 3
     # The chunks' message counts, from the intact file: what losing each one costs.
     lost_alone = {}
-    for pos, op, length in records[1:]:  # the bag/MCAP header first: tested below
+    for pos, op, _length in records[1:]:  # the bag/MCAP header first: tested below
         got, losses = _read(tmp_path, f"x.{kind}", prepare(_garbage(data, pos, n)))
         if op == CHUNK_OPS[kind]:
             lost_alone[pos] = INTACT - got

@@ -61,8 +61,8 @@ def test_a_listed_path_the_os_refuses_fails_its_row_with_the_reason(tmp_path: Pa
         deep = deep / ("d" * 250)
     long_path = deep / "a.csv"
     assert len(os.fsencode(long_path)) >= 4096
-    with pytest.raises(InputError, match="cannot open: File name too long$"):
+    with pytest.raises(InputError, match=r"cannot open: File name too long$"):
         batch._map_one_checked((long_path,), tmp_path / "out", "a", Config().to_dict(), False)
-    with pytest.raises(InputError, match="a.csv: no such file or directory$"):
+    with pytest.raises(InputError, match=r"a\.csv: no such file or directory$"):
         batch._map_one_checked((tmp_path / "a.csv",), tmp_path / "out", "a",
                                Config().to_dict(), False)
