@@ -33,6 +33,8 @@ __all__ = [
     "check_output_file",
     "clean_stale_entries",
     "clean_stale_siblings",
+    "fsync_path",
+    "make_dir",
 ]
 
 # What _sibling_name adds around the name: ".", ".tmp-", a pid (up to 10 digits), "-", 8 hex.
@@ -53,15 +55,16 @@ def check_path_names(path: Path) -> None:
                               f"{NAME_MAX})", path)
 
 
-def _names_other_file(err: OSError, tmp: Path) -> bool:
-    """Whether ``err`` names a file outside the temporary directory ``tmp`` (one the work
-    read: everything an output directory writes is inside ``tmp``)."""
-    name = err.filename
-    return isinstance(name, str) and not _inside(Path(os.path.abspath(name)),
-                                                 Path(os.path.abspath(tmp)))
+def make_dir(path: Path, what: str) -> None:
+    """Create directory ``path`` (and its parents) if missing; OutputError "cannot create
+    the <what>: <reason>" naming it when the system refuses."""
+    try:
+        Path(path).mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise OutputError(f"cannot create the {what}: {err.strerror or err}", path) from err
 
 
-def _fsync_path(path: Path) -> None:
+def fsync_path(path: Path) -> None:
     """fsync a file or directory by path (directories: makes renames inside them durable)."""
     flags = os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) if path.is_dir() else os.O_RDONLY
     fd = os.open(path, flags)
@@ -69,6 +72,14 @@ def _fsync_path(path: Path) -> None:
         os.fsync(fd)
     finally:
         os.close(fd)
+
+
+def _names_other_file(err: OSError, tmp: Path) -> bool:
+    """Whether ``err`` names a file outside the temporary directory ``tmp`` (one the work
+    read: everything an output directory writes is inside ``tmp``)."""
+    name = err.filename
+    return isinstance(name, str) and not _inside(Path(os.path.abspath(name)),
+                                                 Path(os.path.abspath(tmp)))
 
 
 def _sibling_name(final: Path, tag: str) -> Path:
@@ -330,8 +341,8 @@ class OutputDir:
                 for fname in filenames:
                     p = Path(dirpath) / fname
                     if not p.is_symlink():
-                        _fsync_path(p)
-                _fsync_path(Path(dirpath))
+                        fsync_path(p)
+                fsync_path(Path(dirpath))
         except OSError as err:
             raise OutputError(f"cannot sync output files: {err}", self.final) from err
 
@@ -358,7 +369,7 @@ class OutputDir:
         self.committed = True
         # Some filesystems refuse directory fsync; the rename itself is done.
         with contextlib.suppress(OSError):
-            _fsync_path(final.parent)
+            fsync_path(final.parent)
         if old is not None:
             shutil.rmtree(old, ignore_errors=True)
 
@@ -429,7 +440,7 @@ def atomic_open(path: Path) -> Iterator[BinaryIO]:
         raise
     # Some filesystems refuse directory fsync; the data itself is synced.
     with contextlib.suppress(OSError):
-        _fsync_path(path.parent)
+        fsync_path(path.parent)
 
 
 def atomic_write_bytes(path: Path, data: bytes) -> None:

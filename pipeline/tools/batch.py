@@ -642,12 +642,9 @@ def run_batch(
         also = f" ({unread[0].path}: {unread[0].reason})" if unread else ""
         raise InputError(f"no logs found in {where}{also}")
     if isinstance(out_dir, Path):
-        try:
-            out_dir.mkdir(parents=True, exist_ok=True)
-        except OSError as err:
-            raise OutputError(f"cannot create output directory: {err.strerror or err}",
-                              out_dir) from err
-        from formats.writers.atomic import clean_stale_entries
+        from formats.writers.atomic import clean_stale_entries, make_dir
+
+        make_dir(out_dir, "output directory")
 
         # Staging left by interrupted batches (their processes are dead), whatever log it
         # was for; a concurrent batch's live staging stays.

@@ -67,7 +67,7 @@ def test_batch_names_out_when_its_parent_refuses(denied: Path) -> None:
     out = denied / "maps"
     code, err = _cli("batch", OFFICE / "office.mcap", "-o", out, "--workers", "1")
     assert code == 1
-    assert err.splitlines()[-1] == (f"sonarmap: error: {out}: cannot create output directory:"
+    assert err.splitlines()[-1] == (f"sonarmap: error: {out}: cannot create the output directory:"
                                     " Permission denied")
     assert ".tmp-" not in err
 

@@ -30,7 +30,7 @@ from typing import Any
 
 from formats.errors import OutputError, SonarmapError
 from formats.text_file import read_bounded
-from formats.writers.atomic import clean_stale_entries
+from formats.writers.atomic import clean_stale_entries, fsync_path
 from formats.writers.dir_swap import exchange
 from formats.writers.output_marker import GOLDEN_MARKER, not_replaceable_reason, written_files_in
 
@@ -112,15 +112,6 @@ def _sibling(final: Path, tag: str) -> Path:
     return final.parent / f".{final.name}.{tag}-{os.getpid()}-{secrets.token_hex(4)}"
 
 
-def _fsync(path: Path) -> None:
-    flags = os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) if path.is_dir() else os.O_RDONLY
-    fd = os.open(path, flags)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-
-
 def replace_golden(staged: Path, final: Path) -> None:
     """Put the files of ``staged`` under ``final`` atomically (see the module docstring).
     The caller has checked :func:`golden_refusal`; it is checked again here."""
@@ -133,8 +124,8 @@ def replace_golden(staged: Path, final: Path) -> None:
         tmp.mkdir()
         for src in sorted(staged.iterdir()):
             shutil.copyfile(src, tmp / src.name)
-            _fsync(tmp / src.name)
-        _fsync(tmp)
+            fsync_path(tmp / src.name)
+        fsync_path(tmp)
         if not final.exists():
             os.rename(tmp, final)
         elif exchange(tmp, final):
@@ -149,7 +140,7 @@ def replace_golden(staged: Path, final: Path) -> None:
             shutil.rmtree(tmp, ignore_errors=True)
         raise OutputError(f"cannot write the golden: {err.strerror or err}", final) from err
     with contextlib.suppress(OSError):
-        _fsync(final.parent)
+        fsync_path(final.parent)
 
 
 def recover_goldens(goldens: Path) -> list[Path]:
