@@ -27,7 +27,6 @@ import numpy as np
 import yaml
 
 from formats.errors import FormatError
-from formats.ros.sqlite_salvage import Salvage
 from formats.path_text import path_text_problem, shown
 from formats.ros.inflate import MAX_RATIO, ChunkError, inflate_message
 from formats.ros.mcap_source import McapSource
@@ -39,6 +38,7 @@ from formats.ros.source import (
     messages_lost,
     normalize_msgtype,
 )
+from formats.ros.sqlite_salvage import Salvage
 from formats.storage.location import Location, Url, as_location
 from formats.text_file import read_text
 

@@ -23,7 +23,7 @@ from ros1_bags import (
 from rosbags.highlevel import AnyReader
 
 from formats.contract import LogReader, MountBatch, PoseBatch, RangeBatch
-from formats.errors import ConfigError, FormatError, TopicError
+from formats.errors import ConfigError, TopicError
 from formats.options import InputConfig, MountConfig, SensorsConfig
 from formats.presets import PRESETS
 from formats.ros.reader import RosLogReader
