@@ -486,15 +486,14 @@ def _coerce(tp: Any, value: Any, key: str) -> Any:
     if tp is str:
         if not isinstance(value, str):
             raise ConfigError(f"'{key}' must be a string, got {value!r}")
-        if "\x00" in value:  # no name sonarmap matches or opens can hold one
-            raise ConfigError(f"'{key}' must not contain a NUL byte, got {value!r}")
         return value
     raise ConfigError(f"'{key}': unsupported type {tp}")  # pragma: no cover
 
 
 def _check_finite(obj: Any, where: str) -> None:
     """Every number of the configuration is finite: the range checks below compare with
-    < and >, which inf passes and NaN makes meaningless (no key means inf or NaN)."""
+    < and >, which inf passes and NaN makes meaningless (no key means inf or NaN). No
+    string holds a NUL byte: no name sonarmap opens or matches can hold one."""
     for f in dataclasses.fields(obj):
         v, key = getattr(obj, f.name), _join(where, f.name)
         items = v if isinstance(v, tuple) else (v,)
@@ -504,6 +503,8 @@ def _check_finite(obj: Any, where: str) -> None:
                 _check_finite(item, k)
             elif isinstance(item, float) and not math.isfinite(item):
                 raise ConfigError(f"'{k}' must be a finite number, got {item!r}")
+            elif isinstance(item, str) and "\x00" in item:
+                raise ConfigError(f"'{k}' must not contain a NUL byte, got {item!r}")
 
 
 # --------------------------------------------------------------------------- ranges
