@@ -487,8 +487,8 @@ class Ros1BagSource(FileSource):
                 break
             try:
                 if op == OP_MSGDATA:
-                    cid = _u32(header, "conn")
-                    times.setdefault(cid, []).append(_time(header, "time"))
+                    cid, t = _u32(header, "conn"), _time(header, "time")
+                    times.setdefault(cid, []).append(t)
                     offsets.setdefault(cid, []).append(off)
                 elif op == OP_CONNECTION:
                     rec = _conn_record(header, bytes(mv[off + 8 + hlen : end]))

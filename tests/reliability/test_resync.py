@@ -21,7 +21,8 @@ from cli.app import app
 from formats import open_log
 from formats.ros.mcap_source import McapSource
 from formats.ros.ros1bag import Ros1BagSource
-from fuzz.harness import ROOT, Target, read_with_losses
+from fuzz.harness import ROOT, Target, check_mutation, read_with_losses
+from fuzz.mutators import Mutation
 
 OFFICE = ROOT / "sample_logs" / "office"
 BAG, MCAP = OFFICE / "office.bag", OFFICE / "office.mcap"
@@ -201,3 +202,21 @@ def test_a_damaged_page_of_a_rosbag2_database_loses_its_rows_only(
 
 def _read_target(target: Target, data: bytes, work: Path) -> tuple[int, int]:
     return read_with_losses(target.materialize(work, data))
+
+
+# Mutations the long fuzz (`make fuzz`) found defects with, kept as regressions.
+FOUND_BY_FUZZ = [
+    # a message record whose time field is damaged, in a chunk walked (a KeyError once)
+    ("ros1-real-example-unsorted-chunks.bag",
+     Mutation(kind="flip", offset=4334, bits=(32, 64, 128, 128, 1, 2, 64))),
+    # a corrupt stamp puts a batch out of order beside an intact copy (the merge stalled)
+    ("ros2-db3-beside-a-copy", Mutation(kind="flip", offset=139979, bits=(128, 4, 16, 32, 4))),
+]
+
+
+@pytest.mark.parametrize(("name", "mutation"), FOUND_BY_FUZZ)
+def test_what_the_fuzz_found_reads_or_refuses_with_one_line(
+    targets: dict[str, Target], tmp_path: Path, name: str, mutation: Mutation,
+) -> None:
+    outcome = check_mutation(targets[name], mutation, tmp_path)
+    assert outcome.status in ("ok", "loss", "rejected"), outcome.detail
