@@ -33,7 +33,7 @@ from pipeline.config import MapperConfig
 from pipeline.mapper.attribution import AttributionMapper
 from pipeline.mapper.free_space import cone_table
 from pipeline.mapper.kernels.attribution import empty_grid
-from pipeline.mapper.kernels.specular import trace_readings
+from pipeline.mapper.kernels.specular import silent_candidates, trace_readings
 from pipeline.mapper.reading_features import distance_sigma
 from pipeline.mapper.scan_group import ScanGroup
 from pipeline.mapper.types import F32, F64, I32, B, GridSpec, MapperCounters, MapSnapshot
@@ -97,8 +97,8 @@ class SpecularMapper(AttributionMapper):
         self.cos_table = cos_table(self.table)
         self.arc_c: F32 = empty_grid(grid.shape)
         self.arc_s: F32 = empty_grid(grid.shape)
-        self.surfaces: B = np.zeros(grid.shape, dtype=bool)
-        self.surface_rows: I32 = np.zeros((grid.shape[0], grid.shape[1] + 1), dtype=np.int32)
+        self.occ_index, self.occ_cols = silent_candidates(
+            np.zeros(grid.shape, dtype=bool), empty_grid(grid.shape))
         self.nx: F32 = empty_grid(grid.shape)
         self.ny: F32 = empty_grid(grid.shape)
         self.consistency: F32 = empty_grid(grid.shape)
@@ -120,11 +120,11 @@ class SpecularMapper(AttributionMapper):
 
     def _find_surfaces(self) -> None:
         """The first map's occupied cells, their normal lines and consistency."""
-        self.surfaces = AttributionMapper.occupied(self)
+        surfaces = AttributionMapper.occupied(self)
         radius = max(0, round(self.config.spec_normal_radius_m / self.grid.resolution))
         psi, self.consistency = normal_lines(self.arc_c, self.arc_s, self.arcs, radius)
         self.nx, self.ny = np.cos(psi), np.sin(psi)
-        np.cumsum(self.surfaces, axis=1, out=self.surface_rows[:, 1:])
+        self.occ_index, self.occ_cols = silent_candidates(surfaces, self.consistency)
 
     def _integrate_group(self, group: ScanGroup) -> None:
         if self.pass_index == 0:
@@ -149,8 +149,8 @@ class SpecularMapper(AttributionMapper):
         attribute = self.pass_index != 2
         lost = trace_readings(
             cones, up_down, r_inner, free_r[rows], cat.alpha[rows], half,
-            g.origin_x, g.origin_y, g.resolution, self.surfaces, self.surface_rows,
-            self.nx, self.ny, self.consistency, self.cos_table, self.v_unknown, attribute,
+            g.origin_x, g.origin_y, g.resolution, self.occ_index, self.occ_cols,
+            self.nx, self.ny, self.consistency, self.cos_table, self.v_unknown, attribute, first,
             self.free if first else self.free2, self.arcs if first else self.arcs2,
             cfg.attr_candidate_ratio, cfg.attr_dilution, self.free2, self.arcs2,
             self.hits if first else self.hits2, self.arc_c, self.arc_s,

@@ -44,17 +44,19 @@ def visible(dx: float, dy: float, dist: float, nx: float, ny: float, table: F64)
     return table[k] * (1.0 - f) + table[k + 1] * f
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def trace_readings(
     cones: F64, up_down: B, r_inner: F64, r_free: F64, alpha: F64, half_fov: F64,
-    gx: float, gy: float, res: float, occ: B, occ_rows: I32, nx: F32, ny: F32, cons: F32,
-    table: F64, v_unknown: float, attribute: bool, free_in: F32,
+    gx: float, gy: float, res: float, occ_index: I32, occ_cols: I32, nx: F32, ny: F32,
+    cons: F32, table: F64, v_unknown: float, attribute: bool, bearings: bool, free_in: F32,
     arcs_in: F32, ratio: float, dilution: float, free_out: F32, arcs_out: F32,
     hits: F32, arc_c: F32, arc_s: F32,
 ) -> int:
     """One pass over the readings (module doc); returns, with ``attribute``, the echoes
-    with no candidate cell. ``occ_rows`` is the running count of ``occ`` along each row
-    (one leading zero column), so rows of a span without a surface are skipped."""
+    with no candidate cell (readings with no echo count as such). The surfaces that may be
+    silent (:func:`silent_candidates`) are listed row by row: those of row ``r``, columns
+    ``c0..c1``, are ``occ_cols[occ_index[r, c0]:occ_index[r, c1 + 1]]``. With
+    ``bearings`` (and ``attribute``) the arc cells add their bearings to ``arc_c, arc_s``."""
     height, width = free_out.shape
     reach = reach_cells(cones, res)
     size = max_sector_spans(reach * res, res)
@@ -67,6 +69,10 @@ def trace_readings(
     lost = 0
     for i in range(cones.shape[0]):
         ox, oy, r_out = cones[i, 0], cones[i, 1], cones[i, 2]
+        rf, ri = r_free[i], r_inner[i]
+        if attribute and not ri < r_out:  # no echo: no arc to attribute
+            lost += 1
+            continue
         a, hb = alpha[i], half_fov[i]
         n = edge_sector_spans(ox, oy, cones[i, 3], cones[i, 4], cones[i, 5], cones[i, 6],
                               up_down[i, 0], up_down[i, 1], 0.0, r_out, gx, gy, res, width,
@@ -78,11 +84,8 @@ def trace_readings(
         stopped = False
         for k in range(n):  # the silent surfaces in the cone and their shadows
             r = rows[k]
-            if occ_rows[r, c1s[k] + 1] == occ_rows[r, c0s[k]]:
-                continue
-            for c in range(c0s[k], c1s[k] + 1):
-                if not occ[r, c]:
-                    continue
+            for j in range(occ_index[r, c0s[k]], occ_index[r, c1s[k] + 1]):
+                c = occ_cols[j]
                 dx = gx + (c + 0.5) * res - ox
                 dy = gy + (r + 0.5) * res - oy
                 dist = math.sqrt(dx * dx + dy * dy)
@@ -104,14 +107,10 @@ def trace_readings(
                 for kb in range(k0, k1 + 1):
                     stop[kb] = min(stop[kb], dist)
         m = 0
-        rf, ri = r_free[i], r_inner[i]
-        if attribute:  # only the arc's cells matter: the annulus' spans
-            if not ri < r_out:
-                n = 0
-            elif ri > 0.0:
-                n = edge_sector_spans(ox, oy, cones[i, 3], cones[i, 4], cones[i, 5],
-                                      cones[i, 6], up_down[i, 0], up_down[i, 1], ri, r_out,
-                                      gx, gy, res, width, height, rows, c0s, c1s)
+        if attribute and ri > 0.0:  # only the arc's cells matter: the annulus' spans
+            n = edge_sector_spans(ox, oy, cones[i, 3], cones[i, 4], cones[i, 5], cones[i, 6],
+                                  up_down[i, 0], up_down[i, 1], ri, r_out, gx, gy, res, width,
+                                  height, rows, c0s, c1s)
         for k in range(n):
             r = rows[k]
             for c in range(c0s[k], c1s[k] + 1):
@@ -132,9 +131,10 @@ def trace_readings(
                     if not attribute:
                         arcs_out[r, c] += 1.0
                         continue
-                    inv = 1.0 / max(d2, 1e-24)
-                    arc_c[r, c] += (dx * dx - dy * dy) * inv  # cos 2φ
-                    arc_s[r, c] += 2.0 * dx * dy * inv  # sin 2φ
+                    if bearings:
+                        inv = 1.0 / max(d2, 1e-24)
+                        arc_c[r, c] += (dx * dx - dy * dy) * inv  # cos 2φ
+                        arc_s[r, c] += 2.0 * dx * dy * inv  # sin 2φ
                     if free_in[r, c] <= ratio * arcs_in[r, c]:
                         cand_r[m] = r
                         cand_c[m] = c
@@ -148,3 +148,15 @@ def trace_readings(
         for k in range(m):
             hits[cand_r[k], cand_c[k]] += w
     return lost
+
+
+def silent_candidates(surfaces: B, consistency: F32) -> tuple[I32, I32]:
+    """The surface cells that may be silent to some ray, listed for
+    :func:`trace_readings`: ``(occ_index, occ_cols)``. A cell is silent to a ray when
+    ``q·(1 − visible) > ½``, which needs ``q > ½``: cells with ``q ≤ ½`` never stop a ray."""
+    cand = surfaces & (consistency > 0.5)
+    index = np.zeros((cand.shape[0], cand.shape[1] + 1), dtype=np.int32)
+    np.cumsum(cand, axis=1, out=index[:, 1:])
+    index += np.concatenate(([0], np.cumsum(index[:-1, -1]))).astype(np.int32)[:, None]
+    cols: I32 = np.nonzero(cand)[1].astype(np.int32)
+    return index, cols
