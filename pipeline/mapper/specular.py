@@ -35,6 +35,7 @@ from pipeline.mapper.free_space import cone_table
 from pipeline.mapper.kernels.attribution import empty_grid
 from pipeline.mapper.kernels.specular import silent_candidates, trace_readings
 from pipeline.mapper.reading_features import distance_sigma
+from pipeline.mapper.row_bands import RowBands, balanced_split
 from pipeline.mapper.scan_group import ScanGroup
 from pipeline.mapper.types import F32, F64, I32, B, GridSpec, MapperCounters, MapSnapshot
 from pipeline.stages import reading_quality as rq
@@ -106,6 +107,7 @@ class SpecularMapper(AttributionMapper):
         self.arcs2: F32 = empty_grid(grid.shape)
         self.hits2: F32 = empty_grid(grid.shape)
         self._unattributed2 = 0
+        self._bands = RowBands(config.threads)
 
     def begin_pass(self, index: int) -> None:
         """Start pass ``index`` (module doc) over the same scans."""
@@ -115,6 +117,8 @@ class SpecularMapper(AttributionMapper):
             self._settle_counts()
         if index == 2:
             self._find_surfaces()
+        if index == 3:
+            self._bands.close()
         self.pass_index = index
         self._group_index = 0
 
@@ -147,14 +151,24 @@ class SpecularMapper(AttributionMapper):
         half = np.minimum(0.5 * cat.fov[rows], 0.5 * math.pi - 1e-9)
         first = self.pass_index == 1
         attribute = self.pass_index != 2
-        lost = trace_readings(
-            cones, up_down, r_inner, free_r[rows], cat.alpha[rows], half,
-            g.origin_x, g.origin_y, g.resolution, self.occ_index, self.occ_cols,
-            self.nx, self.ny, self.consistency, self.cos_table, self.v_unknown, attribute, first,
-            self.free if first else self.free2, self.arcs if first else self.arcs2,
-            cfg.attr_candidate_ratio, cfg.attr_dilution, self.free2, self.arcs2,
-            self.hits if first else self.hits2, self.arc_c, self.arc_s,
-        )
+        alpha = cat.alpha[rows]
+
+        def trace(row_lo: int, row_hi: int) -> int:
+            return int(trace_readings(
+                cones, up_down, r_inner, free_r[rows], alpha, half,
+                g.origin_x, g.origin_y, g.resolution, self.occ_index, self.occ_cols,
+                self.nx, self.ny, self.consistency, self.cos_table, self.v_unknown, attribute,
+                first, self.free if first else self.free2, self.arcs if first else self.arcs2,
+                cfg.attr_candidate_ratio, cfg.attr_dilution, self.free2, self.arcs2,
+                self.hits if first else self.hits2, self.arc_c, self.arc_s, row_lo, row_hi,
+            ))
+
+        height = g.shape[0]
+        if attribute:
+            lost = trace(0, height)
+        else:
+            split = balanced_split(cones, alpha, g.origin_y, g.resolution, height)
+            lost = self._bands.run(trace, split, height)
         if first:
             self._unattributed += int(lost)
         elif attribute:

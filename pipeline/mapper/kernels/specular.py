@@ -27,7 +27,12 @@ import numpy as np
 from numba import njit
 
 from pipeline.mapper.kernels.attribution import reach_cells
-from pipeline.mapper.kernels.cone import edge_sector_spans, max_sector_spans
+from pipeline.mapper.kernels.cone import (
+    cone_row_span,
+    cone_rows,
+    edge_sector_spans,
+    max_sector_spans,
+)
 from pipeline.mapper.types import F32, F64, I32, B
 
 MAX_BINS = 2048  # angular bins of one cone's occlusion profile
@@ -50,10 +55,13 @@ def trace_readings(
     gx: float, gy: float, res: float, occ_index: I32, occ_cols: I32, nx: F32, ny: F32,
     cons: F32, table: F64, v_unknown: float, attribute: bool, bearings: bool, free_in: F32,
     arcs_in: F32, ratio: float, dilution: float, free_out: F32, arcs_out: F32,
-    hits: F32, arc_c: F32, arc_s: F32,
+    hits: F32, arc_c: F32, arc_s: F32, row_lo: int, row_hi: int,
 ) -> int:
-    """One pass over the readings (module doc); returns, with ``attribute``, the echoes
-    with no candidate cell (readings with no echo count as such). The surfaces that may be
+    """One pass over the readings (module doc), writing only the grid rows
+    ``row_lo ≤ r < row_hi`` (without ``attribute``: the rows a thread owns, so two threads
+    on two bands add to each cell in reading order, as one would); returns, with
+    ``attribute`` (all rows), the echoes with no candidate cell (readings with no echo
+    count as such). The surfaces that may be
     silent (:func:`silent_candidates`) are listed row by row: those of row ``r``, columns
     ``c0..c1``, are ``occ_cols[occ_index[r, c0]:occ_index[r, c1 + 1]]``. With
     ``bearings`` (and ``attribute``) the arc cells add their bearings to ``arc_c, arc_s``."""
@@ -74,9 +82,21 @@ def trace_readings(
             lost += 1
             continue
         a, hb = alpha[i], half_fov[i]
-        n = edge_sector_spans(ox, oy, cones[i, 3], cones[i, 4], cones[i, 5], cones[i, 6],
-                              up_down[i, 0], up_down[i, 1], 0.0, r_out, gx, gy, res, width,
-                              height, rows, c0s, c1s)
+        s1, c1, s2, c2 = cones[i, 3], cones[i, 4], cones[i, 5], cones[i, 6]
+        # The cone's spans (edge_sector_spans' rows) on the rows this call writes and on
+        # the rows that hold a surface that may be silent.
+        r0, r1 = cone_rows(oy, r_out, s1, s2, up_down[i, 0], up_down[i, 1], gy, res, height)
+        n = 0
+        for row in range(r0, r1 + 1):
+            if (attribute or row < row_lo or row >= row_hi) and \
+                    occ_index[row, width] == occ_index[row, 0]:
+                continue
+            c_lo, c_hi = cone_row_span(ox, oy, r_out, s1, c1, s2, c2, row, gx, gy, res, width)
+            if c_lo <= c_hi:
+                rows[n] = row
+                c0s[n] = c_lo
+                c1s[n] = c_hi
+                n += 1
         ca, sa = math.cos(a), math.sin(a)
         t_edge = math.tan(hb)  # bins uniform in tan(bearing − α) across the cone
         nb = min(MAX_BINS, math.ceil(2.0 * hb * r_out / res) + 1)
@@ -107,12 +127,13 @@ def trace_readings(
                 for kb in range(k0, k1 + 1):
                     stop[kb] = min(stop[kb], dist)
         m = 0
-        if attribute and ri > 0.0:  # only the arc's cells matter: the annulus' spans
-            n = edge_sector_spans(ox, oy, cones[i, 3], cones[i, 4], cones[i, 5], cones[i, 6],
-                                  up_down[i, 0], up_down[i, 1], ri, r_out, gx, gy, res, width,
-                                  height, rows, c0s, c1s)
+        if attribute:  # only the arc's cells matter: the annulus' spans
+            n = edge_sector_spans(ox, oy, s1, c1, s2, c2, up_down[i, 0], up_down[i, 1], ri,
+                                  r_out, gx, gy, res, width, height, rows, c0s, c1s)
         for k in range(n):
             r = rows[k]
+            if r < row_lo or r >= row_hi:
+                continue
             for c in range(c0s[k], c1s[k] + 1):
                 dx = gx + (c + 0.5) * res - ox
                 dy = gy + (r + 0.5) * res - oy
