@@ -37,7 +37,7 @@ from pipeline.mapper.kernels.specular import silent_candidates, trace_readings
 from pipeline.mapper.reading_features import distance_sigma
 from pipeline.mapper.row_bands import RowBands, balanced_split
 from pipeline.mapper.scan_group import ScanGroup
-from pipeline.mapper.types import F32, F64, I32, B, GridSpec, MapperCounters, MapSnapshot
+from pipeline.mapper.types import F32, F64, B, GridSpec, MapperCounters, MapSnapshot
 from pipeline.stages import reading_quality as rq
 
 TABLE_STEP = math.radians(0.25)  # sampling of the visibility table, rad

@@ -49,7 +49,7 @@ def visible(dx: float, dy: float, dist: float, nx: float, ny: float, table: F64)
     return table[k] * (1.0 - f) + table[k + 1] * f
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def trace_readings(
     cones: F64, up_down: B, r_inner: F64, r_free: F64, alpha: F64, half_fov: F64,
     gx: float, gy: float, res: float, occ_index: I32, occ_cols: I32, nx: F32, ny: F32,
@@ -61,10 +61,15 @@ def trace_readings(
     ``row_lo ≤ r < row_hi`` (without ``attribute``: the rows a thread owns, so two threads
     on two bands add to each cell in reading order, as one would); returns, with
     ``attribute`` (all rows), the echoes with no candidate cell (readings with no echo
-    count as such). The surfaces that may be
-    silent (:func:`silent_candidates`) are listed row by row: those of row ``r``, columns
-    ``c0..c1``, are ``occ_cols[occ_index[r, c0]:occ_index[r, c1 + 1]]``. With
-    ``bearings`` (and ``attribute``) the arc cells add their bearings to ``arc_c, arc_s``."""
+    count as such). The surfaces that may be silent (:func:`silent_candidates`) are listed
+    row by row: those of row ``r``, columns ``c0..c1``, are
+    ``occ_cols[occ_index[r, c0]:occ_index[r, c1 + 1]]``. With ``bearings`` (and
+    ``attribute``) the arc cells add their bearings to ``arc_c, arc_s``.
+
+    Speed, not results: a span's distances, incidences and shadow bins are first computed
+    in loops without branches (the compiler vectorises them: the same IEEE operations, so
+    the same bits; divisors are never zero, so numpy's error model only drops the checks),
+    then the cells are visited."""
     height, width = free_out.shape
     reach = reach_cells(cones, res)
     size = max_sector_spans(reach * res, res)
@@ -74,6 +79,11 @@ def trace_readings(
     cand_r = np.empty(reach * reach, dtype=np.int64)
     cand_c = np.empty(reach * reach, dtype=np.int64)
     stop = np.empty(MAX_BINS, dtype=np.float64)
+    dbuf = np.empty(width + 1, dtype=np.float64)
+    kbuf = np.empty(width + 1, dtype=np.int64)
+    xbuf = np.empty(width + 1, dtype=np.float64)
+    tmax = float(table.shape[0] - 1)
+    ntab = table.shape[0] - 2
     lost = 0
     for i in range(cones.shape[0]):
         ox, oy, r_out = cones[i, 0], cones[i, 1], cones[i, 2]
@@ -134,19 +144,41 @@ def trace_readings(
             r = rows[k]
             if r < row_lo or r >= row_hi:
                 continue
-            for c in range(c0s[k], c1s[k] + 1):
-                dx = gx + (c + 0.5) * res - ox
-                dy = gy + (r + 0.5) * res - oy
-                d2 = dx * dx + dy * dy
-                dist = math.sqrt(d2)
+            c0 = c0s[k]
+            w = c1s[k] + 1 - c0
+            dy = gy + (r + 0.5) * res - oy
+            if not attribute:
+                nxr, nyr = nx[r, c0:c0 + w], ny[r, c0:c0 + w]
+                for j in range(w):
+                    dxv = gx + ((c0 + j) + 0.5) * res - ox
+                    dv = math.sqrt(dxv * dxv + dy * dy)
+                    dbuf[j] = dv
+                    xbuf[j] = abs(dxv * nxr[j] + dy * nyr[j]) / max(dv, 1e-12) * tmax
                 if stopped:
-                    along = max(dx * ca + dy * sa, 1e-12)
-                    kb = math.floor(((dy * ca - dx * sa) / along + t_edge) / bin_w)
-                    if dist > stop[min(max(kb, 0), nb - 1)]:
+                    for j in range(w):
+                        dxv = gx + ((c0 + j) + 0.5) * res - ox
+                        along = max(dxv * ca + dy * sa, 1e-12)
+                        kb = math.floor(((dy * ca - dxv * sa) / along + t_edge) / bin_w)
+                        kbuf[j] = min(max(kb, 0), nb - 1)
+            for c in range(c0, c0 + w):
+                dx = gx + (c + 0.5) * res - ox
+                d2 = dx * dx + dy * dy
+                dist = dbuf[c - c0] if not attribute else math.sqrt(d2)
+                if stopped:
+                    if attribute:
+                        along = max(dx * ca + dy * sa, 1e-12)
+                        kb = math.floor(((dy * ca - dx * sa) / along + t_edge) / bin_w)
+                        kb = min(max(kb, 0), nb - 1)
+                    else:
+                        kb = kbuf[c - c0]
+                    if dist > stop[kb]:
                         continue
                 if dist < rf and not attribute:
                     q = cons[r, c]
-                    free_out[r, c] += (q * visible(dx, dy, dist, nx[r, c], ny[r, c], table)
+                    x = xbuf[c - c0]
+                    kt = min(int(x), ntab)
+                    f = x - kt
+                    free_out[r, c] += (q * (table[kt] * (1.0 - f) + table[kt + 1] * f)
                                        + (1.0 - q) * v_unknown)
                 if dist >= ri:
                     if not attribute:
