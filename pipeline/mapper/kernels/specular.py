@@ -49,6 +49,64 @@ def visible(dx: float, dy: float, dist: float, nx: float, ny: float, table: F64)
     return table[k] * (1.0 - f) + table[k + 1] * f
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _shadows(
+    ox: float, oy: float, r_out: float, a: float, hb: float, s1: float, c1: float,
+    s2: float, c2: float, up: bool, down: bool, gx: float, gy: float, res: float, width: int,
+    height: int, occ_index: I32, occ_cols: I32, nx: F32, ny: F32, cons: F32, table: F64,
+    own_lo: int, own_hi: int, rows: np.ndarray, c0s: np.ndarray, c1s: np.ndarray,
+    stop: F64,
+) -> tuple[int, bool, int, float, float, float, float]:
+    """One cone (out to ``r_out``, axis ``a``, half-width ``hb``): its spans on the rows
+    ``own_lo ≤ r < own_hi`` and on the rows holding a surface that may be silent (into
+    ``rows, c0s, c1s``), and the shadows of the silent ones: ``stop[b]`` = the distance
+    where the rays of angular bin ``b`` stop. Returns ``(spans, stopped, bins, bin width,
+    tan hb, cos a, sin a)``; ``stopped`` is False when no ray stops (``stop`` untouched)."""
+    # edge_sector_spans' spans, on these rows only
+    r0, r1 = cone_rows(oy, r_out, s1, s2, up, down, gy, res, height)
+    n = 0
+    for row in range(r0, r1 + 1):
+        if (row < own_lo or row >= own_hi) and \
+                occ_index[row, width] == occ_index[row, 0]:
+            continue
+        c_lo, c_hi = cone_row_span(ox, oy, r_out, s1, c1, s2, c2, row, gx, gy, res, width)
+        if c_lo <= c_hi:
+            rows[n] = row
+            c0s[n] = c_lo
+            c1s[n] = c_hi
+            n += 1
+    ca, sa = math.cos(a), math.sin(a)
+    t_edge = math.tan(hb)  # bins uniform in tan(bearing − α) across the cone
+    nb = min(MAX_BINS, math.ceil(2.0 * hb * r_out / res) + 1)
+    bin_w = 2.0 * t_edge / nb
+    stopped = False
+    for k in range(n):  # the silent surfaces in the cone and their shadows
+        r = rows[k]
+        for j in range(occ_index[r, c0s[k]], occ_index[r, c1s[k] + 1]):
+            c = occ_cols[j]
+            dx = gx + (c + 0.5) * res - ox
+            dy = gy + (r + 0.5) * res - oy
+            dist = math.sqrt(dx * dx + dy * dy)
+            # Silent with probability q·(1 − visible): a ray stops only at a surface
+            # whose orientation is known and that it meets obliquely.
+            if cons[r, c] * (1.0 - visible(dx, dy, dist, nx[r, c], ny[r, c], table)) <= 0.5:
+                continue
+            along = dx * ca + dy * sa
+            if along <= 0.0:
+                continue
+            if not stopped:
+                stop[:nb] = np.inf
+                stopped = True
+            t = (dy * ca - dx * sa) / along
+            rel = t + t_edge
+            hw = 0.5 * res / max(dist, res) * (1.0 + t * t)
+            k0 = max(0, math.floor((rel - hw) / bin_w))
+            k1 = min(nb - 1, math.floor((rel + hw) / bin_w))
+            for kb in range(k0, k1 + 1):
+                stop[kb] = min(stop[kb], dist)
+    return n, stopped, nb, bin_w, t_edge, ca, sa
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def trace_readings(
     cones: F64, up_down: B, r_inner: F64, r_free: F64, alpha: F64, half_fov: F64,
@@ -93,49 +151,11 @@ def trace_readings(
             continue
         a, hb = alpha[i], half_fov[i]
         s1, c1, s2, c2 = cones[i, 3], cones[i, 4], cones[i, 5], cones[i, 6]
-        # The cone's spans (edge_sector_spans' rows) on the rows this call writes and on
-        # the rows that hold a surface that may be silent.
-        r0, r1 = cone_rows(oy, r_out, s1, s2, up_down[i, 0], up_down[i, 1], gy, res, height)
-        n = 0
-        for row in range(r0, r1 + 1):
-            if (attribute or row < row_lo or row >= row_hi) and \
-                    occ_index[row, width] == occ_index[row, 0]:
-                continue
-            c_lo, c_hi = cone_row_span(ox, oy, r_out, s1, c1, s2, c2, row, gx, gy, res, width)
-            if c_lo <= c_hi:
-                rows[n] = row
-                c0s[n] = c_lo
-                c1s[n] = c_hi
-                n += 1
-        ca, sa = math.cos(a), math.sin(a)
-        t_edge = math.tan(hb)  # bins uniform in tan(bearing − α) across the cone
-        nb = min(MAX_BINS, math.ceil(2.0 * hb * r_out / res) + 1)
-        bin_w = 2.0 * t_edge / nb
-        stopped = False
-        for k in range(n):  # the silent surfaces in the cone and their shadows
-            r = rows[k]
-            for j in range(occ_index[r, c0s[k]], occ_index[r, c1s[k] + 1]):
-                c = occ_cols[j]
-                dx = gx + (c + 0.5) * res - ox
-                dy = gy + (r + 0.5) * res - oy
-                dist = math.sqrt(dx * dx + dy * dy)
-                # Silent with probability q·(1 − visible): a ray stops only at a surface
-                # whose orientation is known and that it meets obliquely.
-                if cons[r, c] * (1.0 - visible(dx, dy, dist, nx[r, c], ny[r, c], table)) <= 0.5:
-                    continue
-                along = dx * ca + dy * sa
-                if along <= 0.0:
-                    continue
-                if not stopped:
-                    stop[:nb] = np.inf
-                    stopped = True
-                t = (dy * ca - dx * sa) / along
-                rel = t + t_edge
-                hw = 0.5 * res / max(dist, res) * (1.0 + t * t)
-                k0 = max(0, math.floor((rel - hw) / bin_w))
-                k1 = min(nb - 1, math.floor((rel + hw) / bin_w))
-                for kb in range(k0, k1 + 1):
-                    stop[kb] = min(stop[kb], dist)
+        own_lo, own_hi = (0, 0) if attribute else (row_lo, row_hi)
+        n, stopped, nb, bin_w, t_edge, ca, sa = _shadows(
+            ox, oy, r_out, a, hb, s1, c1, s2, c2, up_down[i, 0], up_down[i, 1], gx, gy, res,
+            width, height, occ_index, occ_cols, nx, ny, cons, table, own_lo, own_hi, rows,
+            c0s, c1s, stop)
         m = 0
         if attribute:  # only the arc's cells matter: the annulus' spans
             n = edge_sector_spans(ox, oy, s1, c1, s2, c2, up_down[i, 0], up_down[i, 1], ri,
@@ -213,3 +233,4 @@ def silent_candidates(surfaces: B, consistency: F32) -> tuple[I32, I32]:
     index += np.concatenate(([0], np.cumsum(index[:-1, -1]))).astype(np.int32)[:, None]
     cols: I32 = np.nonzero(cand)[1].astype(np.int32)
     return index, cols
+
