@@ -33,7 +33,12 @@ from pipeline.config import MapperConfig
 from pipeline.mapper.attribution import AttributionMapper
 from pipeline.mapper.free_space import cone_table
 from pipeline.mapper.kernels.attribution import empty_grid
-from pipeline.mapper.kernels.specular import silent_candidates, trace_readings
+from pipeline.mapper.kernels.specular import (
+    shadow_offsets,
+    shadow_profiles,
+    silent_candidates,
+    trace_readings,
+)
 from pipeline.mapper.reading_features import distance_sigma
 from pipeline.mapper.row_bands import RowBands, balanced_split
 from pipeline.mapper.scan_group import ScanGroup
@@ -117,8 +122,6 @@ class SpecularMapper(AttributionMapper):
             self._settle_counts()
         if index == 2:
             self._find_surfaces()
-        if index == 3:
-            self._bands.close()
         self.pass_index = index
         self._group_index = 0
 
@@ -152,18 +155,32 @@ class SpecularMapper(AttributionMapper):
         first = self.pass_index == 1
         attribute = self.pass_index != 2
         alpha = cat.alpha[rows]
+        height = g.shape[0]
+        # The silent surfaces' shadows, cone by cone (none before the first map's surfaces).
+        offsets = shadow_offsets(cones, half, g.resolution)
+        stops: F64 = np.empty(int(offsets[-1]))
+        stopped: B = np.zeros(len(rows), dtype=bool)
+        if self.occ_cols.size:
+            def shadows(lo: int, hi: int) -> int:
+                return int(shadow_profiles(
+                    cones, up_down, r_inner, alpha, half, g.origin_x, g.origin_y,
+                    g.resolution, self.occ_index, self.occ_cols, self.nx, self.ny,
+                    self.consistency, self.cos_table, attribute, lo, hi, offsets, stops,
+                    stopped,
+                ))
+
+            self._bands.run(shadows, len(rows) // 2, len(rows))
 
         def trace(row_lo: int, row_hi: int) -> int:
             return int(trace_readings(
                 cones, up_down, r_inner, free_r[rows], alpha, half,
-                g.origin_x, g.origin_y, g.resolution, self.occ_index, self.occ_cols,
+                g.origin_x, g.origin_y, g.resolution, offsets, stops, stopped,
                 self.nx, self.ny, self.consistency, self.cos_table, self.v_unknown, attribute,
                 first, self.free if first else self.free2, self.arcs if first else self.arcs2,
                 cfg.attr_candidate_ratio, cfg.attr_dilution, self.free2, self.arcs2,
                 self.hits if first else self.hits2, self.arc_c, self.arc_s, row_lo, row_hi,
             ))
 
-        height = g.shape[0]
         if attribute:
             lost = trace(0, height)
         else:
@@ -189,6 +206,7 @@ class SpecularMapper(AttributionMapper):
 
     def snapshot(self) -> MapSnapshot:
         """§9's snapshot with the surface-aware free counts."""
+        self._bands.close()  # the passes are done
         first, self.free = self.free, self.free2
         try:
             return super().snapshot()

@@ -33,7 +33,7 @@ from pipeline.mapper.kernels.cone import (
     edge_sector_spans,
     max_sector_spans,
 )
-from pipeline.mapper.types import F32, F64, I32, B
+from pipeline.mapper.types import F32, F64, I32, I64, B
 
 MAX_BINS = 2048  # angular bins of one cone's occlusion profile
 
@@ -49,80 +49,108 @@ def visible(dx: float, dy: float, dist: float, nx: float, ny: float, table: F64)
     return table[k] * (1.0 - f) + table[k + 1] * f
 
 
-@njit(cache=True, inline="always", error_model="numpy")
-def _shadows(
-    ox: float, oy: float, r_out: float, a: float, hb: float, s1: float, c1: float,
-    s2: float, c2: float, up: bool, down: bool, gx: float, gy: float, res: float, width: int,
-    height: int, occ_index: I32, occ_cols: I32, nx: F32, ny: F32, cons: F32, table: F64,
-    own_lo: int, own_hi: int, rows: np.ndarray, c0s: np.ndarray, c1s: np.ndarray,
-    stop: F64,
-) -> tuple[int, bool, int, float, float, float, float]:
-    """One cone (out to ``r_out``, axis ``a``, half-width ``hb``): its spans on the rows
-    ``own_lo ≤ r < own_hi`` and on the rows holding a surface that may be silent (into
-    ``rows, c0s, c1s``), and the shadows of the silent ones: ``stop[b]`` = the distance
-    where the rays of angular bin ``b`` stop. Returns ``(spans, stopped, bins, bin width,
-    tan hb, cos a, sin a)``; ``stopped`` is False when no ray stops (``stop`` untouched)."""
-    # edge_sector_spans' spans, on these rows only
-    r0, r1 = cone_rows(oy, r_out, s1, s2, up, down, gy, res, height)
-    n = 0
-    for row in range(r0, r1 + 1):
-        if (row < own_lo or row >= own_hi) and \
-                occ_index[row, width] == occ_index[row, 0]:
+@njit(cache=True, inline="always")
+def shadow_bins(hb: float, r_out: float, res: float) -> int:
+    """Angular bins of a cone's shadow profile: about one per cell across its far edge."""
+    return min(MAX_BINS, math.ceil(2.0 * hb * r_out / res) + 1)
+
+
+@njit(cache=True, nogil=True)
+def shadow_offsets(cones: F64, half_fov: F64, res: float) -> I64:
+    """Where each reading's shadow profile starts in :func:`shadow_profiles`' ``stops``
+    (and, last, their total length)."""
+    out = np.zeros(cones.shape[0] + 1, dtype=np.int64)
+    for i in range(cones.shape[0]):
+        out[i + 1] = out[i] + shadow_bins(half_fov[i], cones[i, 2], res)
+    return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def shadow_profiles(
+    cones: F64, up_down: B, r_inner: F64, alpha: F64, half_fov: F64, gx: float, gy: float,
+    res: float, occ_index: I32, occ_cols: I32, nx: F32, ny: F32, cons: F32, table: F64,
+    attribute: bool, lo: int, hi: int, offsets: I64, stops: F64, stopped: B,
+) -> int:
+    """The shadows of the silent surfaces in the cones of readings ``lo:hi``: ``stopped[i]``
+    whether a ray of reading ``i`` stops, and ``stops[offsets[i] + b]`` the distance where
+    the rays of its angular bin ``b`` stop (bins uniform in the tangent of the bearing off
+    the axis). With ``attribute`` the readings with no echo are left out (no arc). Writes
+    only these readings' entries, so calls on disjoint readings may run side by side;
+    returns how many readings have a shadow."""
+    height, width = cons.shape
+    reach = reach_cells(cones, res)
+    size = max_sector_spans(reach * res, res)
+    rows = np.empty(size, dtype=np.int64)
+    c0s = np.empty(size, dtype=np.int64)
+    c1s = np.empty(size, dtype=np.int64)
+    count = 0
+    for i in range(lo, hi):
+        ox, oy, r_out = cones[i, 0], cones[i, 1], cones[i, 2]
+        stopped[i] = False
+        if attribute and not r_inner[i] < r_out:
             continue
-        c_lo, c_hi = cone_row_span(ox, oy, r_out, s1, c1, s2, c2, row, gx, gy, res, width)
-        if c_lo <= c_hi:
-            rows[n] = row
-            c0s[n] = c_lo
-            c1s[n] = c_hi
-            n += 1
-    ca, sa = math.cos(a), math.sin(a)
-    t_edge = math.tan(hb)  # bins uniform in tan(bearing − α) across the cone
-    nb = min(MAX_BINS, math.ceil(2.0 * hb * r_out / res) + 1)
-    bin_w = 2.0 * t_edge / nb
-    stopped = False
-    for k in range(n):  # the silent surfaces in the cone and their shadows
-        r = rows[k]
-        for j in range(occ_index[r, c0s[k]], occ_index[r, c1s[k] + 1]):
-            c = occ_cols[j]
-            dx = gx + (c + 0.5) * res - ox
-            dy = gy + (r + 0.5) * res - oy
-            dist = math.sqrt(dx * dx + dy * dy)
-            # Silent with probability q·(1 − visible): a ray stops only at a surface
-            # whose orientation is known and that it meets obliquely.
-            if cons[r, c] * (1.0 - visible(dx, dy, dist, nx[r, c], ny[r, c], table)) <= 0.5:
+        a, hb = alpha[i], half_fov[i]
+        s1, c1, s2, c2 = cones[i, 3], cones[i, 4], cones[i, 5], cones[i, 6]
+        # edge_sector_spans' spans, on the rows that hold a surface that may be silent
+        r0, r1 = cone_rows(oy, r_out, s1, s2, up_down[i, 0], up_down[i, 1], gy, res, height)
+        n = 0
+        for row in range(r0, r1 + 1):
+            if occ_index[row, width] == occ_index[row, 0]:
                 continue
-            along = dx * ca + dy * sa
-            if along <= 0.0:
-                continue
-            if not stopped:
-                stop[:nb] = np.inf
-                stopped = True
-            t = (dy * ca - dx * sa) / along
-            rel = t + t_edge
-            hw = 0.5 * res / max(dist, res) * (1.0 + t * t)
-            k0 = max(0, math.floor((rel - hw) / bin_w))
-            k1 = min(nb - 1, math.floor((rel + hw) / bin_w))
-            for kb in range(k0, k1 + 1):
-                stop[kb] = min(stop[kb], dist)
-    return n, stopped, nb, bin_w, t_edge, ca, sa
+            c_lo, c_hi = cone_row_span(ox, oy, r_out, s1, c1, s2, c2, row, gx, gy, res, width)
+            if c_lo <= c_hi:
+                rows[n] = row
+                c0s[n] = c_lo
+                c1s[n] = c_hi
+                n += 1
+        ca, sa = math.cos(a), math.sin(a)
+        t_edge = math.tan(hb)
+        nb = offsets[i + 1] - offsets[i]
+        bin_w = 2.0 * t_edge / nb
+        stop = stops[offsets[i]:offsets[i + 1]]
+        for k in range(n):
+            r = rows[k]
+            for j in range(occ_index[r, c0s[k]], occ_index[r, c1s[k] + 1]):
+                c = occ_cols[j]
+                dx = gx + (c + 0.5) * res - ox
+                dy = gy + (r + 0.5) * res - oy
+                dist = math.sqrt(dx * dx + dy * dy)
+                # Silent with probability q·(1 − visible): a ray stops only at a surface
+                # whose orientation is known and that it meets obliquely.
+                if cons[r, c] * (1.0 - visible(dx, dy, dist, nx[r, c], ny[r, c], table)) <= 0.5:
+                    continue
+                along = dx * ca + dy * sa
+                if along <= 0.0:
+                    continue
+                if not stopped[i]:
+                    stop[:] = np.inf
+                    stopped[i] = True
+                    count += 1
+                t = (dy * ca - dx * sa) / along
+                rel = t + t_edge
+                hw = 0.5 * res / max(dist, res) * (1.0 + t * t)
+                k0 = max(0, math.floor((rel - hw) / bin_w))
+                k1 = min(nb - 1, math.floor((rel + hw) / bin_w))
+                for kb in range(k0, k1 + 1):
+                    stop[kb] = min(stop[kb], dist)
+    return count
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def trace_readings(
     cones: F64, up_down: B, r_inner: F64, r_free: F64, alpha: F64, half_fov: F64,
-    gx: float, gy: float, res: float, occ_index: I32, occ_cols: I32, nx: F32, ny: F32,
-    cons: F32, table: F64, v_unknown: float, attribute: bool, bearings: bool, free_in: F32,
-    arcs_in: F32, ratio: float, dilution: float, free_out: F32, arcs_out: F32,
-    hits: F32, arc_c: F32, arc_s: F32, row_lo: int, row_hi: int,
+    gx: float, gy: float, res: float, offsets: I64, stops: F64, stopped_in: B, nx: F32,
+    ny: F32, cons: F32, table: F64, v_unknown: float, attribute: bool, bearings: bool,
+    free_in: F32, arcs_in: F32, ratio: float, dilution: float, free_out: F32,
+    arcs_out: F32, hits: F32, arc_c: F32, arc_s: F32, row_lo: int, row_hi: int,
 ) -> int:
     """One pass over the readings (module doc), writing only the grid rows
     ``row_lo ≤ r < row_hi`` (without ``attribute``: the rows a thread owns, so two threads
     on two bands add to each cell in reading order, as one would); returns, with
     ``attribute`` (all rows), the echoes with no candidate cell (readings with no echo
-    count as such). The surfaces that may be silent (:func:`silent_candidates`) are listed
-    row by row: those of row ``r``, columns ``c0..c1``, are
-    ``occ_cols[occ_index[r, c0]:occ_index[r, c1 + 1]]``. With ``bearings`` (and
-    ``attribute``) the arc cells add their bearings to ``arc_c, arc_s``.
+    count as such). The readings' shadows are :func:`shadow_profiles`' (``offsets, stops,
+    stopped_in``). With ``bearings`` (and ``attribute``) the arc cells add their bearings
+    to ``arc_c, arc_s``.
 
     Speed, not results: a span's distances, incidences and shadow bins are first computed
     in loops without branches (the compiler vectorises them: the same IEEE operations, so
@@ -136,7 +164,6 @@ def trace_readings(
     c1s = np.empty(size, dtype=np.int64)
     cand_r = np.empty(reach * reach, dtype=np.int64)
     cand_c = np.empty(reach * reach, dtype=np.int64)
-    stop = np.empty(MAX_BINS, dtype=np.float64)
     dbuf = np.empty(width + 1, dtype=np.float64)
     kbuf = np.empty(width + 1, dtype=np.int64)
     xbuf = np.empty(width + 1, dtype=np.float64)
@@ -151,15 +178,28 @@ def trace_readings(
             continue
         a, hb = alpha[i], half_fov[i]
         s1, c1, s2, c2 = cones[i, 3], cones[i, 4], cones[i, 5], cones[i, 6]
-        own_lo, own_hi = (0, 0) if attribute else (row_lo, row_hi)
-        n, stopped, nb, bin_w, t_edge, ca, sa = _shadows(
-            ox, oy, r_out, a, hb, s1, c1, s2, c2, up_down[i, 0], up_down[i, 1], gx, gy, res,
-            width, height, occ_index, occ_cols, nx, ny, cons, table, own_lo, own_hi, rows,
-            c0s, c1s, stop)
+        stopped = stopped_in[i]
+        stop = stops[offsets[i]:offsets[i + 1]]
+        nb = offsets[i + 1] - offsets[i]
+        ca, sa = math.cos(a), math.sin(a)
+        t_edge = math.tan(hb)  # bins uniform in tan(bearing − α) across the cone
+        bin_w = 2.0 * t_edge / nb
         m = 0
         if attribute:  # only the arc's cells matter: the annulus' spans
             n = edge_sector_spans(ox, oy, s1, c1, s2, c2, up_down[i, 0], up_down[i, 1], ri,
                                   r_out, gx, gy, res, width, height, rows, c0s, c1s)
+        else:  # edge_sector_spans' spans, on this call's rows
+            r0, r1 = cone_rows(oy, r_out, s1, s2, up_down[i, 0], up_down[i, 1], gy, res,
+                               height)
+            n = 0
+            for row in range(max(r0, row_lo), min(r1 + 1, row_hi)):
+                c_lo, c_hi = cone_row_span(ox, oy, r_out, s1, c1, s2, c2, row, gx, gy, res,
+                                           width)
+                if c_lo <= c_hi:
+                    rows[n] = row
+                    c0s[n] = c_lo
+                    c1s[n] = c_hi
+                    n += 1
         for k in range(n):
             r = rows[k]
             if r < row_lo or r >= row_hi:
