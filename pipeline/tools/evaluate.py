@@ -14,8 +14,8 @@ beside every simulated log), and scores the run's map on the truth grid:
   map still count against precision (``run_occupied_outside`` counts them). All cell
   counts are in truth-grid cells.
 * **Walls, matched one to one** (:mod:`pipeline.tools.wall_matching`, the Berkeley
-  boundary benchmark's rule). The run's occupied cells are thinned to one-cell lines; the
-  truth's walls are the surfaces of its occupied cells, thinned. A run wall cell and a
+  boundary benchmark's rule). Both maps' occupied cells, less those inside true solids
+  (unobservable), are thinned to one-cell lines: the walls. A run wall cell and a
   true wall cell correspond when their centres are within ``tolerance_m``; a maximum
   one-to-one matching pairs them. Precision: of the run's wall cells, the fraction
   matched. Recall: of the true wall cells *in scope*, the fraction matched. In scope means
@@ -58,7 +58,7 @@ from formats.tables import text_table
 from formats.writers.trajectory_csv import read_trajectory
 from pipeline.se2 import inverse, transform_points
 from pipeline.stages.metrics_schema import Metrics, finite, read_metrics
-from pipeline.tools.wall_matching import match, surface, thin
+from pipeline.tools.wall_matching import interior, match, thin
 
 __all__ = [
     "RUN_FILES",
@@ -455,9 +455,10 @@ def evaluate_maps(
     res = truth_grid.resolution
     t_occ = truth_classes == OCCUPIED
     t_known = truth_classes != UNKNOWN
-    # The walls scored: the run's occupied cells and the truth's surfaces, as one-cell lines.
-    r_wall = thin(run == OCCUPIED)
-    t_wall = thin(surface(t_occ))
+    # The walls scored: both maps' occupied cells outside true solids, as one-cell lines.
+    inside = interior(t_occ)
+    r_wall = thin((run == OCCUPIED) & ~inside)
+    t_wall = thin(t_occ & ~inside)
     outside = int((outside_mask & r_wall).sum())
     if outside:
         notes.append(f"{outside} run wall cell(s) lie outside the truth map (counted in "

@@ -7,13 +7,15 @@ its ``correspondPixels``), on occupancy grids:
 * **Thinning** (:func:`thin`). A wall drawn k cells thick becomes its one-cell centre
   line: Guo & Hall's parallel thinning (1989, "Parallel thinning with two-subiteration
   algorithms", CACM 32(3), algorithm A1; MATLAB's ``bwmorph(..., 'thin', Inf)``, the
-  benchmark's own thinning). It keeps connectivity, end points and holes, so lines stay
-  as long as they were and a ring stays a ring; it is idempotent.
-* **Surfaces** (:func:`surface`). A ground truth is a model of solid things (a simulated
-  trunk is a filled disc); what a range sensor maps is their surface: the occupied cells
-  with a neighbour (of 8) that is not occupied. Thinning a solid would shrink it to its medial
-  axis, so the truth is thinned after taking its surface (a wall up to two cells thick
-  is all surface; a disc becomes its rim).
+  benchmark's own thinning). It keeps connectivity, end points and holes: a one-cell line
+  stays as it is, a k-cell-thick bar keeps its length less about k/2 cells at each end, a
+  ring stays a ring; it is idempotent.
+* **Inside solids** (:func:`interior`). A ground truth models solid things (a simulated
+  trunk is a filled disc); a range sensor sees only their surfaces. A truth cell whose 8
+  neighbours are all true walls is inside a solid: no sensor observes it, so it is taken
+  out of the truth *and* of the map before thinning. A solid then becomes its rim in both,
+  whether the map drew it filled or as an outline; a wall up to two cells thick has no
+  inside and is untouched.
 * **Matching** (:func:`match`). A map cell and a truth cell may correspond when their
   centres are within the tolerance; each cell corresponds to at most one other. The
   correspondence is a maximum bipartite matching (Hopcroft-Karp,
@@ -23,7 +25,8 @@ its ``correspondPixels``), on occupancy grids:
   cell order.
 
 Scored this way, how thick a wall is drawn does not change its score (the map is thinned
-first), and surplus parallel lines cost precision (they find no partner).
+first), and surplus parallel lines cost precision (they find no partner); the truth
+scored as a map scores 1.
 """
 
 from __future__ import annotations
@@ -35,7 +38,7 @@ import numpy.typing as npt
 
 from formats.arrays import B
 
-__all__ = ["match", "surface", "thin"]
+__all__ = ["interior", "match", "thin"]
 
 # Neighbours x1..x8 of a cell, counter-clockwise from +column: (row offset, column offset).
 _RING = ((0, 1), (1, 1), (1, 0), (1, -1), (0, -1), (-1, -1), (-1, 0), (-1, 1))
@@ -91,10 +94,10 @@ def thin(mask: B) -> B:
     return out
 
 
-def surface(mask: B) -> B:
-    """The cells of ``mask`` with one of their 8 neighbours outside it (outside the grid
-    counts): all of a wall up to two cells thick, crossings included; a disc's rim."""
-    return np.asarray(mask & (_codes(mask) != 255), dtype=bool)
+def interior(mask: B) -> B:
+    """The cells of ``mask`` whose 8 neighbours are all in it (outside the grid is not):
+    the inside of a solid; none in a wall up to two cells thick."""
+    return np.asarray(mask & (_codes(mask) == 255), dtype=bool)
 
 
 def _offsets(tolerance_m: float, resolution: float) -> list[tuple[int, int]]:

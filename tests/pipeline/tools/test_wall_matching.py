@@ -1,10 +1,10 @@
-"""wall_matching: Guo-Hall thinning, surfaces of solids, one-to-one cell matching."""
+"""wall_matching: Guo-Hall thinning, insides of solids, one-to-one cell matching."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from pipeline.tools.wall_matching import match, surface, thin
+from pipeline.tools.wall_matching import interior, match, thin
 
 
 def _bar(rows: slice, cols: slice, shape: tuple[int, int] = (9, 16)) -> np.ndarray:
@@ -41,20 +41,20 @@ def test_thinning_keeps_lines_rings_and_isolated_cells_and_is_idempotent() -> No
     np.testing.assert_array_equal(thin(out), out)
 
 
-def test_a_solid_disc_has_its_rim_as_surface() -> None:
+def test_a_solid_disc_less_its_inside_thins_to_its_rim() -> None:
     yy, xx = np.mgrid[:15, :15]
     disc = (yy - 7) ** 2 + (xx - 7) ** 2 <= 16
-    rim = surface(disc)
-    assert rim[7, 3] and rim[3, 7] and not rim[7, 7]
-    # every rim cell has a neighbour outside the disc; interior cells none
-    inner = disc & ~rim
-    assert inner.sum() == disc.sum() - rim.sum() and inner[6:9, 6:9].all()
-    walls = thin(rim)
+    inside = interior(disc)
+    # inside: every cell whose 8 neighbours are all in the disc (a 3×3 core among them)
+    assert inside[6:9, 6:9].all() and not inside[7, 3] and not inside[3, 7]
+    assert not interior(_bar(slice(2, 4), slice(1, 15))).any()  # a 2-cell wall has none
+    walls = thin(disc & ~inside)
     # a closed ring round the disc (circumference 2π·4 ≈ 25 cell sizes; diagonal steps
-    # are √2 long), not its centre
+    # are √2 long), not its centre, which thinning the filled disc would give
     from scipy.ndimage import label
 
     assert label(~walls)[1] == 2 and not walls[7, 7] and 16 <= walls.sum() <= 25
+    assert thin(disc).sum() <= 3
 
 
 def test_matching_is_one_to_one_and_maximum() -> None:

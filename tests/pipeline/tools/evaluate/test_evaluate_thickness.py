@@ -68,3 +68,17 @@ def test_a_two_cell_thick_truth_counts_once() -> None:
     v = _score(run, truth)
     assert v["truth_occupied_in_scope"] == 49  # thinned: one line (one end cell shorter)
     assert v["recall"] == 1.0 and v["precision"] == 49 / 50
+
+
+def test_a_solid_scores_by_its_rim_whether_drawn_filled_or_as_an_outline() -> None:
+    truth = np.full(GRID.shape, FREE, dtype=np.int8)
+    yy, xx = np.mgrid[:30, :60]
+    trunk = (yy - 15) ** 2 + (xx - 30) ** 2 <= 16  # a filled disc, radius 0.20 m
+    truth[trunk] = OCCUPIED
+    filled = _score(truth, truth)
+    assert (filled["precision"], filled["recall"]) == (1.0, 1.0)
+    outline = np.full(GRID.shape, FREE, dtype=np.int8)
+    outline[trunk & binary_dilation(~trunk, structure=np.ones((3, 3), bool))] = OCCUPIED
+    v = _score(outline, truth)  # the rim only, as a sonar sees it
+    assert v["f1"] >= 0.95
+    assert v["truth_occupied_in_scope"] == filled["truth_occupied_in_scope"]
