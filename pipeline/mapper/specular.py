@@ -19,7 +19,10 @@ Four passes over the log's scans, in the same order:
    out to ``r_max`` the same way.
 3. §9's attribution with these counts and the same stops; the map is §9's linear test.
 
-Memory: §9's grids and eight more float32 / bool grids; nothing grows with the log.
+With ``threads = 2`` pass 2 runs on two threads by row band and the stops of passes 2-3
+on two halves of each group's readings (:mod:`~pipeline.mapper.row_bands`): the same bytes.
+Memory: §9's grids and seven more grids, the list of surfaces and per-group buffers;
+nothing grows with the log (docs/PERFORMANCE.md).
 """
 
 from __future__ import annotations
