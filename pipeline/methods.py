@@ -11,6 +11,7 @@ class Method(StrEnum):
     ``metrics.json`` (``run.method``) use."""
 
     SPECULAR = "specular"  # echo attribution with specular surfaces, §10 (the default)
+    FORWARD = "forward"  # a forward sensor model fitted by EM, §11
     ATTRIBUTION = "attribution"  # echo attribution, ALGORITHM.md §9
     ANDERSONE = "andersone"  # the paper's method as published, §1-5
     CLASSIC = "classic"  # log-odds occupancy grid with an inverse sensor model, §8

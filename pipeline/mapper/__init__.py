@@ -21,13 +21,14 @@ from pipeline.config import MapperConfig
 from pipeline.mapper.andersone import AndersoneMapper
 from pipeline.mapper.attribution import AttributionMapper
 from pipeline.mapper.classic import ClassicMapper
+from pipeline.mapper.forward import ForwardMapper
 from pipeline.mapper.protocol import Mapper
 from pipeline.mapper.specular import SpecularMapper
 from pipeline.mapper.types import GridSpec
 from pipeline.methods import Method
 
 __all__ = [
-    "AndersoneMapper", "AttributionMapper", "ClassicMapper", "Mapper", "SpecularMapper",
+    "AndersoneMapper", "AttributionMapper", "ClassicMapper", "ForwardMapper", "Mapper", "SpecularMapper",
     "make_mapper",
 ]
 
@@ -36,6 +37,8 @@ def make_mapper(config: MapperConfig, grid: GridSpec) -> Mapper:
     """The mapper named by ``config.method`` (a :class:`~pipeline.methods.Method`)."""
     if config.method == Method.SPECULAR:
         return SpecularMapper(config, grid)
+    if config.method == Method.FORWARD:
+        return ForwardMapper(config, grid)
     if config.method == Method.ATTRIBUTION:
         return AttributionMapper(config, grid)
     if config.method == Method.CLASSIC:

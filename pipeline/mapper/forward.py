@@ -1,0 +1,106 @@
+"""§10 with the detection curve measured on the log itself (ALGORITHM.md §11).
+
+§10 weighs a ray's free evidence at a surface, and stops the ray there, by ``visible(θ)``,
+the chance that a surface met at incidence θ answers, from a fixed critical-angle family
+(``spec_critical_angle_deg``, ``spec_critical_spread``). How specular a building's surfaces
+are is a property of the building and the sonar, so this method measures it, one E-step of
+a forward sensor model (Thrun 2003) against §10's first map:
+
+0. §9's evidence (free and arc counts, the paper's features).
+1. §9's attribution → the first map; the arcs' bearings give each cell a normal line and a
+   consistency q (§10).
+2. Every reading traced through the first map: along each ray the first surface either
+   answers or reflects the pulse away (nothing behind it is reached). Per incidence bin
+   (:data:`INCIDENCE_BINS` over [0, 90°], one more for surfaces of unknown orientation,
+   q < ½) count the reached surfaces the reading answered from (on its echo's arc) and
+   those it passed (:func:`pipeline.mapper.kernels.forward.detection_counts`).
+   ``p_d(bin) = (answered + 1) / (answered + passed + 2)``.
+3. and 4. §10's passes 2 and 3 with ``visible(θ)`` = ``p_d`` (linear between bin centres,
+   flat beyond the first and last) and ``v̄`` = the unknown-orientation bin's ``p_d``.
+
+Memory: §10's grids; the counts are ``2 × (INCIDENCE_BINS + 1)`` numbers.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from pipeline.config import MapperConfig
+from pipeline.mapper.free_space import cone_table
+from pipeline.mapper.kernels.forward import detection_counts
+from pipeline.mapper.reading_features import distance_sigma
+from pipeline.mapper.scan_group import ScanGroup
+from pipeline.mapper.specular import TABLE_STEP, SpecularMapper, cos_table
+from pipeline.mapper.types import F64, GridSpec
+from pipeline.stages import reading_quality as rq
+
+INCIDENCE_BINS = 9  # equal bins of the detection curve over [0, 90°]
+
+
+def fitted_detection(stats: F64) -> F64:
+    """``p_d`` per bin from the counts ``(answered, passed)``, Laplace smoothed."""
+    out: F64 = (stats[0] + 1.0) / (stats[0] + stats[1] + 2.0)
+    return out
+
+
+def detection_table(p_d: F64) -> F64:
+    """``visible(θ)`` on §10's θ grid (0, TABLE_STEP, … just past π/2) from ``p_d`` per
+    incidence bin (the last entry, unknown orientation, is not used)."""
+    theta = np.arange(0.0, 0.5 * math.pi + 2 * TABLE_STEP, TABLE_STEP)
+    centres = (np.arange(INCIDENCE_BINS) + 0.5) * (0.5 * math.pi / INCIDENCE_BINS)
+    out: F64 = np.interp(theta, centres, p_d[:INCIDENCE_BINS])
+    return out
+
+
+class ForwardMapper(SpecularMapper):
+    """§10 with ``visible(θ)`` measured on the first map (module doc); five passes."""
+
+    passes = 5
+
+    def __init__(self, config: MapperConfig, grid: GridSpec) -> None:
+        super().__init__(config, grid)
+        self.stats: F64 = np.zeros((2, INCIDENCE_BINS + 1))
+        self.p_d: F64 = fitted_detection(self.stats)
+        self._measuring = False
+
+    def begin_pass(self, index: int) -> None:
+        """Start pass ``index`` (module doc) over the same scans."""
+        if index not in range(self.passes):
+            raise ValueError(f"the forward method has passes 0 to 4, not {index}")
+        self._measuring = index == 2
+        if index <= 1:
+            super().begin_pass(index)
+        elif index == 2:
+            self._find_surfaces()
+            self.stats[:] = 0.0
+            self.pass_index = 2
+            self._group_index = 0
+        else:
+            if index == 3:
+                self.p_d = fitted_detection(self.stats)
+                self.table = detection_table(self.p_d)
+                self.cos_table = cos_table(self.table)
+                self.v_unknown = float(self.p_d[INCIDENCE_BINS])
+            super().begin_pass(index - 1)
+
+    def _integrate_group(self, group: ScanGroup) -> None:
+        if not self._measuring:
+            super()._integrate_group(group)
+            return
+        g, cfg = self.grid, self.config
+        cat = group.cat
+        d: F64 = np.where(group.codes == rq.OK, cat.range_m, 0.0)
+        band = np.maximum(cfg.attr_band_sigmas * distance_sigma(d, cfg), 0.5 * g.resolution)
+        silent = (group.codes == rq.MAX_RANGE) & np.isfinite(cat.max_range)
+        free_r: F64 = np.where(silent, cat.max_range - cfg.eps_max, group.free_radius)
+        outer: F64 = np.where(silent, free_r, np.where(d > 0.0, d + band, 0.0))
+        rows, cones, up_down = cone_table(cat, outer)
+        r_inner = np.where(d > 0.0, np.maximum(d - band, 0.0), np.inf)[rows]
+        half = np.minimum(0.5 * cat.fov[rows], 0.5 * math.pi - 1e-9)
+        detection_counts(
+            cones, up_down, r_inner, free_r[rows], cat.alpha[rows], half, g.origin_x,
+            g.origin_y, g.resolution, self.surfaces, self.surface_rows, self.nx, self.ny,
+            self.consistency, self.stats,
+        )
