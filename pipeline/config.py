@@ -49,7 +49,8 @@ class MapperConfig:
 
     method: Method = doc_field(  # noqa: RUF009 - doc_field is dataclasses.field with a doc
         "mapping method: 'specular' (echo attribution with specular surfaces, §10; the "
-        "default), 'attribution' (echo attribution, §9), 'andersone' (the paper's, §1-5) or "
+        "default), 'forward' (§10 with the detection curve measured on the log, §11), "
+        "'attribution' (echo attribution, §9), 'andersone' (the paper's, §1-5) or "
         "'classic' (log-odds baseline, §8)",
         default=Method.SPECULAR,
     )
