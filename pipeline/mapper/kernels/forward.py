@@ -7,15 +7,16 @@ pulse away, so nothing behind it (within its angular width, bins uniform in the 
 the bearing off the axis, as :mod:`pipeline.mapper.kernels.specular`) is reached by this
 reading. A reached surface is met at incidence θ against its normal ``(nx, ny)``; it falls
 in incidence bin ``b`` (``bins`` equal bins over [0, 90°]) when its normal's consistency
-``q ≥ ½``, else in the last bin (orientation unknown). The reading
+``q ≥ ½``, else in the last bin (orientation unknown). Counted once per reading:
 
-* *answered* there (``stats[0, b] += 1``) when the surface lies on its echo's arc
-  (``r_inner ≤ dist``), or
-* *passed* it (``stats[1, b] += 1``) when the surface lies closer than ``r_free`` and short of
-  the arc (or the reading has no echo).
+* *answered* (``stats[0, b] += 1``): of the reached surfaces on the echo's arc
+  (``r_inner ≤ dist``), the one met closest to its normal produced the echo (bin ``b``;
+  the others on the arc are neither answered nor passed);
+* *passed* (``stats[1, b] += 1`` once for each bin ``b`` with one): a reached surface
+  closer than ``r_free`` and short of the arc (or the reading has no echo) did not answer.
 
-``stats[0] / (stats[0] + stats[1])`` is then the share of pulses that reached a surface at
-that incidence and were answered: the log's own detection curve. Deterministic.
+``stats[0] / (stats[0] + stats[1])`` is then the share of readings that reached a surface
+at that incidence and were answered by it: the log's own detection curve. Deterministic.
 """
 
 from __future__ import annotations
@@ -56,6 +57,7 @@ def detection_counts(
     c0s = np.empty(size, dtype=np.int64)
     c1s = np.empty(size, dtype=np.int64)
     stop = np.empty(MAX_BINS, dtype=np.float64)
+    passed = np.zeros(bins + 1, dtype=np.bool_)
     for i in range(cones.shape[0]):
         ox, oy, r_out = cones[i, 0], cones[i, 1], cones[i, 2]
         a, hb = alpha[i], half_fov[i]
@@ -67,6 +69,8 @@ def detection_counts(
         nb = min(MAX_BINS, math.ceil(2.0 * hb * r_out / res) + 1)
         bin_w = 2.0 * t_edge / nb
         stop[:nb] = np.inf
+        passed[:] = False
+        best = bins + 1  # the answering surface's bin (none yet)
         for sweep in range(2):  # 0: the surfaces stop the rays; 1: the reached ones count
             for k in range(n):
                 r = rows[k]
@@ -97,6 +101,11 @@ def detection_counts(
                     if cons[r, c] >= 0.5:
                         b = incidence_bin(dx, dy, dist, nx[r, c], ny[r, c], bins)
                     if dist >= r_inner[i]:
-                        stats[0, b] += 1.0
+                        best = min(best, b)
                     elif dist < r_free[i]:
-                        stats[1, b] += 1.0
+                        passed[b] = True
+        if best <= bins:
+            stats[0, best] += 1.0
+        for b in range(bins + 1):
+            if passed[b]:
+                stats[1, b] += 1.0
