@@ -26,13 +26,14 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.special import ndtr
 
 from pipeline.config import MapperConfig
 from pipeline.mapper.free_space import cone_table
 from pipeline.mapper.kernels.forward import detection_counts
 from pipeline.mapper.reading_features import distance_sigma
 from pipeline.mapper.scan_group import ScanGroup
-from pipeline.mapper.specular import TABLE_STEP, SpecularMapper, cos_table
+from pipeline.mapper.specular import SpecularMapper, cos_table, visibility_table
 from pipeline.mapper.types import F64, GridSpec
 from pipeline.stages import reading_quality as rq
 
@@ -45,12 +46,39 @@ def fitted_detection(stats: F64) -> F64:
     return out
 
 
-def detection_table(p_d: F64) -> F64:
-    """``visible(θ)`` on §10's θ grid (0, TABLE_STEP, … just past π/2) from ``p_d`` per
-    incidence bin (the last entry, unknown orientation, is not used)."""
-    theta = np.arange(0.0, 0.5 * math.pi + 2 * TABLE_STEP, TABLE_STEP)
-    centres = (np.arange(INCIDENCE_BINS) + 0.5) * (0.5 * math.pi / INCIDENCE_BINS)
-    out: F64 = np.interp(theta, centres, p_d[:INCIDENCE_BINS])
+# The grid the detection model is fitted on (module doc): head-on rate, critical-angle
+# median (deg) and spread, and the rate of coincidences.
+FIT_HEAD_ON = np.linspace(0.05, 1.0, 20)
+FIT_MEDIAN_DEG = np.geomspace(1.0, 90.0, 96)
+FIT_SPREAD = np.geomspace(0.1, 2.0, 14)
+FIT_FLOOR = np.linspace(0.0, 0.5, 26)
+
+
+def fit_detection(stats: F64) -> tuple[float, float, float, float]:
+    """The detection model ``answered share(θ) = f + (1 − f)·p0·P(θc > θ)`` (θc log-normal:
+    median, spread) fitted to the counts per incidence bin by maximum likelihood (binomial,
+    on a grid: deterministic); returns ``(p0, median_deg, spread, f)``."""
+    centres = (np.arange(INCIDENCE_BINS) + 0.5) * (90.0 / INCIDENCE_BINS)
+    z = (np.log(centres)[None, None, :] - np.log(FIT_MEDIAN_DEG)[:, None, None]) / FIT_SPREAD[
+        None, :, None]
+    vis = 1.0 - ndtr(z)  # (median, spread, bin)
+    a, n = stats[0, :INCIDENCE_BINS], stats[0, :INCIDENCE_BINS] + stats[1, :INCIDENCE_BINS]
+    best = (-math.inf, 1.0, 90.0, 1.0, 0.0)
+    for f in FIT_FLOOR:
+        for p0 in FIT_HEAD_ON:
+            p = np.clip(f + (1.0 - f) * p0 * vis, 1e-6, 1.0 - 1e-6)
+            ll = (a * np.log(p) + (n - a) * np.log1p(-p)).sum(axis=-1)
+            k = int(np.argmax(ll))
+            if ll.flat[k] > best[0]:
+                i, j = np.unravel_index(k, ll.shape)
+                best = (float(ll.flat[k]), float(p0), float(FIT_MEDIAN_DEG[i]),
+                        float(FIT_SPREAD[j]), float(f))
+    return best[1], best[2], best[3], best[4]
+
+
+def detection_table(p0: float, median_deg: float, spread: float) -> F64:
+    """``visible(θ) = p0·P(θc > θ)`` on §10's θ grid (0, TABLE_STEP, … just past π/2)."""
+    out: F64 = p0 * visibility_table(median_deg, spread)
     return out
 
 
@@ -63,6 +91,7 @@ class ForwardMapper(SpecularMapper):
         super().__init__(config, grid)
         self.stats: F64 = np.zeros((2, INCIDENCE_BINS + 1))
         self.p_d: F64 = fitted_detection(self.stats)
+        self.model = (1.0, config.spec_critical_angle_deg, config.spec_critical_spread, 0.0)
         self._measuring = False
 
     def begin_pass(self, index: int) -> None:
@@ -80,9 +109,11 @@ class ForwardMapper(SpecularMapper):
         else:
             if index == 3:
                 self.p_d = fitted_detection(self.stats)
-                self.table = detection_table(self.p_d)
+                self.model = fit_detection(self.stats)
+                p0, median, spread, floor = self.model
+                self.table = detection_table(p0, median, spread)
                 self.cos_table = cos_table(self.table)
-                self.v_unknown = float(self.p_d[INCIDENCE_BINS])
+                self.v_unknown = max(0.0, float(self.p_d[INCIDENCE_BINS]) - floor) / (1.0 - floor)
             super().begin_pass(index - 1)
 
     def _integrate_group(self, group: ScanGroup) -> None:

@@ -12,7 +12,12 @@ from test_mapper_specular import _room
 
 from pipeline.config import MapperConfig
 from pipeline.mapper import ForwardMapper, make_mapper
-from pipeline.mapper.forward import INCIDENCE_BINS, detection_table, fitted_detection
+from pipeline.mapper.forward import (
+    INCIDENCE_BINS,
+    detection_table,
+    fit_detection,
+    fitted_detection,
+)
 from pipeline.mapper.free_space import cone_table
 from pipeline.mapper.kernels.forward import detection_counts
 from pipeline.mapper.specular import TABLE_STEP
@@ -78,16 +83,36 @@ def test_a_wall_passed_obliquely_counts_in_its_incidence_bin() -> None:
     assert stats[1, 5:7].sum() >= 1 and stats[1].sum() == stats[1, 5:7].sum()
 
 
-def test_the_fitted_curve_is_the_smoothed_share_answered() -> None:
+def test_the_smoothed_share_answered() -> None:
     stats = np.zeros((2, INCIDENCE_BINS + 1))
     stats[0, 0], stats[1, 0] = 8, 0
     stats[0, 5], stats[1, 5] = 1, 9
     p_d = fitted_detection(stats)
     assert p_d[0] == pytest.approx(0.9) and p_d[5] == pytest.approx(2 / 12)
     assert p_d[8] == pytest.approx(0.5)  # no data: the smoothing's even odds
-    table = detection_table(p_d)
-    assert table[0] == pytest.approx(0.9)  # flat before the first bin's centre (5°)
-    assert table[round(math.radians(55.0) / TABLE_STEP)] == pytest.approx(2 / 12)
+
+
+@pytest.mark.parametrize(("p0", "median", "spread", "floor"),
+                         [(0.8, 10.0, 0.7, 0.15), (1.0, 40.0, 0.35, 0.0)])
+def test_the_fit_recovers_the_detection_model(p0: float, median: float, spread: float,
+                                              floor: float) -> None:
+    # Exact expected counts of 10 000 reaches per bin drawn from the model.
+    centres = (np.arange(INCIDENCE_BINS) + 0.5) * (90.0 / INCIDENCE_BINS)
+    vis = detection_table(1.0, median, spread)[np.round(np.radians(centres) / TABLE_STEP)
+                                                .astype(int)]
+    share = floor + (1.0 - floor) * p0 * vis
+    stats = np.zeros((2, INCIDENCE_BINS + 1))
+    stats[0, :INCIDENCE_BINS] = 10_000 * share
+    stats[1, :INCIDENCE_BINS] = 10_000 * (1.0 - share)
+    fp0, fmedian, fspread, ffloor = fit_detection(stats)
+    assert ffloor == pytest.approx(floor, abs=0.02)
+    # The curve §10's passes get: the specular part only, the coincidences left out; on the
+    # bins it is the model's within a grid step (head-on rate and median trade off inside
+    # the first bin).
+    table = detection_table(fp0, fmedian, fspread)
+    at = np.round(np.radians(centres) / TABLE_STEP).astype(int)
+    assert np.abs(table[at] - p0 * vis).max() < 0.04
+    assert table[0] == pytest.approx(fp0)
 
 
 def _fitted(critical_deg: float | None) -> np.ndarray:
