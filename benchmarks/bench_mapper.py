@@ -135,6 +135,7 @@ def run_octomap(scans: list[Scan], resolution: float) -> float | None:
 
 METHODS = [
     ("specular (default)", MapperConfig(method="specular")),
+    ("forward (§11)", MapperConfig(method="forward")),
     ("attribution", MapperConfig(method="attribution")),
     ("andersone+correction", MapperConfig(method="andersone")),
     ("andersone+correction+split_guard", MapperConfig(method="andersone", split_guard=True)),

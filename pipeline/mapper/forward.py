@@ -3,22 +3,24 @@
 §10 weighs a ray's free evidence at a surface, and stops the ray there, by ``visible(θ)``,
 the chance that a surface met at incidence θ answers, from a fixed critical-angle family
 (``spec_critical_angle_deg``, ``spec_critical_spread``). How specular a building's surfaces
-are is a property of the building and the sonar, so this method measures it, one E-step of
-a forward sensor model (Thrun 2003) against §10's first map:
+are belongs to the building and the sonar, so this method measures it with one E-step of a
+forward sensor model (Thrun 2003) against §10's first map:
 
 0. §9's evidence (free and arc counts, the paper's features).
 1. §9's attribution → the first map; the arcs' bearings give each cell a normal line and a
    consistency q (§10).
 2. Every reading traced through the first map: along each ray the first surface either
-   answers or reflects the pulse away (nothing behind it is reached). Per incidence bin
-   (:data:`INCIDENCE_BINS` over [0, 90°], one more for surfaces of unknown orientation,
-   q < ½) count the reached surfaces the reading answered from (on its echo's arc) and
-   those it passed (:func:`pipeline.mapper.kernels.forward.detection_counts`).
-   ``p_d(bin) = (answered + 1) / (answered + passed + 2)``.
-3. and 4. §10's passes 2 and 3 with ``visible(θ)`` = ``p_d`` (linear between bin centres,
-   flat beyond the first and last) and ``v̄`` = the unknown-orientation bin's ``p_d``.
+   answers or reflects the pulse away (nothing behind it is reached). Once per reading and
+   incidence bin (:data:`INCIDENCE_BINS` over [0, 90°], one more for surfaces of unknown
+   orientation, q < ½): did it answer from a reached surface there, did it pass one
+   (:func:`pipeline.mapper.kernels.forward.detection_counts`).
+3. and 4. §10's passes 2 and 3 with the fitted model (:func:`fit_detection`):
+   answered share(θ) = f + (1 − f)·p0·P(θc > θ), θc log-normal; f is the rate at which an
+   echo from elsewhere lands on a surface by coincidence. §10 gets the specular part,
+   ``visible(θ) = p0·P(θc > θ)``, and ``v̄`` = the unknown-orientation bin's share with the
+   coincidences taken out.
 
-Memory: §10's grids; the counts are ``2 × (INCIDENCE_BINS + 1)`` numbers.
+No configuration key of its own. Memory: §10's grids; the counts are 20 numbers.
 """
 
 from __future__ import annotations

@@ -300,8 +300,10 @@ def test_usage_errors_exit_2(runner, tmp_path):
     bad = _run(runner, ["run", "x", "-o", str(tmp_path / "o"), "--method", "magic"])
     assert bad.exit_code == 2
     # The choices are the config's: one definition (pipeline.methods.Method).
-    assert "'magic' is not one of 'specular', 'attribution', 'andersone', 'classic'" in bad.output
-    assert [m.value for m in Method] == ["specular", "attribution", "andersone", "classic"]
+    assert ("'magic' is not one of 'specular', 'forward', 'attribution', 'andersone', "
+            "'classic'") in bad.output
+    assert [m.value for m in Method] == [
+        "specular", "forward", "attribution", "andersone", "classic"]
     assert _run(runner, ["frobnicate"]).exit_code == 2
 
 

@@ -44,7 +44,7 @@ def test_method_is_the_one_typed_choice():
         assert f'method = "{m.value}"' in dump_config(cfg).splitlines()
     for bad in ("Classic", "", 3):
         with pytest.raises(ConfigError, match=r"'mapper.method' must be one of "
-                           r"\['specular', 'attribution', 'andersone', 'classic'\], got "):
+                           r"\['specular', 'forward', 'attribution', 'andersone', 'classic'\], got "):
             config_from_dict({"mapper": {"method": bad}})
 
 
