@@ -1,10 +1,12 @@
-"""§10 with the detection curve measured on the log itself (ALGORITHM.md §11).
+"""§10 with the detection rate of surfaces of unknown orientation measured on the log
+(ALGORITHM.md §11).
 
-§10 weighs a ray's free evidence at a surface, and stops the ray there, by ``visible(θ)``,
-the chance that a surface met at incidence θ answers, from a fixed critical-angle family
-(``spec_critical_angle_deg``, ``spec_critical_spread``). How specular a building's surfaces
-are belongs to the building and the sonar, so this method measures it with one E-step of a
-forward sensor model (Thrun 2003) against §10's first map:
+§10 weighs a ray's free evidence at a cell by the chance that a surface there would have
+answered: ``visible(θ)`` where the cell's orientation is known (consistency q), and
+``v̄`` where it is not, ``q·visible(θ) + (1 − q)·v̄``. §10 takes ``v̄`` as the mean of its
+critical-angle family over incidences (0.29). What surfaces of unknown orientation (posts,
+corners, clutter) do is a property of the building and the sonar, so this method measures
+it with one E-step of a forward sensor model (Thrun 2003) against §10's first map:
 
 0. §9's evidence (free and arc counts, the paper's features).
 1. §9's attribution → the first map; the arcs' bearings give each cell a normal line and a
@@ -14,13 +16,15 @@ forward sensor model (Thrun 2003) against §10's first map:
    incidence bin (:data:`INCIDENCE_BINS` over [0, 90°], one more for surfaces of unknown
    orientation, q < ½): did it answer from a reached surface there, did it pass one
    (:func:`pipeline.mapper.kernels.forward.detection_counts`).
-3. and 4. §10's passes 2 and 3 with the fitted model (:func:`fit_detection`):
-   answered share(θ) = f + (1 − f)·p0·P(θc > θ), θc log-normal; f is the rate at which an
-   echo from elsewhere lands on a surface by coincidence. §10 gets the specular part,
-   ``visible(θ) = p0·P(θc > θ)``, and ``v̄`` = the unknown-orientation bin's share with the
-   coincidences taken out.
+3. and 4. §10's passes 2 and 3 with ``v̄`` = the unknown-orientation bin's answered share,
+   the coincidences taken out (:func:`unknown_rate`): the rate ``f`` at which an echo from
+   elsewhere lands on a surface, from the detection model fitted to the oriented bins
+   (:func:`fit_detection`: share(θ) = f + (1 − f)·p0·P(θc > θ), θc log-normal).
 
-No configuration key of its own. Memory: §10's grids; the counts are 20 numbers.
+The oriented bins' fitted curve is measured and reported (§11), not used for ``visible``:
+with it in place of §10's family the maps lost on 3 of 8 ideal-sonar logs and on the
+12° cut-off emulation (out-of-cone echoes inflate the oblique bins). No configuration key
+of its own. Memory: §10's grids; the counts are 20 numbers.
 """
 
 from __future__ import annotations
@@ -35,7 +39,7 @@ from pipeline.mapper.free_space import cone_table
 from pipeline.mapper.kernels.forward import detection_counts
 from pipeline.mapper.reading_features import distance_sigma
 from pipeline.mapper.scan_group import ScanGroup
-from pipeline.mapper.specular import SpecularMapper, cos_table, visibility_table
+from pipeline.mapper.specular import SpecularMapper, visibility_table
 from pipeline.mapper.types import F64, GridSpec
 from pipeline.stages import reading_quality as rq
 
@@ -78,14 +82,21 @@ def fit_detection(stats: F64) -> tuple[float, float, float, float]:
     return best[1], best[2], best[3], best[4]
 
 
+def unknown_rate(p_d: F64, floor: float) -> float:
+    """``v̄``: the share of reaches a surface of unknown orientation answered, coincidences
+    (``floor``) taken out."""
+    return max(0.0, float(p_d[INCIDENCE_BINS]) - floor) / (1.0 - floor)
+
+
 def detection_table(p0: float, median_deg: float, spread: float) -> F64:
-    """``visible(θ) = p0·P(θc > θ)`` on §10's θ grid (0, TABLE_STEP, … just past π/2)."""
+    """The fitted specular curve ``p0·P(θc > θ)`` on §10's θ grid (0, TABLE_STEP, … just
+    past π/2): reported (ALGORITHM.md §11), not used by the map (module doc)."""
     out: F64 = p0 * visibility_table(median_deg, spread)
     return out
 
 
 class ForwardMapper(SpecularMapper):
-    """§10 with ``visible(θ)`` measured on the first map (module doc); five passes."""
+    """§10 with ``v̄`` measured on the first map (module doc); five passes."""
 
     passes = 5
 
@@ -112,10 +123,7 @@ class ForwardMapper(SpecularMapper):
             if index == 3:
                 self.p_d = fitted_detection(self.stats)
                 self.model = fit_detection(self.stats)
-                p0, median, spread, floor = self.model
-                self.table = detection_table(p0, median, spread)
-                self.cos_table = cos_table(self.table)
-                self.v_unknown = max(0.0, float(self.p_d[INCIDENCE_BINS]) - floor) / (1.0 - floor)
+                self.v_unknown = unknown_rate(self.p_d, self.model[3])
             super().begin_pass(index - 1)
 
     def _integrate_group(self, group: ScanGroup) -> None:
