@@ -150,8 +150,8 @@ def test_the_room_with_the_measured_unknown_rate() -> None:
     assert ideal["recall"] >= fixed["recall"] - 0.03
 
 
-def test_five_passes_and_checks_them() -> None:
-    m = make_mapper(MapperConfig(method=Method.FORWARD), room_grid(0.1))
-    assert m.passes == 5
+def test_the_default_is_five_passes_and_checks_them() -> None:
+    m = make_mapper(MapperConfig(), room_grid(0.1))
+    assert isinstance(m, ForwardMapper) and m.passes == 5
     with pytest.raises(ValueError, match="passes 0 to 4"):
         m.begin_pass(5)
