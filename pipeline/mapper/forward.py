@@ -35,12 +35,13 @@ import numpy as np
 from scipy.special import ndtr
 
 from pipeline.config import MapperConfig
+from pipeline.mapper.attribution import AttributionMapper
 from pipeline.mapper.free_space import cone_table
 from pipeline.mapper.kernels.forward import detection_counts
 from pipeline.mapper.reading_features import distance_sigma
 from pipeline.mapper.scan_group import ScanGroup
 from pipeline.mapper.specular import SpecularMapper, visibility_table
-from pipeline.mapper.types import F64, GridSpec
+from pipeline.mapper.types import F64, I32, B, GridSpec
 from pipeline.stages import reading_quality as rq
 
 INCIDENCE_BINS = 9  # equal bins of the detection curve over [0, 90°]
@@ -105,6 +106,8 @@ class ForwardMapper(SpecularMapper):
         self.stats: F64 = np.zeros((2, INCIDENCE_BINS + 1))
         self.p_d: F64 = fitted_detection(self.stats)
         self.model = (1.0, config.spec_critical_angle_deg, config.spec_critical_spread, 0.0)
+        self.surfaces: B = np.zeros(grid.shape, dtype=bool)  # the first map
+        self.surface_rows: I32 = np.zeros((grid.shape[0], grid.shape[1] + 1), dtype=np.int32)
         self._measuring = False
 
     def begin_pass(self, index: int) -> None:
@@ -116,6 +119,8 @@ class ForwardMapper(SpecularMapper):
             super().begin_pass(index)
         elif index == 2:
             self._find_surfaces()
+            self.surfaces = AttributionMapper.occupied(self)
+            np.cumsum(self.surfaces, axis=1, out=self.surface_rows[:, 1:])
             self.stats[:] = 0.0
             self.pass_index = 2
             self._group_index = 0
