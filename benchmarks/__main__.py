@@ -102,7 +102,9 @@ def mapper_rows(smoke: bool, quick: bool, verbose: bool) -> list[Row]:
     n = int(f["readings"])
     rows: list[Row] = []
     for name, label in (
-        ("specular (default)", "default method (specular echo attribution, 4 passes)"),
+        ("forward (default, §11)",
+         "default method (specular echo attribution, v̄ measured, 5 passes)"),
+        ("specular (§10)", "specular echo attribution (§10, 4 passes)"),
         ("attribution", "echo attribution (§9, 2 passes)"),
         ("andersone+correction", "paper's method (correction on)"),
         ("andersone", "without correction"),

@@ -134,7 +134,8 @@ def run_octomap(scans: list[Scan], resolution: float) -> float | None:
 
 
 METHODS = [
-    ("specular (default)", MapperConfig(method="specular")),
+    ("forward (default, §11)", MapperConfig(method="forward")),
+    ("specular (§10)", MapperConfig(method="specular")),
     ("attribution", MapperConfig(method="attribution")),
     ("andersone+correction", MapperConfig(method="andersone")),
     ("andersone+correction+split_guard", MapperConfig(method="andersone", split_guard=True)),

@@ -57,14 +57,16 @@ REPO = Path(__file__).resolve().parents[1]
 LOG_SUFFIXES = {".mcap", ".bag", ".db3", ".csv", ".txt", ".zst"}
 
 METHODS: tuple[tuple[str, Method, bool], ...] = (
-    ("default", Method.SPECULAR, True),
+    ("default", Method.FORWARD, True),
+    ("specular", Method.SPECULAR, True),
     ("attribution", Method.ATTRIBUTION, True),
     ("with_correction", Method.ANDERSONE, True),
     ("without_correction", Method.ANDERSONE, False),
     ("classic", Method.CLASSIC, True),
 )
 LABELS = {
-    "default": "sonarmap default (specular echo attribution)",
+    "default": "sonarmap default (§11: specular echo attribution, v̄ measured)",
+    "specular": "specular echo attribution (§10)",
     "attribution": "echo attribution (§9)",
     "with_correction": "Andersone, with feature correction",
     "without_correction": "Andersone, without correction",
@@ -300,7 +302,7 @@ def markdown(rows: list[Row], caption: str) -> str:
 def summary(results: list[tuple[list[Row], str]]) -> str:
     """One table: F1 (precision / recall) of every method on every log, the paper's metric
     with and without correction, and the default's F1 margin over OctoMap."""
-    keys = ["default", "attribution", "with_correction", "without_correction", "classic", "octomap"]
+    keys = ["default", "specular", "attribution", "with_correction", "without_correction", "classic", "octomap"]
     head = ["log", *(LABELS[k] for k in keys), "default − OctoMap",
             "mean feature variance with / without correction (m²)"]
     lines = ["| " + " | ".join(head) + " |", "|---" + "|---:" * (len(head) - 1) + "|"]
@@ -354,7 +356,7 @@ def thickness(results: list[tuple[list[Row], str]]) -> str:
     """F1 with every method's walls grown by one cell and thinned to one cell, beside its
     own: a scorer that neither rewards thick walls nor thin ones gains (almost) nothing
     from either."""
-    keys = ["default", "attribution", "with_correction", "without_correction", "classic", "octomap"]
+    keys = ["default", "specular", "attribution", "with_correction", "without_correction", "classic", "octomap"]
     head = ["log (F1: gain grown one cell / thinned to one cell)", *(LABELS[k] for k in keys)]
     lines = ["| " + " | ".join(head) + " |", "|---" + "|---:" * (len(head) - 1) + "|"]
     worst = {"grown": -math.inf, "thinned": -math.inf}

@@ -49,10 +49,12 @@ class MapperConfig:
     """Parameters of the mapping method (ALGORITHM.md), with its documented defaults."""
 
     method: Method = doc_field(  # noqa: RUF009 - doc_field is dataclasses.field with a doc
-        "mapping method: 'specular' (echo attribution with specular surfaces, §10; the "
-        "default), 'attribution' (echo attribution, §9), 'andersone' (the paper's, §1-5) or "
-        "'classic' (log-odds baseline, §8)",
-        default=Method.SPECULAR,
+        "mapping method: 'forward' (echo attribution with specular surfaces and the "
+        "detection rate of surfaces of unknown orientation measured on the log, §11; the "
+        "default), 'specular' (echo attribution with specular surfaces, §10), 'attribution' "
+        "(echo attribution, §9), 'andersone' (the paper's, §1-5) or 'classic' (log-odds "
+        "baseline, §8)",
+        default=Method.FORWARD,
     )
     sigma_d0: float = doc_field("σ_d0, distance uncertainty at zero range, m (eq. 2)", default=0.01)
     k_d: float = doc_field("k_d, growth of distance uncertainty with range (eq. 2)", default=0.01)

@@ -123,7 +123,8 @@ def run(
     label = log_label(paths)
     if compare_correction and config.mapper.method == Method.CLASSIC:
         raise ConfigError(
-            "--compare-correction needs features: mapper.method 'specular', 'attribution' or 'andersone'"
+            "--compare-correction needs features: mapper.method 'forward', 'specular', "
+            "'attribution' or 'andersone'"
         )
     timer = StageTimer()
     t_start = time.perf_counter()

@@ -1,4 +1,4 @@
-"""The default method: echo attribution with specular surfaces (ALGORITHM.md §10).
+"""Echo attribution with specular surfaces (ALGORITHM.md §10; the default, §11, builds on it).
 
 A sonar hears a smooth surface only near its normal: beyond the surface's critical angle
 θc the pulse is reflected away, the surface is silent and the echo (if any) comes from

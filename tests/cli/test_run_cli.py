@@ -300,8 +300,10 @@ def test_usage_errors_exit_2(runner, tmp_path):
     bad = _run(runner, ["run", "x", "-o", str(tmp_path / "o"), "--method", "magic"])
     assert bad.exit_code == 2
     # The choices are the config's: one definition (pipeline.methods.Method).
-    assert "'magic' is not one of 'specular', 'attribution', 'andersone', 'classic'" in bad.output
-    assert [m.value for m in Method] == ["specular", "attribution", "andersone", "classic"]
+    assert ("'magic' is not one of 'specular', 'forward', 'attribution', 'andersone', "
+            "'classic'") in bad.output
+    assert [m.value for m in Method] == [
+        "specular", "forward", "attribution", "andersone", "classic"]
     assert _run(runner, ["frobnicate"]).exit_code == 2
 
 
@@ -368,8 +370,8 @@ def test_progress_has_the_real_total_from_the_first_pass(tmp_path):
     assert all(total is None for _s, _d, total in reading)
     assert reading[-1][1] == readings  # pass 1 counted every reading
     mapping = [c for c in calls if c[0] == "mapping"]
-    # The default method streams the log four times: the bar's total covers every pass.
-    assert {total for _s, _d, total in mapping} == {4 * readings}  # real total from the start
+    # The default method streams the log five times: the bar's total covers every pass.
+    assert {total for _s, _d, total in mapping} == {5 * readings}  # real total from the start
     done = [d for _s, d, _t in mapping]
-    assert done == sorted(done) and done[-1] == 4 * readings
+    assert done == sorted(done) and done[-1] == 5 * readings
     assert any(readings // 2 < d < readings for d in done)  # pass 1 reports as it goes

@@ -31,11 +31,11 @@ def test_dump_round_trips_through_toml(tmp_path):
     p.write_text(text)
     again = load_config(p)
     assert again == cfg and again.hash() == cfg.hash()
-    assert tomllib.loads(dump_config(Config()))["mapper"]["method"] == "specular"
+    assert tomllib.loads(dump_config(Config()))["mapper"]["method"] == "forward"
 
 
 def test_method_is_the_one_typed_choice():
-    assert Config().mapper.method is Method.SPECULAR
+    assert Config().mapper.method is Method.FORWARD
     for m in Method:
         cfg = config_from_dict({"mapper": {"method": m.value}})
         assert cfg.mapper.method is m
@@ -44,7 +44,7 @@ def test_method_is_the_one_typed_choice():
         assert f'method = "{m.value}"' in dump_config(cfg).splitlines()
     for bad in ("Classic", "", 3):
         with pytest.raises(ConfigError, match=r"'mapper.method' must be one of "
-                           r"\['specular', 'attribution', 'andersone', 'classic'\], got "):
+                           r"\['specular', 'forward', 'attribution', 'andersone', 'classic'\], got "):
             config_from_dict({"mapper": {"method": bad}})
 
 

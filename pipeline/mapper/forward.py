@@ -1,0 +1,152 @@
+"""§10 with the detection rate of surfaces of unknown orientation measured on the log
+(ALGORITHM.md §11).
+
+§10 weighs a ray's free evidence at a cell by the chance that a surface there would have
+answered: ``visible(θ)`` where the cell's orientation is known (consistency q), and
+``v̄`` where it is not, ``q·visible(θ) + (1 − q)·v̄``. §10 takes ``v̄`` as the mean of its
+critical-angle family over incidences (0.29). What surfaces of unknown orientation (posts,
+corners, clutter) do is a property of the building and the sonar, so this method measures
+it with one E-step of a forward sensor model (Thrun 2003) against §10's first map:
+
+0. §9's evidence (free and arc counts, the paper's features).
+1. §9's attribution → the first map; the arcs' bearings give each cell a normal line and a
+   consistency q (§10).
+2. Every reading traced through the first map: along each ray the first surface either
+   answers or reflects the pulse away (nothing behind it is reached). Once per reading and
+   incidence bin (:data:`INCIDENCE_BINS` over [0, 90°], one more for surfaces of unknown
+   orientation, q < ½): did it answer from a reached surface there, did it pass one
+   (:func:`pipeline.mapper.kernels.forward.detection_counts`).
+3. and 4. §10's passes 2 and 3 with ``v̄`` = the unknown-orientation bin's answered share,
+   the coincidences taken out (:func:`unknown_rate`): the rate ``f`` at which an echo from
+   elsewhere lands on a surface, from the detection model fitted to the oriented bins
+   (:func:`fit_detection`: share(θ) = f + (1 − f)·p0·P(θc > θ), θc log-normal).
+
+The oriented bins' fitted curve is measured and reported (§11), not used for ``visible``:
+with it in place of §10's family the maps lost on 3 of 8 ideal-sonar logs and on the
+12° cut-off emulation (out-of-cone echoes inflate the oblique bins). No configuration key
+of its own. Memory: §10's grids; the counts are 20 numbers.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.special import ndtr
+
+from pipeline.config import MapperConfig
+from pipeline.mapper.attribution import AttributionMapper
+from pipeline.mapper.free_space import cone_table
+from pipeline.mapper.kernels.forward import detection_counts
+from pipeline.mapper.reading_features import distance_sigma
+from pipeline.mapper.scan_group import ScanGroup
+from pipeline.mapper.specular import SpecularMapper, visibility_table
+from pipeline.mapper.types import F64, I32, B, GridSpec
+from pipeline.stages import reading_quality as rq
+
+INCIDENCE_BINS = 9  # equal bins of the detection curve over [0, 90°]
+
+
+def fitted_detection(stats: F64) -> F64:
+    """``p_d`` per bin from the counts ``(answered, passed)``, Laplace smoothed."""
+    out: F64 = (stats[0] + 1.0) / (stats[0] + stats[1] + 2.0)
+    return out
+
+
+# The grid the detection model is fitted on (module doc): head-on rate, critical-angle
+# median (deg) and spread, and the rate of coincidences.
+FIT_HEAD_ON = np.linspace(0.05, 1.0, 20)
+FIT_MEDIAN_DEG = np.geomspace(1.0, 90.0, 96)
+FIT_SPREAD = np.geomspace(0.1, 2.0, 14)
+FIT_FLOOR = np.linspace(0.0, 0.5, 26)
+
+
+def fit_detection(stats: F64) -> tuple[float, float, float, float]:
+    """The detection model ``answered share(θ) = f + (1 − f)·p0·P(θc > θ)`` (θc log-normal:
+    median, spread) fitted to the counts per incidence bin by maximum likelihood (binomial,
+    on a grid: deterministic); returns ``(p0, median_deg, spread, f)``."""
+    centres = (np.arange(INCIDENCE_BINS) + 0.5) * (90.0 / INCIDENCE_BINS)
+    z = (np.log(centres)[None, None, :] - np.log(FIT_MEDIAN_DEG)[:, None, None]) / FIT_SPREAD[
+        None, :, None]
+    vis = 1.0 - ndtr(z)  # (median, spread, bin)
+    a, n = stats[0, :INCIDENCE_BINS], stats[0, :INCIDENCE_BINS] + stats[1, :INCIDENCE_BINS]
+    best = (-math.inf, 1.0, 90.0, 1.0, 0.0)
+    for f in FIT_FLOOR:
+        for p0 in FIT_HEAD_ON:
+            p = np.clip(f + (1.0 - f) * p0 * vis, 1e-6, 1.0 - 1e-6)
+            ll = (a * np.log(p) + (n - a) * np.log1p(-p)).sum(axis=-1)
+            k = int(np.argmax(ll))
+            if ll.flat[k] > best[0]:
+                i, j = np.unravel_index(k, ll.shape)
+                best = (float(ll.flat[k]), float(p0), float(FIT_MEDIAN_DEG[i]),
+                        float(FIT_SPREAD[j]), float(f))
+    return best[1], best[2], best[3], best[4]
+
+
+def unknown_rate(p_d: F64, floor: float) -> float:
+    """``v̄``: the share of reaches a surface of unknown orientation answered, coincidences
+    (``floor``) taken out."""
+    return max(0.0, float(p_d[INCIDENCE_BINS]) - floor) / (1.0 - floor)
+
+
+def detection_table(p0: float, median_deg: float, spread: float) -> F64:
+    """The fitted specular curve ``p0·P(θc > θ)`` on §10's θ grid (0, TABLE_STEP, … just
+    past π/2): reported (ALGORITHM.md §11), not used by the map (module doc)."""
+    out: F64 = p0 * visibility_table(median_deg, spread)
+    return out
+
+
+class ForwardMapper(SpecularMapper):
+    """§10 with ``v̄`` measured on the first map (module doc); five passes."""
+
+    passes = 5
+
+    def __init__(self, config: MapperConfig, grid: GridSpec) -> None:
+        super().__init__(config, grid)
+        self.stats: F64 = np.zeros((2, INCIDENCE_BINS + 1))
+        self.p_d: F64 = fitted_detection(self.stats)
+        self.model = (1.0, config.spec_critical_angle_deg, config.spec_critical_spread, 0.0)
+        self.surfaces: B = np.zeros(grid.shape, dtype=bool)  # the first map
+        self.surface_rows: I32 = np.zeros((grid.shape[0], grid.shape[1] + 1), dtype=np.int32)
+        self._measuring = False
+
+    def begin_pass(self, index: int) -> None:
+        """Start pass ``index`` (module doc) over the same scans."""
+        if index not in range(self.passes):
+            raise ValueError(f"the forward method has passes 0 to 4, not {index}")
+        self._measuring = index == 2
+        if index <= 1:
+            super().begin_pass(index)
+        elif index == 2:
+            self._find_surfaces()
+            self.surfaces = AttributionMapper.occupied(self)
+            np.cumsum(self.surfaces, axis=1, out=self.surface_rows[:, 1:])
+            self.stats[:] = 0.0
+            self.pass_index = 2
+            self._group_index = 0
+        else:
+            if index == 3:
+                self.p_d = fitted_detection(self.stats)
+                self.model = fit_detection(self.stats)
+                self.v_unknown = unknown_rate(self.p_d, self.model[3])
+            super().begin_pass(index - 1)
+
+    def _integrate_group(self, group: ScanGroup) -> None:
+        if not self._measuring:
+            super()._integrate_group(group)
+            return
+        g, cfg = self.grid, self.config
+        cat = group.cat
+        d: F64 = np.where(group.codes == rq.OK, cat.range_m, 0.0)
+        band = np.maximum(cfg.attr_band_sigmas * distance_sigma(d, cfg), 0.5 * g.resolution)
+        silent = (group.codes == rq.MAX_RANGE) & np.isfinite(cat.max_range)
+        free_r: F64 = np.where(silent, cat.max_range - cfg.eps_max, group.free_radius)
+        outer: F64 = np.where(silent, free_r, np.where(d > 0.0, d + band, 0.0))
+        rows, cones, up_down = cone_table(cat, outer)
+        r_inner = np.where(d > 0.0, np.maximum(d - band, 0.0), np.inf)[rows]
+        half = np.minimum(0.5 * cat.fov[rows], 0.5 * math.pi - 1e-9)
+        detection_counts(
+            cones, up_down, r_inner, free_r[rows], cat.alpha[rows], half, g.origin_x,
+            g.origin_y, g.resolution, self.surfaces, self.surface_rows, self.nx, self.ny,
+            self.consistency, self.stats,
+        )

@@ -1,0 +1,111 @@
+"""Compiled E-step of the fitted detection curve (ALGORITHM.md §11): one pass over the readings.
+
+A reading's cone out to ``cones[i, 2]`` (the far edge of its echo's arc, or ``r_max`` for a
+reading with no echo) is visited cell by cell (:mod:`pipeline.mapper.kernels.cone`). Every
+surface of the map ``occ`` stops the rays that meet it: it either answers or reflects the
+pulse away, so nothing behind it (within its angular width, bins uniform in the tangent of
+the bearing off the axis, as :mod:`pipeline.mapper.kernels.specular`) is reached by this
+reading. A reached surface is met at incidence θ against its normal ``(nx, ny)``; it falls
+in incidence bin ``b`` (``bins`` equal bins over [0, 90°]) when its normal's consistency
+``q ≥ ½``, else in the last bin (orientation unknown). Counted once per reading:
+
+* *answered* (``stats[0, b] += 1``): of the reached surfaces on the echo's arc
+  (``r_inner ≤ dist``), the one met closest to its normal produced the echo (bin ``b``;
+  the others on the arc are neither answered nor passed);
+* *passed* (``stats[1, b] += 1`` once for each bin ``b`` with one): a reached surface
+  closer than ``r_free`` and short of the arc (or the reading has no echo) did not answer.
+
+``stats[0] / (stats[0] + stats[1])`` is then the share of readings that reached a surface
+at that incidence and were answered by it: the log's own detection curve. Deterministic.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from pipeline.mapper.kernels.attribution import reach_cells
+from pipeline.mapper.kernels.cone import edge_sector_spans, max_sector_spans
+from pipeline.mapper.types import F32, F64, I32, B
+
+MAX_BINS = 2048  # angular bins of one cone's occlusion profile
+
+
+@njit(cache=True, inline="always")
+def incidence_bin(dx: float, dy: float, dist: float, nx: float, ny: float, bins: int) -> int:
+    """The incidence bin (``bins`` equal bins over [0, 90°]) of the ray ``(dx, dy)`` on a
+    surface with unit normal ``(nx, ny)``."""
+    c = min(abs(dx * nx + dy * ny) / max(dist, 1e-12), 1.0)
+    return min(int(math.acos(c) / (0.5 * math.pi) * bins), bins - 1)
+
+
+@njit(cache=True)
+def detection_counts(
+    cones: F64, up_down: B, r_inner: F64, r_free: F64, alpha: F64, half_fov: F64,
+    gx: float, gy: float, res: float, occ: B, occ_rows: I32, nx: F32, ny: F32, cons: F32,
+    stats: F64,
+) -> None:
+    """Add each reading's answered and passed surfaces to ``stats`` ``(2, bins + 1)``
+    (module doc); ``occ_rows`` is the running count of ``occ`` along each row (one leading
+    zero column), so rows of a span without a surface are skipped."""
+    height, width = occ.shape
+    bins = stats.shape[1] - 1
+    size = max_sector_spans(reach_cells(cones, res) * res, res)
+    rows = np.empty(size, dtype=np.int64)
+    c0s = np.empty(size, dtype=np.int64)
+    c1s = np.empty(size, dtype=np.int64)
+    stop = np.empty(MAX_BINS, dtype=np.float64)
+    passed = np.zeros(bins + 1, dtype=np.bool_)
+    for i in range(cones.shape[0]):
+        ox, oy, r_out = cones[i, 0], cones[i, 1], cones[i, 2]
+        a, hb = alpha[i], half_fov[i]
+        n = edge_sector_spans(ox, oy, cones[i, 3], cones[i, 4], cones[i, 5], cones[i, 6],
+                              up_down[i, 0], up_down[i, 1], 0.0, r_out, gx, gy, res, width,
+                              height, rows, c0s, c1s)
+        ca, sa = math.cos(a), math.sin(a)
+        t_edge = math.tan(hb)
+        nb = min(MAX_BINS, math.ceil(2.0 * hb * r_out / res) + 1)
+        bin_w = 2.0 * t_edge / nb
+        stop[:nb] = np.inf
+        passed[:] = False
+        best = bins + 1  # the answering surface's bin (none yet)
+        for sweep in range(2):  # 0: the surfaces stop the rays; 1: the reached ones count
+            for k in range(n):
+                r = rows[k]
+                if occ_rows[r, c1s[k] + 1] == occ_rows[r, c0s[k]]:
+                    continue
+                for c in range(c0s[k], c1s[k] + 1):
+                    if not occ[r, c]:
+                        continue
+                    dx = gx + (c + 0.5) * res - ox
+                    dy = gy + (r + 0.5) * res - oy
+                    along = dx * ca + dy * sa
+                    if along <= 0.0:
+                        continue
+                    dist = math.sqrt(dx * dx + dy * dy)
+                    t = (dy * ca - dx * sa) / along
+                    if sweep == 0:
+                        rel = t + t_edge
+                        hw = 0.5 * res / max(dist, res) * (1.0 + t * t)
+                        k0 = max(0, math.floor((rel - hw) / bin_w))
+                        k1 = min(nb - 1, math.floor((rel + hw) / bin_w))
+                        for kb in range(k0, k1 + 1):
+                            stop[kb] = min(stop[kb], dist)
+                        continue
+                    kb = math.floor((t + t_edge) / bin_w)
+                    if dist > stop[min(max(kb, 0), nb - 1)]:
+                        continue
+                    b = bins
+                    if cons[r, c] >= 0.5:
+                        b = incidence_bin(dx, dy, dist, nx[r, c], ny[r, c], bins)
+                    if dist >= r_inner[i]:
+                        best = min(best, b)
+                    elif dist < r_free[i]:
+                        passed[b] = True
+        if best <= bins:
+            stats[0, best] += 1.0
+        for b in range(bins + 1):
+            if passed[b]:
+                stats[1, b] += 1.0
