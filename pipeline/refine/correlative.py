@@ -1,8 +1,8 @@
 """Correlative scan-to-submap matching that reports a distribution, not a best cell.
 
 The reference points (earlier submaps placed by the current estimate) become a blurred
-evidence field (:meth:`pipeline.refine.matcher.LikelihoodField.of_points`, values in
-[0, 1)). A candidate pose ``p`` of the query submap gets the log-likelihood
+evidence field (:meth:`LikelihoodField.of_points`, values in [0, 1)). A candidate pose
+``p`` of the query submap gets the log-likelihood
 
     ℓ(p) = Σ_e log(ε + max_arc f(p ⊕ e)),   ε = OUTLIER
 
@@ -33,13 +33,70 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from formats.angles import wrap_angle
 from formats.arrays import F64
-from pipeline.refine.matcher import LikelihoodField
+
+F32 = npt.NDArray[np.float32]
 
 OUTLIER = 0.05  # field value an echo gets where the reference saw nothing (a floor)
 UNSEEN = 0.5  # field value where the reference's beams never looked (the occupancy prior)
+
+
+@dataclass(frozen=True)
+class LikelihoodField:
+    """``values[row, col]`` over cells of ``res`` m; row 0 at ``origin_y`` (min y)."""
+
+    origin_x: float
+    origin_y: float
+    res: float
+    values: F32
+
+    @staticmethod
+    def of_points(x: F64, y: F64, *, res: float, sigma: float, margin: float) -> LikelihoodField:
+        """The evidence field of arc points ``(x, y)`` over their box grown by ``margin``:
+        their density ``ρ`` (splatted bilinearly) blurred by a Gaussian of ``sigma`` m, as
+        ``1 − exp(−ρ/ρ_med)`` (``ρ_med`` the median over cells with evidence), so a wall seen
+        by few echoes counts nearly as much as one seen by many. Arcs of echoes from different
+        viewpoints cross where the obstacle is, so its cells hold the most evidence."""
+        from pipeline.refine.kernels import gaussian_blur
+
+        x, y = x.ravel(), y.ravel()
+        x0 = math.floor((float(x.min()) - margin) / res) * res
+        y0 = math.floor((float(y.min()) - margin) / res) * res
+        w = math.ceil((float(x.max()) + margin - x0) / res) + 2
+        h = math.ceil((float(y.max()) + margin - y0) / res) + 2
+        # Each point is splatted bilinearly over the four cells around it (no res/2 bias).
+        fx, fy = (x - x0) / res - 0.5, (y - y0) / res - 0.5
+        ix, iy = np.floor(fx).astype(np.int64), np.floor(fy).astype(np.int64)
+        ax, ay = fx - ix, fy - iy
+        flat = np.zeros(h * w)
+        for dx, dy, wt in ((0, 0, (1 - ax) * (1 - ay)), (1, 0, ax * (1 - ay)),
+                           (0, 1, (1 - ax) * ay), (1, 1, ax * ay)):
+            flat += np.bincount((iy + dy) * w + ix + dx, weights=wt, minlength=h * w)
+        counts = flat.reshape(h, w)
+        dens = gaussian_blur(counts, sigma / res)
+        level = float(np.median(dens[dens > 0.01 * dens.max()])) if dens.max() > 0 else 1.0
+        vals = (1.0 - np.exp(-dens / level)).astype(np.float32)
+        return LikelihoodField(x0, y0, res, vals)
+
+    def sample(self, x: F64, y: F64) -> F64:
+        """Bilinear field values at points (0 outside the field)."""
+        x, y = np.broadcast_arrays(np.asarray(x, np.float64), np.asarray(y, np.float64))
+        h, w = self.values.shape
+        fx = (x - self.origin_x) / self.res - 0.5
+        fy = (y - self.origin_y) / self.res - 0.5
+        x0 = np.floor(fx).astype(np.int64)
+        y0 = np.floor(fy).astype(np.int64)
+        ax, ay = fx - x0, fy - y0
+        out = np.zeros(np.shape(x))
+        for dx, dy, wt in ((0, 0, (1 - ax) * (1 - ay)), (1, 0, ax * (1 - ay)),
+                           (0, 1, (1 - ax) * ay), (1, 1, ax * ay)):
+            cx, cy = x0 + dx, y0 + dy
+            ok = (cx >= 0) & (cx < w) & (cy >= 0) & (cy < h)
+            out[ok] += wt[ok] * self.values[cy[ok], cx[ok]]
+        return out
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,7 @@ remove most of its drift. Residuals, each whitened by its square-root informatio
   error accumulated along it); standard deviations ``σ_xy·√L_i + 5 mm`` and
   ``σ_θ·√L_i + 0.1° + 1 % of the turn``;
 * **match** (consecutive submaps and loop closures): ``X_i⁻¹X_j ⊖ z`` whitened by the
-  match's information (its score-surface covariance, :mod:`pipeline.refine.matcher`);
+  match's information (its posterior covariance, :mod:`pipeline.refine.correlative`);
 * **priors**: anchor 0 stays where it is (σ 1 mm, 0.01°); ``k`` and ``b`` are pulled to 0
   with the configured standard deviations.
 
