@@ -163,9 +163,13 @@ def _loglik(fld: LikelihoodField, cover: np.ndarray, neutral: float, qx: F64, qy
 
 
 def _evidence(ref_x: F64, ref_y: F64, ref_sx: F64, ref_sy: F64, res: float, sigma: float,
-              margin: float) -> tuple[LikelihoodField, np.ndarray, float]:
+              ray: float) -> tuple[LikelihoodField, np.ndarray, float]:
     """The reference's field, the cells its beams covered, and the value of a place they
-    did not: an unobserved place is occupied with the prior probability ``UNSEEN``."""
+    did not: an unobserved place is occupied with the prior probability ``UNSEEN``. The
+    field spans only what its beams covered (``ray``: the longest from a sensor to its
+    echo's arc; 2σ beyond the echo; the blur's 3σ reach): elsewhere every pose scores
+    ``UNSEEN`` whatever the field would hold."""
+    margin = ray + 3 * sigma + 2 * res
     fld = LikelihoodField.of_points(ref_x, ref_y, res=res, sigma=sigma, margin=margin)
     cover = _coverage(fld, ref_x, ref_y, ref_sx, ref_sy, sigma)
     return fld, cover, math.log(OUTLIER + UNSEEN)
@@ -185,10 +189,9 @@ def correlate(ref_x: F64, ref_y: F64, ref_sx: F64, ref_sy: F64, qx: F64, qy: F64
     side has fewer than 3 echoes."""
     if ref_x.shape[0] < 3 or qx.shape[0] < 3:
         return None
-    reach = float(np.sqrt(qx**2 + qy**2).max())
-    margin = window.xy + 3 * window.step_xy + reach
+    ray = float(np.hypot(ref_x - ref_sx[:, None], ref_y - ref_sy[:, None]).max())
     coarse, cover_c, neutral_c = _evidence(ref_x, ref_y, ref_sx, ref_sy, window.step_xy,
-                                           max(sigma, window.step_xy), margin)
+                                           max(sigma, window.step_xy), ray)
     dyaw_c, off_c = _grid(window.yaw, window.step_yaw), _grid(window.xy, window.step_xy)
     mid = qx.shape[1] // 2  # a field blurred wider than the arc: its middle point scores it
     cx_, cy_ = ((qx[:, mid:mid + 1], qy[:, mid:mid + 1]) if window.step_xy >= 4 * res
@@ -211,7 +214,7 @@ def correlate(ref_x: F64, ref_y: F64, ref_sx: F64, ref_sy: F64, qx: F64, qy: F64
         dyaw_f, off_f = _grid(2 * step_yaw, step_yaw / 4), _grid(2 * step_xy, max(res, step_xy / 4))
         step_xy, step_yaw = max(res, step_xy / 4), step_yaw / 4
         fine, cover, neutral = _evidence(ref_x, ref_y, ref_sx, ref_sy, step_xy,
-                                         max(sigma, step_xy), margin)
+                                         max(sigma, step_xy), ray)
         ll = _loglik(fine, cover, neutral, qx, qy, centre, dyaw_f, off_f)
         if res < step_xy:
             k, a, b = np.unravel_index(int(np.argmax(ll)), ll.shape)
