@@ -1,7 +1,8 @@
 """Pose refinement as one model: graph SLAM on the sonar echoes.
 
 1. **Submaps** (:mod:`~pipeline.refine.submaps`): echoes pooled over ``submap_travel_m``
-   of odometry, rigid in their anchor's frame.
+   of odometry, rigid in their anchor's frame; one more anchor, without echoes, at the
+   first pose holds the graph's frame where the odometry has no error yet.
 2. **Scan-to-map matching**, in travel order: submap ``j`` is correlated
    (:mod:`~pipeline.refine.correlative`) against the previous ``local_map_submaps``
    submaps placed by their estimates, around the odometry's prediction (± ``search_xy_m``,
@@ -122,6 +123,15 @@ class _Graph:
         return chi2
 
 
+def _start(tt: np.ndarray, tx: F64, ty: F64, tyaw: F64, first: Submap) -> Submap:
+    """An anchor without echoes at the track's first pose, where the odometry has no error
+    yet: the graph's frame is held there, not at the first submap's anchor (already
+    ``submap_travel_m``/2 of drift in)."""
+    empty = np.empty((0, first.px.shape[1]))
+    return Submap(int(tt[0]), np.array([tx[0], ty[0], tyaw[0]]), 0.0, empty, empty.copy(),
+                  np.empty(0), np.empty(0))
+
+
 def _consistent(g: _Graph, last: int, keep: np.ndarray) -> np.ndarray:
     """The constraints kept once every one the graph explains within χ²'s 99.9 % quantile:
     the worst is dropped and the graph solved again until none exceeds it (one at a time,
@@ -187,6 +197,7 @@ def slam_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig
     if len(submaps) < 2:
         metrics.update(zero, note="fewer than 2 submaps: the odometry")
         return tx.copy(), ty.copy(), tyaw.copy(), metrics
+    submaps = [_start(tt, tx, ty, tyaw, submaps[0]), *submaps]
     odo_anchor = np.array([s.anchor for s in submaps])
     anchor_path = np.array([s.path_m for s in submaps])
     opt = GraphOptions(cfg.odometry_sigma_xy, math.radians(cfg.odometry_sigma_yaw_deg), True,
