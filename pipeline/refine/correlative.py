@@ -139,14 +139,34 @@ def _coverage(fld: LikelihoodField, rx: F64, ry: F64, sx: F64, sy: F64, sigma: f
     return cover.reshape(h, w)
 
 
+def _table(fld: LikelihoodField, cover: np.ndarray, neutral: float) -> F64:
+    """Each cell's log value (the field where the beams looked, else ``neutral``), then one
+    more for outside the field."""
+    table = np.where(cover, np.log(OUTLIER + fld.values.astype(np.float64)), neutral).ravel()
+    return np.concatenate([table, [neutral]])
+
+
 def _loglik(fld: LikelihoodField, cover: np.ndarray, neutral: float, qx: F64, qy: F64,
             centre: F64, dyaw: F64, offsets: F64) -> F64:
-    """ℓ over poses ``centre + (offsets[a], offsets[b], dyaw[k])``: (yaw, x, y)."""
+    """ℓ over poses ``centre + (offsets[a], offsets[b], dyaw[k])``: (yaw, x, y), compiled
+    (:func:`pipeline.refine.kernels.correlation_grid`; :func:`_loglik_reference` in numpy)."""
+    from pipeline.refine.kernels import correlation_grid
+
+    h, w = fld.values.shape
+    cells = np.round(offsets / fld.res).astype(np.int64)
+    return np.asarray(correlation_grid(
+        _table(fld, cover, neutral), h, w, np.ascontiguousarray(qx.ravel()),
+        np.ascontiguousarray(qy.ravel()), qx.shape[1], np.asarray(centre, np.float64),
+        fld.origin_x, fld.origin_y, fld.res, np.asarray(dyaw, np.float64), cells))
+
+
+def _loglik_reference(fld: LikelihoodField, cover: np.ndarray, neutral: float, qx: F64,
+                      qy: F64, centre: F64, dyaw: F64, offsets: F64) -> F64:
+    """:func:`_loglik` in numpy (the kernel's tests compare the two)."""
     n_echo, n_arc = qx.shape
     fx, fy = qx.ravel(), qy.ravel()
     h, w = fld.values.shape
-    table = np.where(cover, np.log(OUTLIER + fld.values.astype(np.float64)), neutral).ravel()
-    table = np.concatenate([table, [neutral]])
+    table = _table(fld, cover, neutral)
     cells = np.round(offsets / fld.res).astype(np.int64)
     out = np.empty((dyaw.shape[0], cells.shape[0], cells.shape[0]))
     for k, da in enumerate(dyaw.tolist()):

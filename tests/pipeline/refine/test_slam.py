@@ -159,3 +159,24 @@ def test_a_closure_the_graph_cannot_explain_is_dropped_and_the_right_ones_stay()
     keep = _consistent(g, 7, np.ones(3, bool))
     assert keep.tolist() == [True, True, False]
     assert np.abs(g.est[:, :2] - truth[:, :2]).max() < 0.01  # solved without it
+
+
+def test_the_compiled_correlation_gives_the_numpy_versions_bits() -> None:
+    from pipeline.refine.correlative import (
+        LikelihoodField,
+        _coverage,
+        _loglik,
+        _loglik_reference,
+    )
+
+    rx, ry, sx, sy = _room(np.random.default_rng(0))
+    qx, qy, _, _ = _room(np.random.default_rng(1))
+    fld = LikelihoodField.of_points(rx, ry, res=0.05, sigma=0.1, margin=1.0)
+    cover = _coverage(fld, rx, ry, sx, sy, 0.1)
+    centre = np.array([0.1, -0.05, 0.02])
+    dyaw, offsets = np.linspace(-0.1, 0.1, 5), np.arange(-8, 9) * 0.05
+    fast = _loglik(fld, cover, math.log(0.55), qx, qy, centre, dyaw, offsets)
+    slow = _loglik_reference(fld, cover, math.log(0.55), qx, qy, centre, dyaw, offsets)
+    assert fast.shape == (5, 17, 17) and np.isfinite(fast).all()
+    assert np.array_equal(fast, slow)
+    assert np.ptp(fast) > 1.0  # the grid sees the room, not a flat field
