@@ -45,6 +45,7 @@ import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -87,6 +88,7 @@ class Row:
     readings_per_s: float
     map_png: Path
     f1_dilated: float = math.nan  # F1 with the map's walls grown by one cell (thickness check)
+    f1_thinned: float = math.nan  # F1 with the map's walls thinned to one cell
     note: str = ""  # OctoMap: which variant and classification scored best
 
 
@@ -170,7 +172,7 @@ def compare_log(
             int(result.metrics.counts["features"]),
             float(result.metrics.timing.get("readings_per_s", float("nan"))),
             out / "map.png",
-            dilated_f1(load_nav2_map(out / "map.yaml"), ref, poses, ev.reach_m, args.tolerance),
+            *thickness_f1(load_nav2_map(out / "map.yaml"), ref, poses, ev.reach_m, args.tolerance),
         ))
     octo = octomap_row(log, cfg, truth, trajectory, reach, work / log.name, args.tolerance)
     if octo is not None:
@@ -216,10 +218,10 @@ def octomap_row(
     note += f" (read-back: {'; '.join(checks)})"
     png = work / "octomap.png"
     classes_png(cls, png)
-    grown = evaluate_maps(dilated(cls), grid, ref.classes, ref.grid, tolerance_m=tolerance,
-                          poses_xy=poses, reach_m=reach, feature_xy=np.zeros((0, 2)))[0]["f1"]
+    grown, thin = thickness_f1(SimpleNamespace(classes=cls, grid=grid), ref, poses, reach,
+                               tolerance)
     return Row("octomap", values["f1"], values["precision"], values["recall"], None, 0,
-               float("nan"), png, float(grown), note)
+               float("nan"), png, grown, thin, note)
 
 
 def dilated(cls: np.ndarray) -> np.ndarray:
@@ -233,15 +235,31 @@ def dilated(cls: np.ndarray) -> np.ndarray:
     return out
 
 
-def dilated_f1(run_map: object, ref: object, poses: np.ndarray | None, reach: float | None,
-               tolerance: float) -> float:
-    """F1 of a run's nav2 map with its walls grown by one cell, scored as the map itself."""
+def thinned(cls: np.ndarray) -> np.ndarray:
+    """A trinary map with its occupied cells thinned to one-cell lines (the cells thinning
+    removes become free)."""
+    from pipeline.tools.evaluate import FREE, OCCUPIED
+    from pipeline.tools.wall_matching import thin
+
+    occupied = cls == OCCUPIED
+    out = cls.copy()
+    out[occupied & ~thin(occupied)] = FREE
+    return out
+
+
+def thickness_f1(run_map: object, ref: object, poses: np.ndarray | None, reach: float | None,
+                 tolerance: float) -> tuple[float, float]:
+    """F1 of a map (``.classes``, ``.grid``) with its walls grown by one cell and with them
+    thinned to one cell, scored as the map itself."""
     from pipeline.tools.evaluate import evaluate_maps
 
-    values, _ = evaluate_maps(dilated(run_map.classes), run_map.grid,  # type: ignore[attr-defined]
-                              ref.classes, ref.grid, tolerance_m=tolerance,  # type: ignore[attr-defined]
-                              poses_xy=poses, reach_m=reach, feature_xy=np.zeros((0, 2)))
-    return float(values["f1"])
+    out = []
+    for changed in (dilated, thinned):
+        values, _ = evaluate_maps(changed(run_map.classes), run_map.grid,  # type: ignore[attr-defined]
+                                  ref.classes, ref.grid, tolerance_m=tolerance,  # type: ignore[attr-defined]
+                                  poses_xy=poses, reach_m=reach, feature_xy=np.zeros((0, 2)))
+        out.append(float(values["f1"]))
+    return out[0], out[1]
 
 
 def classes_png(cls: np.ndarray, path: Path) -> None:
@@ -333,12 +351,13 @@ def sonar_models(results: list[tuple[list[Row], str]]) -> str:
 
 
 def thickness(results: list[tuple[list[Row], str]]) -> str:
-    """F1 with every method's walls grown by one cell, beside its own: a scorer that does
-    not reward thick walls gains (almost) nothing from the growth."""
+    """F1 with every method's walls grown by one cell and thinned to one cell, beside its
+    own: a scorer that neither rewards thick walls nor thin ones gains (almost) nothing
+    from either."""
     keys = ["default", "attribution", "with_correction", "without_correction", "classic", "octomap"]
-    head = ["log (F1 → F1 with walls grown one cell)", *(LABELS[k] for k in keys)]
+    head = ["log (F1: gain grown one cell / thinned to one cell)", *(LABELS[k] for k in keys)]
     lines = ["| " + " | ".join(head) + " |", "|---" + "|---:" * (len(head) - 1) + "|"]
-    worst = -math.inf
+    worst = {"grown": -math.inf, "thinned": -math.inf}
     for rows, caption in results:
         by = {r.key: r for r in rows}
         cells = [caption.split(" vs ")[0]]
@@ -347,12 +366,14 @@ def thickness(results: list[tuple[list[Row], str]]) -> str:
             if r is None:
                 cells.append("–")
                 continue
-            gain = r.f1_dilated - r.f1
-            worst = max(worst, gain)
-            cells.append(f"{r.f1:.3f} → {r.f1_dilated:.3f} ({gain:+.3f})")
+            grown, thin = r.f1_dilated - r.f1, r.f1_thinned - r.f1
+            worst["grown"] = max(worst["grown"], grown)
+            worst["thinned"] = max(worst["thinned"], thin)
+            cells.append(f"{r.f1:.3f}: {grown:+.3f} / {thin:+.3f}")
         lines.append("| " + " | ".join(cells) + " |")
     lines.append("")
-    lines.append(f"Largest gain from growing the walls: {worst:+.3f} F1.")
+    lines.append(f"Largest gain from growing the walls: {worst['grown']:+.3f} F1; "
+                 f"from thinning them: {worst['thinned']:+.3f} F1.")
     return "\n".join(lines)
 
 

@@ -31,7 +31,7 @@ def evaluate(
                      "walls within sensor reach of it."),
     ] = None,
     tolerance: Annotated[
-        float, typer.Option("--tolerance", help="Match distance for occupied cells, m.")
+        float, typer.Option("--tolerance", help="Farthest a map wall cell may lie from the true wall cell it pairs with, m.")
     ] = 0.10,
     reach: Annotated[
         float | None,
@@ -65,8 +65,8 @@ def evaluate(
         bool, typer.Option("--no-report", help="Leave the run's report.html/report.md as they are.")
     ] = False,
 ) -> None:
-    """Score a run's map against a ground-truth map: occupied-cell precision, recall and F1
-    within a tolerance, free-space accuracy, unknown fraction, feature distance to the true
+    """Score a run's map against a ground-truth map: wall precision, recall and F1 (walls
+    thinned to one-cell lines, paired one to one within a tolerance), free-space accuracy, unknown fraction, feature distance to the true
     walls and the paper's mean feature variance; with --truth-trajectory also the
     trajectory errors (ATE, RPE, as evo defines them). The results are added to the run's
     report.html and report.md (unless --no-report); nothing else in the run directory is

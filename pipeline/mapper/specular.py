@@ -19,7 +19,10 @@ Four passes over the log's scans, in the same order:
    out to ``r_max`` the same way.
 3. §9's attribution with these counts and the same stops; the map is §9's linear test.
 
-Memory: §9's grids and eight more float32 / bool grids; nothing grows with the log.
+With ``threads = 2`` pass 2 runs on two threads by row band and the stops of passes 2-3
+on two halves of each group's readings (:mod:`~pipeline.mapper.row_bands`): the same bytes.
+Memory: §9's grids and seven more grids, the list of surfaces and per-group buffers;
+nothing grows with the log (docs/PERFORMANCE.md).
 """
 
 from __future__ import annotations
@@ -33,10 +36,16 @@ from pipeline.config import MapperConfig
 from pipeline.mapper.attribution import AttributionMapper
 from pipeline.mapper.free_space import cone_table
 from pipeline.mapper.kernels.attribution import empty_grid
-from pipeline.mapper.kernels.specular import trace_readings
+from pipeline.mapper.kernels.specular import (
+    shadow_offsets,
+    shadow_profiles,
+    silent_candidates,
+    trace_readings,
+)
 from pipeline.mapper.reading_features import distance_sigma
+from pipeline.mapper.row_bands import RowBands, balanced_split
 from pipeline.mapper.scan_group import ScanGroup
-from pipeline.mapper.types import F32, F64, I32, B, GridSpec, MapperCounters, MapSnapshot
+from pipeline.mapper.types import F32, F64, B, GridSpec, MapperCounters, MapSnapshot
 from pipeline.stages import reading_quality as rq
 
 TABLE_STEP = math.radians(0.25)  # sampling of the visibility table, rad
@@ -97,8 +106,8 @@ class SpecularMapper(AttributionMapper):
         self.cos_table = cos_table(self.table)
         self.arc_c: F32 = empty_grid(grid.shape)
         self.arc_s: F32 = empty_grid(grid.shape)
-        self.surfaces: B = np.zeros(grid.shape, dtype=bool)
-        self.surface_rows: I32 = np.zeros((grid.shape[0], grid.shape[1] + 1), dtype=np.int32)
+        self.occ_index, self.occ_cols = silent_candidates(
+            np.zeros(grid.shape, dtype=bool), empty_grid(grid.shape))
         self.nx: F32 = empty_grid(grid.shape)
         self.ny: F32 = empty_grid(grid.shape)
         self.consistency: F32 = empty_grid(grid.shape)
@@ -106,6 +115,7 @@ class SpecularMapper(AttributionMapper):
         self.arcs2: F32 = empty_grid(grid.shape)
         self.hits2: F32 = empty_grid(grid.shape)
         self._unattributed2 = 0
+        self._bands = RowBands(config.threads)
 
     def begin_pass(self, index: int) -> None:
         """Start pass ``index`` (module doc) over the same scans."""
@@ -120,11 +130,11 @@ class SpecularMapper(AttributionMapper):
 
     def _find_surfaces(self) -> None:
         """The first map's occupied cells, their normal lines and consistency."""
-        self.surfaces = AttributionMapper.occupied(self)
+        surfaces = AttributionMapper.occupied(self)
         radius = max(0, round(self.config.spec_normal_radius_m / self.grid.resolution))
         psi, self.consistency = normal_lines(self.arc_c, self.arc_s, self.arcs, radius)
         self.nx, self.ny = np.cos(psi), np.sin(psi)
-        np.cumsum(self.surfaces, axis=1, out=self.surface_rows[:, 1:])
+        self.occ_index, self.occ_cols = silent_candidates(surfaces, self.consistency)
 
     def _integrate_group(self, group: ScanGroup) -> None:
         if self.pass_index == 0:
@@ -147,14 +157,38 @@ class SpecularMapper(AttributionMapper):
         half = np.minimum(0.5 * cat.fov[rows], 0.5 * math.pi - 1e-9)
         first = self.pass_index == 1
         attribute = self.pass_index != 2
-        lost = trace_readings(
-            cones, up_down, r_inner, free_r[rows], cat.alpha[rows], half,
-            g.origin_x, g.origin_y, g.resolution, self.surfaces, self.surface_rows,
-            self.nx, self.ny, self.consistency, self.cos_table, self.v_unknown, attribute,
-            self.free if first else self.free2, self.arcs if first else self.arcs2,
-            cfg.attr_candidate_ratio, cfg.attr_dilution, self.free2, self.arcs2,
-            self.hits if first else self.hits2, self.arc_c, self.arc_s,
-        )
+        alpha = cat.alpha[rows]
+        height = g.shape[0]
+        # The silent surfaces' shadows, cone by cone (none before the first map's surfaces).
+        offsets = shadow_offsets(cones, half, g.resolution)
+        stops: F64 = np.empty(int(offsets[-1]))
+        stopped: B = np.zeros(len(rows), dtype=bool)
+        if self.occ_cols.size:
+            def shadows(lo: int, hi: int) -> int:
+                return int(shadow_profiles(
+                    cones, up_down, r_inner, alpha, half, g.origin_x, g.origin_y,
+                    g.resolution, self.occ_index, self.occ_cols, self.nx, self.ny,
+                    self.consistency, self.cos_table, attribute, lo, hi, offsets, stops,
+                    stopped,
+                ))
+
+            self._bands.run(shadows, len(rows) // 2, len(rows))
+
+        def trace(row_lo: int, row_hi: int) -> int:
+            return int(trace_readings(
+                cones, up_down, r_inner, free_r[rows], alpha, half,
+                g.origin_x, g.origin_y, g.resolution, offsets, stops, stopped,
+                self.nx, self.ny, self.consistency, self.cos_table, self.v_unknown, attribute,
+                first, self.free if first else self.free2, self.arcs if first else self.arcs2,
+                cfg.attr_candidate_ratio, cfg.attr_dilution, self.free2, self.arcs2,
+                self.hits if first else self.hits2, self.arc_c, self.arc_s, row_lo, row_hi,
+            ))
+
+        if attribute:
+            lost = trace(0, height)
+        else:
+            split = balanced_split(cones, alpha, g.origin_y, g.resolution, height)
+            lost = self._bands.run(trace, split, height)
         if first:
             self._unattributed += int(lost)
         elif attribute:
@@ -175,6 +209,7 @@ class SpecularMapper(AttributionMapper):
 
     def snapshot(self) -> MapSnapshot:
         """§9's snapshot with the surface-aware free counts."""
+        self._bands.close()  # the passes are done
         first, self.free = self.free, self.free2
         try:
             return super().snapshot()

@@ -13,14 +13,17 @@ beside every simulated log), and scores the run's map on the truth grid:
   (same alignment and resolution, truth unknown there), so phantom walls outside the truth
   map still count against precision (``run_occupied_outside`` counts them). All cell
   counts are in truth-grid cells.
-* **Occupied cells.** Precision: of the run's occupied cells, the fraction whose centre
-  lies within ``tolerance_m`` of a true occupied cell centre. Recall: of the true occupied
-  cells *in scope*, the fraction within ``tolerance_m`` of a run occupied cell. In scope
-  means within ``reach`` of a trajectory pose (``reach`` = the run's largest sensor range,
-  or ``sensor_reach_m``); with no trajectory or no known reach every true occupied cell is
-  in scope and a note says so. Distances are Euclidean distance transforms on the truth
-  grid (metres, between cell centres). F1 is their harmonic mean; an undefined precision
-  or recall (nothing to score) counts as 0 and adds a note.
+* **Walls, matched one to one** (:mod:`pipeline.tools.wall_matching`, the Berkeley
+  boundary benchmark's rule). Both maps' occupied cells, less those inside true solids
+  (unobservable), are thinned to one-cell lines: the walls. A run wall cell and a
+  true wall cell correspond when their centres are within ``tolerance_m``; a maximum
+  one-to-one matching pairs them. Precision: of the run's wall cells, the fraction
+  matched. Recall: of the true wall cells *in scope*, the fraction matched. In scope means
+  within ``reach`` of a trajectory pose (``reach`` = the run's largest sensor range, or
+  ``sensor_reach_m``); with no trajectory or no known reach every true wall cell is in
+  scope and a note says so. F1 is their harmonic mean (an undefined precision or recall
+  counts as 0, with a note). A wall's drawn thickness does not change its score; a second
+  line along a matched wall finds no partner and costs precision.
 * **Free space.** Free accuracy: of the run's free cells on known truth cells, the fraction
   free in the truth. Unknown fraction: of the truth's known cells in scope, the fraction
   the run left unknown.
@@ -31,8 +34,7 @@ beside every simulated log), and scores the run's map on the truth grid:
   the ATE, :func:`pipeline.tools.trajectory_error.align_se2`), so it measures the map's shape,
   not where its frame was anchored (:func:`move_classes`).
 * **Features.** Mean (and median) distance, m, from each feature mean to the nearest true
-  occupied cell centre (exact, k-d tree), and the paper's mean feature variance (m²) from
-  ``metrics.json``.
+  occupied cell centre, and the paper's mean feature variance (m²) from ``metrics.json``.
 
 Values that cannot be computed are ``None``, never NaN, so results compare equal and
 serialise to JSON exactly. Everything is deterministic.
@@ -56,6 +58,7 @@ from formats.tables import text_table
 from formats.writers.trajectory_csv import read_trajectory
 from pipeline.se2 import inverse, transform_points
 from pipeline.stages.metrics_schema import Metrics, finite, read_metrics
+from pipeline.tools.wall_matching import interior, match, thin
 
 __all__ = [
     "RUN_FILES",
@@ -71,6 +74,10 @@ __all__ = [
 RUN_FILES = ("map.yaml", "metrics.json", "features.parquet")
 
 OCCUPIED, FREE, UNKNOWN = 1, 0, -1
+#: The rule that pairs run and true wall cells (``Evaluation.matching``).
+MATCHING = "one-to-one, thinned walls"
+#: What an evaluation written before the rule was scored with.
+MATCHING_BEFORE = "distance to the nearest cell"
 
 
 def _within(dist: F64, tolerance_m: float) -> B:
@@ -102,10 +109,10 @@ class Evaluation:
     f1: float
     free_accuracy: float | None
     unknown_fraction: float | None
-    run_occupied: int  # run occupied cells (truth-grid cells, incl. the outside ones)
+    run_occupied: int  # run wall cells (thinned, truth-grid cells, incl. the outside ones)
     run_occupied_matched: int
     run_occupied_outside: int  # of run_occupied, those outside the truth map
-    truth_occupied_in_scope: int
+    truth_occupied_in_scope: int  # true wall cells (surfaces, thinned) in scope
     truth_occupied_matched: int
     run_free: int  # run free cells on known truth cells
     run_free_correct: int
@@ -127,6 +134,8 @@ class Evaluation:
     # The map scored again after the trajectory's SE(2) alignment (module docstring):
     # precision, recall, f1 and the alignment [tx, ty, θ] (m, m, rad).
     aligned: dict[str, Any] | None = None
+    # How run and true wall cells were paired (MATCHING; MATCHING_BEFORE for older files).
+    matching: str = MATCHING
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: floats rounded to 12 significant digits, notes as a list."""
@@ -149,12 +158,13 @@ class Evaluation:
             raise FormatError("evaluation is not a JSON object", source)
         names = [f.name for f in fields(cls)]
         optional = ("notes", "false_occupied", "missed", "oblique", "trajectory_error",
-                    "aligned")
+                    "aligned", "matching")
         missing = [n for n in names if n not in data and n not in optional]
         if missing:
             raise FormatError(f"evaluation has no {', '.join(missing)}", source)
         kwargs = {n: data[n] for n in names if n in data}
         kwargs["notes"] = tuple(str(n) for n in data.get("notes", ()))
+        kwargs["matching"] = str(data.get("matching", MATCHING_BEFORE))
         for n in ("false_occupied", "missed"):
             part = data.get(n, {})
             if not isinstance(part, dict) or not all(isinstance(v, int) for v in part.values()):
@@ -191,11 +201,12 @@ class Evaluation:
             ("truth", self.truth),
             ("trajectory", self.trajectory or "-"),
             ("tolerance", f"{self.tolerance_m:.3g} m"),
+            ("matching", self.matching),
             ("recall scope", scope),
             ("precision", f"{pct(self.precision)}  ({self.run_occupied_matched}"
-                          f"/{self.run_occupied} run occupied cells)"),
+                          f"/{self.run_occupied} run wall cells)"),
             ("recall", f"{pct(self.recall)}  ({self.truth_occupied_matched}"
-                       f"/{self.truth_occupied_in_scope} true occupied cells)"),
+                       f"/{self.truth_occupied_in_scope} true wall cells)"),
             ("F1", f"{self.f1:.4f}"),
             ("free accuracy", f"{pct(self.free_accuracy)}  ({self.run_free_correct}"
                               f"/{self.run_free} run free cells)"),
@@ -440,15 +451,18 @@ def evaluate_maps(
     run, _ = resample_classes(run_classes, run_grid, grid)
     outside_mask = np.ones(grid.shape, dtype=bool)
     outside_mask[window] = False
-    outside = int((outside_mask & (run == OCCUPIED)).sum())
-    if outside:
-        notes.append(f"{outside} run occupied cell(s) lie outside the truth map (counted in "
-                     "precision: no true wall there)")
     truth_grid = grid
     res = truth_grid.resolution
     t_occ = truth_classes == OCCUPIED
     t_known = truth_classes != UNKNOWN
-    r_occ = run == OCCUPIED
+    # The walls scored: both maps' occupied cells outside true solids, as one-cell lines.
+    inside = interior(t_occ)
+    r_wall = thin((run == OCCUPIED) & ~inside)
+    t_wall = thin(t_occ & ~inside)
+    outside = int((outside_mask & r_wall).sum())
+    if outside:
+        notes.append(f"{outside} run wall cell(s) lie outside the truth map (counted in "
+                     "precision: no true wall there)")
 
     if poses_xy is not None and reach_m is not None:
         scope = _in_reach(truth_grid, poses_xy, reach_m)
@@ -459,13 +473,17 @@ def evaluate_maps(
         why = "no trajectory" if poses_xy is None else "no known sensor reach"
         notes.append(f"{why}: recall and unknown fraction are over all true cells")
 
-    dist_truth = _distance_to(t_occ, res)
-    dist_run = _distance_to(r_occ, res)
-    run_occupied = int(r_occ.sum())
-    run_matched = int((r_occ & _within(dist_truth, tolerance_m)).sum())
-    t_scope = t_occ & scope
+    # Precision from a largest matching into all true walls, recall from one into those in
+    # scope: one matching attains both (the true cells a matching can cover form a matroid,
+    # so a largest matching into the walls in scope extends to a largest one into all).
+    r_matched, t_matched = match(r_wall, t_wall, tolerance_m, res)
+    run_occupied = int(r_wall.sum())
+    run_matched = int(r_matched.sum())
+    t_scope = t_wall & scope
+    if not scope.all():
+        _, t_matched = match(r_wall, t_scope, tolerance_m, res)
     truth_in_scope = int(t_scope.sum())
-    truth_matched = int((t_scope & _within(dist_run, tolerance_m)).sum())
+    truth_matched = int((t_matched & scope).sum())
     precision = _ratio(run_matched, run_occupied)
     recall = _ratio(truth_matched, truth_in_scope)
     if precision is None:
@@ -482,15 +500,17 @@ def evaluate_maps(
     known_in_scope = int(k_scope.sum())
     unknown_in_scope = int((k_scope & (run == UNKNOWN)).sum())
 
+    dist_run = _distance_to(r_wall, res)
     false_occupied, missed = error_breakdown(
-        r_occ, run, t_occ & scope, truth_classes, dist_truth, dist_run, tolerance_m
+        r_wall & ~r_matched, t_scope & ~t_matched, run, truth_classes,
+        _distance_to(t_wall, res), dist_run, tolerance_m,
     )
     oblique: dict[str, float] = {}
     if oblique_deg is not None and poses_xy is not None and reach_m is not None:
         from pipeline.tools.oblique_walls import seen_obliquely
 
         obl = seen_obliquely(t_occ, truth_grid, t_scope, poses_xy, reach_m, oblique_deg)
-        miss = t_scope & ~_within(dist_run, tolerance_m)
+        miss = t_scope & ~t_matched
         free_miss = miss & ~_within(dist_run, NEAR_M) & (run == FREE)
         oblique = {"incidence_deg": float(oblique_deg), "walls": int(obl.sum()),
                    "missed": int((obl & miss).sum()),
@@ -535,6 +555,7 @@ def evaluate_maps(
         "false_occupied": false_occupied,
         "missed": missed,
         "oblique": oblique,
+        "matching": MATCHING,
     }
     return values, tuple(notes)
 
@@ -545,28 +566,31 @@ NEAR_M = 0.25
 
 
 def error_breakdown(
-    run_occupied: B, run_classes: I8, truth_in_scope: B, truth_classes: I8,
+    false: B, miss: B, run_classes: I8, truth_classes: I8,
     dist_truth: F64, dist_run: F64, tolerance_m: float,
 ) -> tuple[dict[str, int], dict[str, int]]:
     """Why a map is wrong, in truth-grid cells.
 
-    False occupied cells (farther than ``tolerance_m`` from every true wall) are
-    ``near_wall`` (within ``NEAR_M``: a wall drawn in the wrong place), ``in_free_space``
-    (farther, where the truth is free: a phantom inside the rooms, which the run should
-    have seen free) or ``unobserved`` (farther, where the truth is unknown: behind walls or
-    outside the building). Missed wall cells (in scope, no run occupied cell within
-    ``tolerance_m``) are ``near_prediction`` (a run occupied cell within ``NEAR_M``),
-    ``seen_free`` (the run calls the cell free: free-space evidence overrode the wall) or
-    ``unobserved`` (the run left it unknown).
+    ``false``: the run's unmatched wall cells; ``miss``: the unmatched true wall cells in
+    scope; ``dist_truth`` and ``dist_run``: distances, m, to the nearest true and run wall
+    cell. False cells are ``double`` (within ``tolerance_m`` of a true wall whose cells all
+    went to other run cells: a second line along a wall), ``near_wall`` (farther, within
+    ``NEAR_M``: a wall drawn in the wrong place), ``in_free_space`` (farther, where the
+    truth is free: a phantom inside the rooms, which the run should have seen free) or
+    ``unobserved`` (farther, where the truth is unknown: behind walls or outside the
+    building). Missed wall cells are ``near_prediction`` (a run wall cell within
+    ``NEAR_M``), ``seen_free`` (the run calls the cell free: free-space evidence overrode
+    the wall) or ``unobserved`` (the run left it unknown).
     """
-    false = run_occupied & ~_within(dist_truth, tolerance_m)
-    near = _within(dist_truth, NEAR_M)
-    miss = truth_in_scope & ~_within(dist_run, tolerance_m)
+    close = _within(dist_truth, tolerance_m)
+    near = _within(dist_truth, NEAR_M) & ~close
+    far = ~close & ~near
     near_pred = _within(dist_run, NEAR_M)
     false_occupied = {
+        "double": int((false & close).sum()),
         "near_wall": int((false & near).sum()),
-        "in_free_space": int((false & ~near & (truth_classes == FREE)).sum()),
-        "unobserved": int((false & ~near & (truth_classes == UNKNOWN)).sum()),
+        "in_free_space": int((false & far & (truth_classes == FREE)).sum()),
+        "unobserved": int((false & far & (truth_classes == UNKNOWN)).sum()),
     }
     missed = {
         "near_prediction": int((miss & near_pred).sum()),

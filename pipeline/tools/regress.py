@@ -6,7 +6,8 @@ tolerance, ok):
 * ``f1`` — only when the golden directory holds an ``evaluation.json`` (written by
   ``sonarmap evaluate --output`` when the golden was refreshed): the run is re-evaluated
   against the same truth, trajectory, tolerance and reach named in it, and its F1 may not
-  drop by more than ``f1_drop`` below the golden's (an improvement always passes).
+  drop by more than ``f1_drop`` below the golden's (an improvement always passes); a golden
+  scored by another wall-matching rule (its ``matching``) is not compared, with a note.
   Relative paths in evaluation.json are looked up beside the golden directory, then in the
   golden directory's parents (so repository-relative paths work from any checkout), then in
   the working directory.
@@ -282,6 +283,10 @@ def _f1_row(
         run_dir, truth, trajectory=traj, tolerance_m=golden.tolerance_m,
         sensor_reach_m=golden.reach_m if within else None,
     )
+    if current.matching != golden.matching:
+        notes.append(f"golden F1 was scored by '{golden.matching}', evaluate now scores by "
+                     f"'{current.matching}': F1 not compared (refresh the golden)")
+        return None
     # evaluation.json holds 12 significant digits: compare the current F1 at that precision.
     f1 = float(f"{current.f1:.12g}")
     ok = f1 >= golden.f1 - tol.f1_drop - 1e-12

@@ -27,8 +27,13 @@ import numpy as np
 from numba import njit
 
 from pipeline.mapper.kernels.attribution import reach_cells
-from pipeline.mapper.kernels.cone import edge_sector_spans, max_sector_spans
-from pipeline.mapper.types import F32, F64, I32, B
+from pipeline.mapper.kernels.cone import (
+    cone_row_span,
+    cone_rows,
+    edge_sector_spans,
+    max_sector_spans,
+)
+from pipeline.mapper.types import F32, F64, I32, I64, B
 
 MAX_BINS = 2048  # angular bins of one cone's occlusion profile
 
@@ -44,45 +49,69 @@ def visible(dx: float, dy: float, dist: float, nx: float, ny: float, table: F64)
     return table[k] * (1.0 - f) + table[k + 1] * f
 
 
-@njit(cache=True)
-def trace_readings(
-    cones: F64, up_down: B, r_inner: F64, r_free: F64, alpha: F64, half_fov: F64,
-    gx: float, gy: float, res: float, occ: B, occ_rows: I32, nx: F32, ny: F32, cons: F32,
-    table: F64, v_unknown: float, attribute: bool, free_in: F32,
-    arcs_in: F32, ratio: float, dilution: float, free_out: F32, arcs_out: F32,
-    hits: F32, arc_c: F32, arc_s: F32,
+@njit(cache=True, inline="always")
+def shadow_bins(hb: float, r_out: float, res: float) -> int:
+    """Angular bins of a cone's shadow profile: about one per cell across its far edge."""
+    return min(MAX_BINS, math.ceil(2.0 * hb * r_out / res) + 1)
+
+
+@njit(cache=True, nogil=True)
+def shadow_offsets(cones: F64, half_fov: F64, res: float) -> I64:
+    """Where each reading's shadow profile starts in :func:`shadow_profiles`' ``stops``
+    (and, last, their total length)."""
+    out = np.zeros(cones.shape[0] + 1, dtype=np.int64)
+    for i in range(cones.shape[0]):
+        out[i + 1] = out[i] + shadow_bins(half_fov[i], cones[i, 2], res)
+    return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def shadow_profiles(
+    cones: F64, up_down: B, r_inner: F64, alpha: F64, half_fov: F64, gx: float, gy: float,
+    res: float, occ_index: I32, occ_cols: I32, nx: F32, ny: F32, cons: F32, table: F64,
+    attribute: bool, lo: int, hi: int, offsets: I64, stops: F64, stopped: B,
 ) -> int:
-    """One pass over the readings (module doc); returns, with ``attribute``, the echoes
-    with no candidate cell. ``occ_rows`` is the running count of ``occ`` along each row
-    (one leading zero column), so rows of a span without a surface are skipped."""
-    height, width = free_out.shape
+    """The shadows of the silent surfaces in the cones of readings ``lo:hi``: ``stopped[i]``
+    whether a ray of reading ``i`` stops, and ``stops[offsets[i] + b]`` the distance where
+    the rays of its angular bin ``b`` stop (bins uniform in the tangent of the bearing off
+    the axis). With ``attribute`` the readings with no echo are left out (no arc). Writes
+    only these readings' entries, so calls on disjoint readings may run side by side;
+    returns how many readings have a shadow."""
+    height, width = cons.shape
     reach = reach_cells(cones, res)
     size = max_sector_spans(reach * res, res)
     rows = np.empty(size, dtype=np.int64)
     c0s = np.empty(size, dtype=np.int64)
     c1s = np.empty(size, dtype=np.int64)
-    cand_r = np.empty(reach * reach, dtype=np.int64)
-    cand_c = np.empty(reach * reach, dtype=np.int64)
-    stop = np.empty(MAX_BINS, dtype=np.float64)
-    lost = 0
-    for i in range(cones.shape[0]):
+    count = 0
+    for i in range(lo, hi):
         ox, oy, r_out = cones[i, 0], cones[i, 1], cones[i, 2]
+        stopped[i] = False
+        if attribute and not r_inner[i] < r_out:
+            continue
         a, hb = alpha[i], half_fov[i]
-        n = edge_sector_spans(ox, oy, cones[i, 3], cones[i, 4], cones[i, 5], cones[i, 6],
-                              up_down[i, 0], up_down[i, 1], 0.0, r_out, gx, gy, res, width,
-                              height, rows, c0s, c1s)
-        ca, sa = math.cos(a), math.sin(a)
-        t_edge = math.tan(hb)  # bins uniform in tan(bearing − α) across the cone
-        nb = min(MAX_BINS, math.ceil(2.0 * hb * r_out / res) + 1)
-        bin_w = 2.0 * t_edge / nb
-        stopped = False
-        for k in range(n):  # the silent surfaces in the cone and their shadows
-            r = rows[k]
-            if occ_rows[r, c1s[k] + 1] == occ_rows[r, c0s[k]]:
+        s1, c1, s2, c2 = cones[i, 3], cones[i, 4], cones[i, 5], cones[i, 6]
+        # edge_sector_spans' spans, on the rows that hold a surface that may be silent
+        r0, r1 = cone_rows(oy, r_out, s1, s2, up_down[i, 0], up_down[i, 1], gy, res, height)
+        n = 0
+        for row in range(r0, r1 + 1):
+            if occ_index[row, width] == occ_index[row, 0]:
                 continue
-            for c in range(c0s[k], c1s[k] + 1):
-                if not occ[r, c]:
-                    continue
+            c_lo, c_hi = cone_row_span(ox, oy, r_out, s1, c1, s2, c2, row, gx, gy, res, width)
+            if c_lo <= c_hi:
+                rows[n] = row
+                c0s[n] = c_lo
+                c1s[n] = c_hi
+                n += 1
+        ca, sa = math.cos(a), math.sin(a)
+        t_edge = math.tan(hb)
+        nb = offsets[i + 1] - offsets[i]
+        bin_w = 2.0 * t_edge / nb
+        stop = stops[offsets[i]:offsets[i + 1]]
+        for k in range(n):
+            r = rows[k]
+            for j in range(occ_index[r, c0s[k]], occ_index[r, c1s[k] + 1]):
+                c = occ_cols[j]
                 dx = gx + (c + 0.5) * res - ox
                 dy = gy + (r + 0.5) * res - oy
                 dist = math.sqrt(dx * dx + dy * dy)
@@ -93,9 +122,10 @@ def trace_readings(
                 along = dx * ca + dy * sa
                 if along <= 0.0:
                     continue
-                if not stopped:
-                    stop[:nb] = np.inf
-                    stopped = True
+                if not stopped[i]:
+                    stop[:] = np.inf
+                    stopped[i] = True
+                    count += 1
                 t = (dy * ca - dx * sa) / along
                 rel = t + t_edge
                 hw = 0.5 * res / max(dist, res) * (1.0 + t * t)
@@ -103,38 +133,121 @@ def trace_readings(
                 k1 = min(nb - 1, math.floor((rel + hw) / bin_w))
                 for kb in range(k0, k1 + 1):
                     stop[kb] = min(stop[kb], dist)
-        m = 0
+    return count
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def trace_readings(
+    cones: F64, up_down: B, r_inner: F64, r_free: F64, alpha: F64, half_fov: F64,
+    gx: float, gy: float, res: float, offsets: I64, stops: F64, stopped_in: B, nx: F32,
+    ny: F32, cons: F32, table: F64, v_unknown: float, attribute: bool, bearings: bool,
+    free_in: F32, arcs_in: F32, ratio: float, dilution: float, free_out: F32,
+    arcs_out: F32, hits: F32, arc_c: F32, arc_s: F32, row_lo: int, row_hi: int,
+) -> int:
+    """One pass over the readings (module doc), writing only the grid rows
+    ``row_lo ≤ r < row_hi`` (without ``attribute``: the rows a thread owns, so two threads
+    on two bands add to each cell in reading order, as one would); returns, with
+    ``attribute`` (all rows), the echoes with no candidate cell (readings with no echo
+    count as such). The readings' shadows are :func:`shadow_profiles`' (``offsets, stops,
+    stopped_in``). With ``bearings`` (and ``attribute``) the arc cells add their bearings
+    to ``arc_c, arc_s``.
+
+    Speed, not results: a span's distances, incidences and shadow bins are first computed
+    in loops without branches (the compiler vectorises them: the same IEEE operations, so
+    the same bits; divisors are never zero, so numpy's error model only drops the checks),
+    then the cells are visited."""
+    height, width = free_out.shape
+    reach = reach_cells(cones, res)
+    size = max_sector_spans(reach * res, res)
+    rows = np.empty(size, dtype=np.int64)
+    c0s = np.empty(size, dtype=np.int64)
+    c1s = np.empty(size, dtype=np.int64)
+    cand_r = np.empty(reach * reach, dtype=np.int64)
+    cand_c = np.empty(reach * reach, dtype=np.int64)
+    dbuf = np.empty(width + 1, dtype=np.float64)
+    kbuf = np.empty(width + 1, dtype=np.int64)
+    xbuf = np.empty(width + 1, dtype=np.float64)
+    tmax = float(table.shape[0] - 1)
+    ntab = table.shape[0] - 2
+    lost = 0
+    for i in range(cones.shape[0]):
+        ox, oy, r_out = cones[i, 0], cones[i, 1], cones[i, 2]
         rf, ri = r_free[i], r_inner[i]
+        if attribute and not ri < r_out:  # no echo: no arc to attribute
+            lost += 1
+            continue
+        a, hb = alpha[i], half_fov[i]
+        s1, c1, s2, c2 = cones[i, 3], cones[i, 4], cones[i, 5], cones[i, 6]
+        stopped = stopped_in[i]
+        stop = stops[offsets[i]:offsets[i + 1]]
+        nb = offsets[i + 1] - offsets[i]
+        ca, sa = math.cos(a), math.sin(a)
+        t_edge = math.tan(hb)  # bins uniform in tan(bearing − α) across the cone
+        bin_w = 2.0 * t_edge / nb
+        m = 0
         if attribute:  # only the arc's cells matter: the annulus' spans
-            if not ri < r_out:
-                n = 0
-            elif ri > 0.0:
-                n = edge_sector_spans(ox, oy, cones[i, 3], cones[i, 4], cones[i, 5],
-                                      cones[i, 6], up_down[i, 0], up_down[i, 1], ri, r_out,
-                                      gx, gy, res, width, height, rows, c0s, c1s)
+            n = edge_sector_spans(ox, oy, s1, c1, s2, c2, up_down[i, 0], up_down[i, 1], ri,
+                                  r_out, gx, gy, res, width, height, rows, c0s, c1s)
+        else:  # edge_sector_spans' spans, on this call's rows
+            r0, r1 = cone_rows(oy, r_out, s1, s2, up_down[i, 0], up_down[i, 1], gy, res,
+                               height)
+            n = 0
+            for row in range(max(r0, row_lo), min(r1 + 1, row_hi)):
+                c_lo, c_hi = cone_row_span(ox, oy, r_out, s1, c1, s2, c2, row, gx, gy, res,
+                                           width)
+                if c_lo <= c_hi:
+                    rows[n] = row
+                    c0s[n] = c_lo
+                    c1s[n] = c_hi
+                    n += 1
         for k in range(n):
             r = rows[k]
-            for c in range(c0s[k], c1s[k] + 1):
-                dx = gx + (c + 0.5) * res - ox
-                dy = gy + (r + 0.5) * res - oy
-                d2 = dx * dx + dy * dy
-                dist = math.sqrt(d2)
+            if r < row_lo or r >= row_hi:
+                continue
+            c0 = c0s[k]
+            w = c1s[k] + 1 - c0
+            dy = gy + (r + 0.5) * res - oy
+            if not attribute:
+                nxr, nyr = nx[r, c0:c0 + w], ny[r, c0:c0 + w]
+                for j in range(w):
+                    dxv = gx + ((c0 + j) + 0.5) * res - ox
+                    dv = math.sqrt(dxv * dxv + dy * dy)
+                    dbuf[j] = dv
+                    xbuf[j] = abs(dxv * nxr[j] + dy * nyr[j]) / max(dv, 1e-12) * tmax
                 if stopped:
-                    along = max(dx * ca + dy * sa, 1e-12)
-                    kb = math.floor(((dy * ca - dx * sa) / along + t_edge) / bin_w)
-                    if dist > stop[min(max(kb, 0), nb - 1)]:
+                    for j in range(w):
+                        dxv = gx + ((c0 + j) + 0.5) * res - ox
+                        along = max(dxv * ca + dy * sa, 1e-12)
+                        kb = math.floor(((dy * ca - dxv * sa) / along + t_edge) / bin_w)
+                        kbuf[j] = min(max(kb, 0), nb - 1)
+            for c in range(c0, c0 + w):
+                dx = gx + (c + 0.5) * res - ox
+                d2 = dx * dx + dy * dy
+                dist = dbuf[c - c0] if not attribute else math.sqrt(d2)
+                if stopped:
+                    if attribute:
+                        along = max(dx * ca + dy * sa, 1e-12)
+                        kb = math.floor(((dy * ca - dx * sa) / along + t_edge) / bin_w)
+                        kb = min(max(kb, 0), nb - 1)
+                    else:
+                        kb = kbuf[c - c0]
+                    if dist > stop[kb]:
                         continue
                 if dist < rf and not attribute:
                     q = cons[r, c]
-                    free_out[r, c] += (q * visible(dx, dy, dist, nx[r, c], ny[r, c], table)
+                    x = xbuf[c - c0]
+                    kt = min(int(x), ntab)
+                    f = x - kt
+                    free_out[r, c] += (q * (table[kt] * (1.0 - f) + table[kt + 1] * f)
                                        + (1.0 - q) * v_unknown)
                 if dist >= ri:
                     if not attribute:
                         arcs_out[r, c] += 1.0
                         continue
-                    inv = 1.0 / max(d2, 1e-24)
-                    arc_c[r, c] += (dx * dx - dy * dy) * inv  # cos 2φ
-                    arc_s[r, c] += 2.0 * dx * dy * inv  # sin 2φ
+                    if bearings:
+                        inv = 1.0 / max(d2, 1e-24)
+                        arc_c[r, c] += (dx * dx - dy * dy) * inv  # cos 2φ
+                        arc_s[r, c] += 2.0 * dx * dy * inv  # sin 2φ
                     if free_in[r, c] <= ratio * arcs_in[r, c]:
                         cand_r[m] = r
                         cand_c[m] = c
@@ -148,3 +261,16 @@ def trace_readings(
         for k in range(m):
             hits[cand_r[k], cand_c[k]] += w
     return lost
+
+
+def silent_candidates(surfaces: B, consistency: F32) -> tuple[I32, I32]:
+    """The surface cells that may be silent to some ray, listed for
+    :func:`trace_readings`: ``(occ_index, occ_cols)``. A cell is silent to a ray when
+    ``q·(1 − visible) > ½``, which needs ``q > ½``: cells with ``q ≤ ½`` never stop a ray."""
+    cand = surfaces & (consistency > 0.5)
+    index = np.zeros((cand.shape[0], cand.shape[1] + 1), dtype=np.int32)
+    np.cumsum(cand, axis=1, out=index[:, 1:])
+    index += np.concatenate(([0], np.cumsum(index[:-1, -1]))).astype(np.int32)[:, None]
+    cols: I32 = np.nonzero(cand)[1].astype(np.int32)
+    return index, cols
+

@@ -29,7 +29,8 @@ def test_false_occupied_cells_are_split_by_where_they_lie() -> None:
     run[6, 6] = OCCUPIED
     run[10, 35] = OCCUPIED  # behind the wall, where the truth never saw
     v = _score(run, truth)
-    assert v["false_occupied"] == {"near_wall": 1, "in_free_space": 2, "unobserved": 1}
+    assert v["false_occupied"] == {"double": 0, "near_wall": 1, "in_free_space": 2,
+                                   "unobserved": 1}
     assert sum(v["false_occupied"].values()) == v["run_occupied"] - v["run_occupied_matched"]
 
 

@@ -126,6 +126,18 @@ def test_f1_compared_when_golden_has_evaluation(tmp_path: Path) -> None:
         regress(same, golden)
 
 
+def test_f1_not_compared_with_a_golden_scored_by_another_rule(tmp_path: Path) -> None:
+    truth = write_truth(tmp_path)
+    golden = write_run(tmp_path / "golden")
+    doc = evaluate_run(golden, truth).to_dict()
+    del doc["matching"]  # an evaluation.json written before the one-to-one rule
+    (golden / "evaluation.json").write_text(json.dumps(doc), encoding="utf-8")
+    result = regress(write_run(tmp_path / "bad", shifted_wall(5)), golden)
+    assert "f1" not in [r.metric for r in result.rows]
+    assert any("golden F1 was scored by 'distance to the nearest cell'" in n
+               for n in result.notes)
+
+
 def test_incomplete_directories_are_input_errors(tmp_path: Path) -> None:
     golden, run = golden_and_run(tmp_path)
     (golden / "metrics.json").unlink()

@@ -72,15 +72,16 @@ def test_shift_beyond_tolerance_scores_zero(tmp_path: Path) -> None:
     assert evaluate_run(run, truth, tolerance_m=0.24).f1 == 0.0
 
 
-def test_half_wall_recall_counts_cells_within_tolerance(tmp_path: Path) -> None:
+def test_half_wall_recall_counts_one_true_cell_per_run_cell(tmp_path: Path) -> None:
     truth = write_truth(tmp_path)
     run = write_run(tmp_path / "run", wall_probability(cols=slice(40, 70)))
     ev = evaluate_run(run, truth)
     assert ev.precision == 1.0
-    # True cells 40..69, and 38, 39 (0.10 and 0.05 m from the run's first cell).
-    assert ev.truth_occupied_matched == 32
-    assert ev.recall == 32 / 60
-    assert ev.f1 == pytest.approx(2 * (32 / 60) / (1 + 32 / 60))
+    # 30 run cells pair with 30 true cells (one each), though true cells 38 and 39 also lie
+    # within 0.10 m of the run's first cell.
+    assert ev.truth_occupied_matched == 30
+    assert ev.recall == 30 / 60
+    assert ev.f1 == pytest.approx(2 * 0.5 / 1.5)
 
 
 def test_empty_run_recall_zero_precision_undefined(tmp_path: Path) -> None:
@@ -114,13 +115,14 @@ def test_coarser_run_with_other_origin_is_resampled(tmp_path: Path) -> None:
     prob[0, 0] = 1.0  # centre (-0.45, -0.25): outside the truth map
     run = write_run(tmp_path / "run", prob, grid)
     ev = evaluate_run(run, truth)
-    # Each coarse cell covers 2×2 truth cells: the wall becomes truth rows 30 and 31, the
-    # phantom outside the truth map 4 cells of the extended truth grid, all unmatched.
-    assert ev.run_occupied == 2 * WALL_CELLS + 4
-    assert ev.run_occupied_outside == 4
-    assert ev.run_occupied_matched == 2 * WALL_CELLS
-    assert ev.precision == 120 / 124 and ev.recall == 1.0
-    assert any("4 run occupied cell(s) lie outside the truth map" in n for n in ev.notes)
+    # Each coarse cell covers 2×2 truth cells: the wall becomes truth rows 30 and 31, thinned
+    # to one line of 59 cells (thinning shortens a two-cell-thick bar by one cell); the
+    # phantom outside the truth map becomes 2×2 cells of the extended grid, thinned to one.
+    assert ev.run_occupied == WALL_CELLS - 1 + 1
+    assert ev.run_occupied_outside == 1
+    assert ev.run_occupied_matched == WALL_CELLS - 1
+    assert ev.precision == 59 / 60 and ev.recall == 59 / 60
+    assert any("1 run wall cell(s) lie outside the truth map" in n for n in ev.notes)
     assert ev.unknown_fraction == 0.0
 
 
@@ -129,7 +131,7 @@ def test_partial_run_map_leaves_the_rest_unknown(tmp_path: Path) -> None:
     grid = GridSpec(2.0, 0.0, 0.05, 40, 60)  # covers x ∈ [2, 4) only
     run = write_run(tmp_path / "run", wall_probability(grid, cols=slice(0, 30)), grid)
     ev = evaluate_run(run, truth)
-    assert ev.precision == 1.0 and ev.recall == 32 / 60
+    assert ev.precision == 1.0 and ev.recall == 30 / 60
     assert ev.unknown_fraction == 0.5  # truth columns 0..39 are outside the run map
 
 
@@ -170,10 +172,13 @@ def test_recall_scope_follows_trajectory_and_reach(tmp_path: Path) -> None:
     # Cells within 10 cells of a cell centre: the Gauss circle count N(10) = 317.
     assert ev.truth_known_in_scope == 317
     assert ev.precision == 1.0
+    # The run cell pairs with the true cell in scope, not with its neighbours 38, 39, 41
+    # and 42 (as close, but out of scope).
+    assert ev.truth_occupied_matched == 1
     everything = evaluate_run(run, truth)
-    # Over the whole wall: the one run cell matches true cells 38..42.
+    # Over the whole wall: the one run cell pairs with one true cell.
     assert everything.truth_occupied_in_scope == WALL_CELLS
-    assert everything.recall == 5 / WALL_CELLS
+    assert everything.recall == 1 / WALL_CELLS
 
 
 def test_reach_from_config_and_metrics(tmp_path: Path) -> None:

@@ -1,0 +1,99 @@
+"""The specular method's speed-ups keep its bytes: the row-band split between two threads
+(any split row, one thread or two), and the list of surfaces that may be silent."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+from specular_room import specular_scans
+
+import pipeline.mapper.specular as specular
+from pipeline.config import MapperConfig
+from pipeline.mapper import make_mapper
+from pipeline.mapper.kernels.specular import silent_candidates
+from pipeline.mapper.row_bands import RowBands, balanced_split
+from pipeline.mapper.synthetic import room_grid
+
+
+def test_balanced_split_halves_the_cones_area() -> None:
+    # Four cones along +x (centroid on the origin's row), one twice the radius (4× area).
+    oy = np.array([0.5, 1.0, 1.5, 2.0])
+    cones = np.zeros((4, 7))
+    cones[:, 1] = oy
+    cones[:, 2] = [1.0, 1.0, 1.0, 2.0]
+    alpha = np.zeros(4)
+    # weights 1, 1, 1, 4 by row 10, 20, 30, 40: half of 7 is reached at row 40
+    assert balanced_split(cones, alpha, 0.0, 0.05, 100) == 40
+    cones[:, 2] = 1.0
+    assert balanced_split(cones, alpha, 0.0, 0.05, 100) == 20
+    # A cone pointing up counts where its cells are: 2/3 of its radius above the origin.
+    up = cones[:1].copy()
+    up[0, 2] = 3.0
+    assert balanced_split(up, np.array([np.pi / 2]), 0.0, 0.05, 100) == 50
+    assert balanced_split(np.zeros((0, 7)), np.zeros(0), 0.0, 0.05, 100) == 50
+    assert balanced_split(cones, alpha, 10.0, 0.05, 100) == 0  # clamped to the grid
+
+
+def test_row_bands_run_both_bands_and_add_their_results() -> None:
+    calls: list[tuple[int, int, str]] = []
+
+    def band(lo: int, hi: int) -> int:
+        calls.append((lo, hi, threading.current_thread().name))
+        return 10 * lo + hi
+
+    two = RowBands(2)
+    assert two.run(band, 5, 12) == (0 + 5) + (50 + 12)
+    assert sorted(c[:2] for c in calls) == [(0, 5), (5, 12)]
+    assert any(name.startswith("sonarmap-band") for *_, name in calls)  # the upper band
+    two.close()
+    calls.clear()
+    assert two.run(band, 5, 12) == 12 and [c[:2] for c in calls] == [(0, 12)]
+    calls.clear()
+    assert RowBands(1).run(band, 5, 12) == 12 and [c[:2] for c in calls] == [(0, 12)]
+
+    def fails(lo: int, hi: int) -> int:
+        raise ValueError(f"band {lo}")
+
+    with pytest.raises(ValueError, match="band"):
+        RowBands(2).run(fails, 5, 12)
+
+
+def _specular_grids(threads: int) -> dict[str, np.ndarray]:
+    grid = room_grid()
+    m = make_mapper(MapperConfig(threads=threads), grid)
+    scans = specular_scans(120, 20.0)
+    for index in range(m.passes):
+        m.begin_pass(index)
+        m.integrate_many(scans)
+    out = {k: getattr(m, k).copy() for k in ("free2", "arcs2", "hits2", "hits", "free")}
+    out["occupied"] = m.snapshot().occupied
+    return out
+
+
+def test_the_specular_maps_do_not_depend_on_threads_or_the_split(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    one = _specular_grids(1)
+    assert one["occupied"].sum() > 100 and one["free2"].max() > 1.0
+    for split in (None, 0, 37, 10**6):
+        if split is not None:
+            monkeypatch.setattr(specular, "balanced_split", lambda *a, s=split: min(s, a[-1]))
+        two = _specular_grids(2)
+        for name, grid in one.items():
+            assert np.array_equal(grid, two[name]), (split, name)
+
+
+def test_silent_candidates_list_the_consistent_surfaces_row_by_row() -> None:
+    surfaces = np.array([[1, 0, 1, 1], [0, 0, 0, 0], [1, 1, 0, 1]], dtype=bool)
+    q = np.full(surfaces.shape, 0.9, dtype=np.float32)
+    q[0, 3] = 0.5  # q ≤ ½ never stops a ray: q·(1 − visible) ≤ q
+    index, cols = silent_candidates(surfaces, q)
+    assert cols.tolist() == [0, 2, 0, 1, 3]
+    # row r, columns c0..c1: cols[index[r, c0]:index[r, c1 + 1]]
+    assert cols[index[0, 0]:index[0, 4]].tolist() == [0, 2]
+    assert cols[index[0, 1]:index[0, 3]].tolist() == [2]
+    assert index[1, 0] == index[1, 4] == 2
+    assert cols[index[2, 1]:index[2, 4]].tolist() == [1, 3]
+    assert index.dtype == np.int32 and index.shape == (3, 5)
