@@ -266,9 +266,6 @@ class PoseRefinementConfig:
     compass_min_z: float = doc_field(
         "... applied when the drift stands this many standard errors from 0 (as unlikely: "
         "Student's t over the windows fitted)", default=4.0)
-    match_submaps: bool = doc_field("after the calibration, match submaps and solve the pose "
-                               "graph (off: measured worse on sonar, see RESULTS.md)",
-                               default=False)
     submap_travel_m: float = doc_field("echoes are pooled into a submap per this much travel, m",
                                   default=8.0)
     submap_min_echoes: int = doc_field("a shorter stretch joins the next submap", default=60)
@@ -353,17 +350,13 @@ class PoseRefinementConfig:
         "(aliases: <= 0.037 sharper; 0.8 deg/m of bias: 0.07-0.77; Belgioioso: 0.19 and "
         "level), or, found by the consistency scan, more consistent by it and less sharp "
         "(lattices: 0.17-0.23; yaw noise's aliases: 0.035-0.057); 1e9: neither", default=0.10)
-    calibrate: bool = doc_field("estimate the odometry's scale error and heading bias", default=True)
     prior_scale: float = doc_field("σ of the odometry's scale error (prior, fraction)", default=0.01)
+    prior_bias_deg_per_m: float = doc_field("σ of the heading bias's prior, deg/m", default=2.0)
 
     @property
     def echo_reach_m(self) -> float:
         """The farthest echo refinement uses: those it matches, or the scale's far ones."""
         return max(self.max_echo_range_m, self.calibration_far_range_m)
-    prior_bias_deg_per_m: float = doc_field("σ of the heading bias's prior, deg/m", default=2.0)
-    robust_scale: float = doc_field("Cauchy loss scale on whitened residuals", default=3.0)
-    reject_chi2: float = doc_field("a match whose χ² after solving exceeds this is dropped",
-                              default=16.0)
 
 
 # Keys that set how fast a run goes, never what it computes: left out of Config.hash.
@@ -595,8 +588,7 @@ RANGES: dict[str, Range] = {
         "calibration_max_bias_deg_per_m": above(0, 45, "deg/m"),
         "calibration_min_gain": Range(0, 1, hi_open=True),
         "calibration_strong_gain": Range(0, 1e9), "prior_scale": above(0, 10),
-        "prior_bias_deg_per_m": above(0, 90, "deg/m"), "robust_scale": above(0, 1e3),
-        "reject_chi2": above(0, 1e9),
+        "prior_bias_deg_per_m": above(0, 90, "deg/m"),
     }.items()},
 }
 
@@ -640,7 +632,7 @@ def _check_ranges(cfg: Config) -> None:
     for key in ("submap_travel_m", "max_echo_range_m", "field_resolution_m", "field_sigma_m",
                 "search_xy_m", "search_yaw_deg", "loop_radius_m", "loop_search_xy_m",
                 "loop_search_yaw_deg", "odometry_sigma_xy", "odometry_sigma_yaw_deg",
-                "prior_scale", "prior_bias_deg_per_m", "robust_scale", "reject_chi2",
+                "prior_scale", "prior_bias_deg_per_m",
                 "local_stretch_m"):
         v = getattr(pr, key)
         need(math.isfinite(v) and v > 0, f"pose_refinement.{key}", "must be > 0", v)

@@ -232,9 +232,7 @@ def _refine_poses(
     track = PoseTrack(refined.t_ns, refined.x, refined.y, refined.yaw, old.parent_frame,
                       old.child_frame, backwards=old.backwards, duplicates=old.duplicates,
                       spikes=old.spikes)
-    log.info("pose refinement: %d submaps, %d matches, %d loop closures; poses moved %.3f m "
-             "on average", refined.metrics["submaps"], refined.metrics.get("matches_accepted", 0),
-             refined.metrics.get("loop_closures_accepted", 0), refined.metrics["moved_mean_m"])
+    log.info("%s", refined.metrics["summary"])
     return dataclasses.replace(sv, track=track), refined.metrics
 
 

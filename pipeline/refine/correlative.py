@@ -1,8 +1,8 @@
 """Correlative scan-to-submap matching that reports a distribution, not a best cell.
 
 The reference points (earlier submaps placed by the current estimate) become a blurred
-evidence field (:meth:`pipeline.refine.matcher.LikelihoodField.of_points`, values in
-[0, 1)). A candidate pose ``p`` of the query submap gets the log-likelihood
+evidence field (:meth:`LikelihoodField.of_points`, values in [0, 1)). A candidate pose
+``p`` of the query submap gets the log-likelihood
 
     ℓ(p) = Σ_e log(ε + max_arc f(p ⊕ e)),   ε = OUTLIER
 
@@ -33,13 +33,70 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from formats.angles import wrap_angle
 from formats.arrays import F64
-from pipeline.refine.matcher import LikelihoodField
+
+F32 = npt.NDArray[np.float32]
 
 OUTLIER = 0.05  # field value an echo gets where the reference saw nothing (a floor)
 UNSEEN = 0.5  # field value where the reference's beams never looked (the occupancy prior)
+
+
+@dataclass(frozen=True)
+class LikelihoodField:
+    """``values[row, col]`` over cells of ``res`` m; row 0 at ``origin_y`` (min y)."""
+
+    origin_x: float
+    origin_y: float
+    res: float
+    values: F32
+
+    @staticmethod
+    def of_points(x: F64, y: F64, *, res: float, sigma: float, margin: float) -> LikelihoodField:
+        """The evidence field of arc points ``(x, y)`` over their box grown by ``margin``:
+        their density ``ρ`` (splatted bilinearly) blurred by a Gaussian of ``sigma`` m, as
+        ``1 − exp(−ρ/ρ_med)`` (``ρ_med`` the median over cells with evidence), so a wall seen
+        by few echoes counts nearly as much as one seen by many. Arcs of echoes from different
+        viewpoints cross where the obstacle is, so its cells hold the most evidence."""
+        from pipeline.refine.kernels import gaussian_blur
+
+        x, y = x.ravel(), y.ravel()
+        x0 = math.floor((float(x.min()) - margin) / res) * res
+        y0 = math.floor((float(y.min()) - margin) / res) * res
+        w = math.ceil((float(x.max()) + margin - x0) / res) + 2
+        h = math.ceil((float(y.max()) + margin - y0) / res) + 2
+        # Each point is splatted bilinearly over the four cells around it (no res/2 bias).
+        fx, fy = (x - x0) / res - 0.5, (y - y0) / res - 0.5
+        ix, iy = np.floor(fx).astype(np.int64), np.floor(fy).astype(np.int64)
+        ax, ay = fx - ix, fy - iy
+        flat = np.zeros(h * w)
+        for dx, dy, wt in ((0, 0, (1 - ax) * (1 - ay)), (1, 0, ax * (1 - ay)),
+                           (0, 1, (1 - ax) * ay), (1, 1, ax * ay)):
+            flat += np.bincount((iy + dy) * w + ix + dx, weights=wt, minlength=h * w)
+        counts = flat.reshape(h, w)
+        dens = gaussian_blur(counts, sigma / res)
+        level = float(np.median(dens[dens > 0.01 * dens.max()])) if dens.max() > 0 else 1.0
+        vals = (1.0 - np.exp(-dens / level)).astype(np.float32)
+        return LikelihoodField(x0, y0, res, vals)
+
+    def sample(self, x: F64, y: F64) -> F64:
+        """Bilinear field values at points (0 outside the field)."""
+        x, y = np.broadcast_arrays(np.asarray(x, np.float64), np.asarray(y, np.float64))
+        h, w = self.values.shape
+        fx = (x - self.origin_x) / self.res - 0.5
+        fy = (y - self.origin_y) / self.res - 0.5
+        x0 = np.floor(fx).astype(np.int64)
+        y0 = np.floor(fy).astype(np.int64)
+        ax, ay = fx - x0, fy - y0
+        out = np.zeros(np.shape(x))
+        for dx, dy, wt in ((0, 0, (1 - ax) * (1 - ay)), (1, 0, ax * (1 - ay)),
+                           (0, 1, (1 - ax) * ay), (1, 1, ax * ay)):
+            cx, cy = x0 + dx, y0 + dy
+            ok = (cx >= 0) & (cx < w) & (cy >= 0) & (cy < h)
+            out[ok] += wt[ok] * self.values[cy[ok], cx[ok]]
+        return out
 
 
 @dataclass(frozen=True)
@@ -82,14 +139,34 @@ def _coverage(fld: LikelihoodField, rx: F64, ry: F64, sx: F64, sy: F64, sigma: f
     return cover.reshape(h, w)
 
 
+def _table(fld: LikelihoodField, cover: np.ndarray, neutral: float) -> F64:
+    """Each cell's log value (the field where the beams looked, else ``neutral``), then one
+    more for outside the field."""
+    table = np.where(cover, np.log(OUTLIER + fld.values.astype(np.float64)), neutral).ravel()
+    return np.concatenate([table, [neutral]])
+
+
 def _loglik(fld: LikelihoodField, cover: np.ndarray, neutral: float, qx: F64, qy: F64,
             centre: F64, dyaw: F64, offsets: F64) -> F64:
-    """ℓ over poses ``centre + (offsets[a], offsets[b], dyaw[k])``: (yaw, x, y)."""
+    """ℓ over poses ``centre + (offsets[a], offsets[b], dyaw[k])``: (yaw, x, y), compiled
+    (:func:`pipeline.refine.kernels.correlation_grid`; :func:`_loglik_reference` in numpy)."""
+    from pipeline.refine.kernels import correlation_grid
+
+    h, w = fld.values.shape
+    cells = np.round(offsets / fld.res).astype(np.int64)
+    return np.asarray(correlation_grid(
+        _table(fld, cover, neutral), h, w, np.ascontiguousarray(qx.ravel()),
+        np.ascontiguousarray(qy.ravel()), qx.shape[1], np.asarray(centre, np.float64),
+        fld.origin_x, fld.origin_y, fld.res, np.asarray(dyaw, np.float64), cells))
+
+
+def _loglik_reference(fld: LikelihoodField, cover: np.ndarray, neutral: float, qx: F64,
+                      qy: F64, centre: F64, dyaw: F64, offsets: F64) -> F64:
+    """:func:`_loglik` in numpy (the kernel's tests compare the two)."""
     n_echo, n_arc = qx.shape
     fx, fy = qx.ravel(), qy.ravel()
     h, w = fld.values.shape
-    table = np.where(cover, np.log(OUTLIER + fld.values.astype(np.float64)), neutral).ravel()
-    table = np.concatenate([table, [neutral]])
+    table = _table(fld, cover, neutral)
     cells = np.round(offsets / fld.res).astype(np.int64)
     out = np.empty((dyaw.shape[0], cells.shape[0], cells.shape[0]))
     for k, da in enumerate(dyaw.tolist()):
@@ -106,9 +183,13 @@ def _loglik(fld: LikelihoodField, cover: np.ndarray, neutral: float, qx: F64, qy
 
 
 def _evidence(ref_x: F64, ref_y: F64, ref_sx: F64, ref_sy: F64, res: float, sigma: float,
-              margin: float) -> tuple[LikelihoodField, np.ndarray, float]:
+              ray: float) -> tuple[LikelihoodField, np.ndarray, float]:
     """The reference's field, the cells its beams covered, and the value of a place they
-    did not: an unobserved place is occupied with the prior probability ``UNSEEN``."""
+    did not: an unobserved place is occupied with the prior probability ``UNSEEN``. The
+    field spans only what its beams covered (``ray``: the longest from a sensor to its
+    echo's arc; 2σ beyond the echo; the blur's 3σ reach): elsewhere every pose scores
+    ``UNSEEN`` whatever the field would hold."""
+    margin = ray + 3 * sigma + 2 * res
     fld = LikelihoodField.of_points(ref_x, ref_y, res=res, sigma=sigma, margin=margin)
     cover = _coverage(fld, ref_x, ref_y, ref_sx, ref_sy, sigma)
     return fld, cover, math.log(OUTLIER + UNSEEN)
@@ -128,10 +209,9 @@ def correlate(ref_x: F64, ref_y: F64, ref_sx: F64, ref_sy: F64, qx: F64, qy: F64
     side has fewer than 3 echoes."""
     if ref_x.shape[0] < 3 or qx.shape[0] < 3:
         return None
-    reach = float(np.sqrt(qx**2 + qy**2).max())
-    margin = window.xy + 3 * window.step_xy + reach
+    ray = float(np.hypot(ref_x - ref_sx[:, None], ref_y - ref_sy[:, None]).max())
     coarse, cover_c, neutral_c = _evidence(ref_x, ref_y, ref_sx, ref_sy, window.step_xy,
-                                           max(sigma, window.step_xy), margin)
+                                           max(sigma, window.step_xy), ray)
     dyaw_c, off_c = _grid(window.yaw, window.step_yaw), _grid(window.xy, window.step_xy)
     mid = qx.shape[1] // 2  # a field blurred wider than the arc: its middle point scores it
     cx_, cy_ = ((qx[:, mid:mid + 1], qy[:, mid:mid + 1]) if window.step_xy >= 4 * res
@@ -154,7 +234,7 @@ def correlate(ref_x: F64, ref_y: F64, ref_sx: F64, ref_sy: F64, qx: F64, qy: F64
         dyaw_f, off_f = _grid(2 * step_yaw, step_yaw / 4), _grid(2 * step_xy, max(res, step_xy / 4))
         step_xy, step_yaw = max(res, step_xy / 4), step_yaw / 4
         fine, cover, neutral = _evidence(ref_x, ref_y, ref_sx, ref_sy, step_xy,
-                                         max(sigma, step_xy), margin)
+                                         max(sigma, step_xy), ray)
         ll = _loglik(fine, cover, neutral, qx, qy, centre, dyaw_f, off_f)
         if res < step_xy:
             k, a, b = np.unravel_index(int(np.argmax(ll)), ll.shape)

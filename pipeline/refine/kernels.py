@@ -497,3 +497,45 @@ def free_samples(ox: np.ndarray, oy: np.ndarray, rx: np.ndarray, ry: np.ndarray,
                     c = min(max(int((fx - x0) / cell), 0), w - 1)
                     counts[r, c] += 1.0
     return xmin, ymin, xmax, ymax
+
+
+@njit(cache=True, nogil=True)
+def correlation_grid(table: np.ndarray, h: int, w: int, fx: np.ndarray, fy: np.ndarray,
+                     n_arc: int, centre: np.ndarray, origin_x: float, origin_y: float,
+                     res: float, dyaw: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """The correlative match's log-likelihood over poses ``centre + (cells[a]·res,
+    cells[b]·res, dyaw[k])`` (:func:`pipeline.refine.correlative._loglik`, whose numpy
+    version it replaces bit for bit): ``table`` the per-cell log values (row-major ``h × w``,
+    then one more: the value outside), ``fx, fy`` the query's arc points (echo-major,
+    ``n_arc`` per echo); each echo scores its best arc point, summed over echoes in order."""
+    n_cells = cells.shape[0]
+    n_pts = fx.shape[0]
+    n_echo = n_pts // n_arc
+    out = np.zeros((dyaw.shape[0], n_cells, n_cells))
+    ix = np.empty(n_pts, np.int64)
+    iy = np.empty(n_pts, np.int64)
+    best = np.empty((n_cells, n_cells))
+    outside = h * w
+    for k in range(dyaw.shape[0]):
+        th = centre[2] + dyaw[k]
+        c, s = math.cos(th), math.sin(th)
+        for p in range(n_pts):
+            ix[p] = np.int64(math.floor((centre[0] + c * fx[p] - s * fy[p] - origin_x) / res))
+            iy[p] = np.int64(math.floor((centre[1] + s * fx[p] + c * fy[p] - origin_y) / res))
+        for e in range(n_echo):
+            for a in range(n_cells):
+                for b in range(n_cells):
+                    best[a, b] = -np.inf
+            for q in range(e * n_arc, (e + 1) * n_arc):
+                for a in range(n_cells):
+                    cx = ix[q] + cells[a]
+                    for b in range(n_cells):
+                        cy = iy[q] + cells[b]
+                        i = cy * w + cx if 0 <= cx < w and 0 <= cy < h else outside
+                        v = table[i]
+                        if v > best[a, b]:
+                            best[a, b] = v
+            for a in range(n_cells):
+                for b in range(n_cells):
+                    out[k, a, b] += best[a, b]
+    return out

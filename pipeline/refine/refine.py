@@ -1,35 +1,20 @@
 """Pose refinement: the odometry corrected from the sonar echoes, before mapping.
 
-0. **Calibration** (:mod:`~pipeline.refine.calibration`, ``calibration_search``): the
-   odometry's scale error and heading bias that the echoes agree on; the rest works on
-   the odometry corrected by them. Then ``compass`` (:mod:`~pipeline.refine.compass`):
-   the walls' spectrum overrules a heading bias whose track turns the walls off one
-   lattice (an alias: calibrated again near the walls' bias), and the windows take out the
-   heading bias left where the walls' directions drift along the run (the scale then
-   found again under the walls' heading). Then
-   ``local_corrections``
-   (:mod:`~pipeline.refine.stretches`): a rigid correction per stretch of travel where the
-   surface patches that its visits share establish one (the odometry's random walk). With
-   ``match_submaps = false`` (the default, see below) this is the refinement.
-1. **Submaps** (:mod:`~pipeline.refine.submaps`): echoes pooled over ~1.5 m of odometry.
-2. **Sequential matching**: each submap is matched (:mod:`~pipeline.refine.matcher`) against
-   the previous ``local_map_submaps`` submaps placed by their current estimates, around the
-   odometry's prediction; a match scoring ``min_score`` or more places the submap and
-   becomes a constraint on the pose graph, else the odometry's prediction is kept.
-3. **Loop closures**: each submap is matched against earlier submaps (not the recent ones:
-   ``loop_min_path_m`` of travel apart) whose estimated anchors lie within
-   ``loop_radius_m``, nearest first, in a wider window; gated by score and ambiguity.
-4. **Pose graph** (:mod:`~pipeline.refine.graph`) over odometry, matches and loop closures,
-   with the odometry calibration (scale error, heading bias); matches whose χ² at the
-   solution exceeds ``reject_chi2`` are dropped and the graph solved again.
-5. **Back onto every pose**: the odometry re-integrated with the estimated calibration
-   (:func:`pipeline.drift.apply_drift` with the inverse model), then each pose moved by
-   the anchors' corrections interpolated in time (linear, shortest arc in yaw).
+1. **Calibration** (:mod:`~pipeline.refine.calibration`, ``calibration_search``): the
+   odometry's scale error and heading bias that the echoes agree on, removed by
+   re-integrating the odometry with the inverse drift model.
+2. **Compass** (:mod:`~pipeline.refine.compass`, ``compass``): the walls' spectrum
+   overrules a heading bias whose track turns the walls off one lattice (an alias:
+   calibrated again near the walls' bias), and the windows take out the heading bias left
+   where the walls' directions drift along the run (the scale then found again under the
+   walls' heading).
+3. **Local corrections** (:mod:`~pipeline.refine.stretches`, ``local_corrections``): a
+   rigid correction per stretch of travel where the surface patches that its visits share
+   establish one (the odometry's random walk).
 
-Steps 1-5 (``match_submaps``) are off by default: measured on the simulated office run
-with 3 % scale error and 0.8°/m heading bias, the matcher's yaw errors on sonar submaps
-(3-8°, against 1-2° of odometry error per submap) made the graph's result worse than the
-calibrated odometry (ATE 0.31 m against 0.125 m); see benchmarks/RESULTS.md.
+``model = "graph"`` replaces all three by graph SLAM on the echoes
+(:mod:`~pipeline.refine.slam`: submaps, correlative loop closures, one pose graph with the
+odometry's scale and heading bias as variables, an acceptance test).
 
 Everything is numpy and scipy without randomness, so the same input gives the same bytes.
 """
@@ -45,7 +30,6 @@ import numpy as np
 from formats.angles import wrap_angle
 from formats.arrays import F64, I64
 from pipeline.config import PoseRefinementConfig
-from pipeline.drift import DriftModel, apply_drift
 from pipeline.refine.calibration import (
     Calibration,
     Lean,
@@ -60,19 +44,8 @@ from pipeline.refine.compass import (
     window_lattice,
 )
 from pipeline.refine.echoes import Echoes
-from pipeline.refine.graph import (
-    GraphOptions,
-    MatchConstraints,
-    Odometry,
-    cost_at,
-    solve,
-    sqrt_information,
-)
-from pipeline.refine.matcher import LikelihoodField, Match, SearchWindow, match
 from pipeline.refine.stretches import consistency_needed, correct_stretches
-from pipeline.refine.submaps import Submap, build_submaps, path_length_at
-from pipeline.se2 import between, compose, inverse, transform_points
-from pipeline.stages.pose_sync import POSE_OK, PoseTrack, interpolate_poses
+from pipeline.stages.pose_sync import PoseTrack
 
 
 @dataclass(frozen=True)
@@ -84,55 +57,6 @@ class Refinement:
     y: F64
     yaw: F64
     metrics: dict[str, Any]
-
-
-@dataclass
-class _Constraint:
-    i: int
-    j: int
-    z: F64
-    cov: F64
-    kind: str  # "sequential" or "loop"
-
-
-class _Matcher:
-    """Submap matching with the configured field and gates."""
-
-    def __init__(self, cfg: PoseRefinementConfig, submaps: list[Submap]):
-        self.cfg = cfg
-        self.submaps = submaps
-        self.step_xy = cfg.field_resolution_m
-        self.seq = SearchWindow(cfg.search_xy_m, math.radians(cfg.search_yaw_deg),
-                                cfg.field_resolution_m, math.radians(0.5))
-        self.loop = SearchWindow(cfg.loop_search_xy_m, math.radians(cfg.loop_search_yaw_deg),
-                                 2 * cfg.field_resolution_m, math.radians(1.0))
-
-    def against(self, refs: list[int], est: F64, j: int, prediction: F64,
-                window: SearchWindow) -> Match | None:
-        xs, ys = [], []
-        for r in refs:
-            sm = self.submaps[r]
-            wx, wy = transform_points(est[r], sm.px, sm.py)
-            xs.append(wx)
-            ys.append(wy)
-        rx, ry = np.concatenate(xs), np.concatenate(ys)
-        if rx.shape[0] < 3 or len(self.submaps[j]) < 3:
-            return None
-        cfg = self.cfg
-        margin = window.xy + 3 * cfg.field_sigma_m + cfg.max_echo_range_m
-        fld = LikelihoodField.of_points(rx, ry, res=cfg.field_resolution_m,
-                                        sigma=cfg.field_sigma_m, margin=margin)
-        q = self.submaps[j]
-        return match(fld, q.px, q.py, prediction, window, temperature=0.02,
-                     floor_xy=0.02, floor_yaw=math.radians(0.3),
-                     distinct_m=max(0.3, 3 * cfg.field_sigma_m), distinct_rad=math.radians(8))
-
-
-def _rotate_cov(cov: F64, yaw: float) -> F64:
-    """A world-frame (x, y, yaw) covariance expressed in a frame rotated by ``yaw``."""
-    c, s = math.cos(yaw), math.sin(yaw)
-    r = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
-    return np.asarray(r @ cov @ r.T)
 
 
 def configured_calibration(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes,
@@ -282,107 +206,9 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
             metrics["consistency_after"] = cal0.consistency
     else:
         ox, oy, oyaw = tx, ty, tyaw
-    path = path_length_at(tt, ox, oy, echoes.t_ns) if len(echoes) else np.empty(0)
-    submaps = build_submaps(echoes, path, travel_m=cfg.submap_travel_m,
-                            min_echoes=cfg.submap_min_echoes, max_points=cfg.submap_max_points)
-    metrics["submaps"] = len(submaps)
-    if not cfg.match_submaps or len(submaps) < 2:
-        metrics["note"] = ("fewer than 2 submaps: no matching" if cfg.match_submaps
-                           else "match_submaps = false: the calibrated odometry")
-        metrics.update({"matches_accepted": 0, "matches_rejected": 0,
-                        "loop_closures_accepted": 0, "loop_closures_rejected": 0,
-                        "cost_initial": None, "cost_final": None})
-        metrics.update(_moved(tx, ty, tyaw, ox, oy, oyaw))
-        metrics["summary"] = summary(metrics, cfg)
-        return Refinement(tt.copy(), ox.copy(), oy.copy(), oyaw.copy(), metrics)
-    n = len(submaps)
-    odo_anchor = np.array([s.anchor for s in submaps])
-    anchor_path = np.array([s.path_m for s in submaps])
-    matcher = _Matcher(cfg, submaps)
-    est = odo_anchor.copy()
-    cons: list[_Constraint] = []
-    seq_ok = seq_rejected = 0
-    for j in range(1, n):
-        pred = compose(est[j - 1], between(odo_anchor[j - 1], odo_anchor[j]))
-        refs = list(range(max(0, j - cfg.local_map_submaps), j))
-        m = matcher.against(refs, est, j, pred, matcher.seq)
-        if m is not None and m.score >= cfg.min_score:
-            est[j] = m.pose
-            z = between(est[j - 1], m.pose)
-            cons.append(_Constraint(j - 1, j, z, _rotate_cov(m.cov, est[j - 1][2]), "sequential"))
-            seq_ok += 1
-        else:
-            est[j] = pred
-            seq_rejected += 1
-    loop_tried = loop_ok = loop_gated = 0
-    for j in range(n):
-        d = np.hypot(est[:j, 0] - est[j, 0], est[:j, 1] - est[j, 1])
-        far_path = anchor_path[j] - anchor_path[:j] >= cfg.loop_min_path_m
-        cand = np.flatnonzero((d <= cfg.loop_radius_m) & far_path)
-        cand = cand[np.argsort(d[cand], kind="stable")][: cfg.loop_max_per_submap]
-        for i in cand.tolist():
-            loop_tried += 1
-            refs = [r for r in (i - 1, i, i + 1) if 0 <= r < n and r != j]
-            m = matcher.against(refs, est, j, est[j], matcher.loop)
-            if m is None or m.score < cfg.min_score or m.ambiguity > cfg.max_ambiguity:
-                loop_gated += 1
-                continue
-            z = between(est[i], m.pose)
-            cons.append(_Constraint(i, j, z, _rotate_cov(m.cov, est[i][2]), "loop"))
-            loop_ok += 1
-    odo = Odometry(between(odo_anchor[:-1], odo_anchor[1:]), np.diff(anchor_path))
-    opt = GraphOptions(cfg.odometry_sigma_xy, math.radians(cfg.odometry_sigma_yaw_deg),
-                       cfg.calibrate, cfg.prior_scale, math.radians(cfg.prior_bias_deg_per_m),
-                       cfg.robust_scale)
-    mc = MatchConstraints(
-        np.array([c.i for c in cons], np.int64), np.array([c.j for c in cons], np.int64),
-        np.array([c.z for c in cons]).reshape(-1, 3),
-        np.array([sqrt_information(c.cov) for c in cons]).reshape(-1, 3, 3),
-    )
-    kinds = np.array([c.kind for c in cons])
-    cost_odometry = cost_at(odo_anchor, odo, mc, opt)
-    sol = solve(est, odo, mc, opt)
-    cost_initial = sol.cost_initial
-    bad = sol.match_chi2 > cfg.reject_chi2
-    if bad.any():
-        mc = mc.take(~bad)
-        sol = solve(sol.anchors, odo, mc, opt)
-    rejected_seq = int((bad & (kinds == "sequential")).sum()) if kinds.size else 0
-    rejected_loop = int((bad & (kinds == "loop")).sum()) if kinds.size else 0
-    # Back onto every pose: calibrated odometry, then the anchors' corrections.
-    inv_model = DriftModel(
-        scale_error=1.0 / (1.0 + sol.scale_error) - 1.0,
-        heading_bias_deg_per_m=-math.degrees(sol.heading_bias),
-    )
-    cx, cy, cyaw = apply_drift(ox, oy, oyaw, inv_model)
-    cal = PoseTrack(tt, cx, cy, cyaw, "", "")
-    t_anchor = np.array([s.t_ns for s in submaps], np.int64)
-    look = interpolate_poses(cal, t_anchor, np.iinfo(np.int64).max)
-    assert (look.reason == POSE_OK).all()
-    cal_anchor = np.column_stack([look.x, look.y, look.yaw])
-    corr = compose(sol.anchors, inverse(cal_anchor))  # world-frame correction per anchor
-    corr[:, 2] = np.unwrap(corr[:, 2])
-    ct = [np.interp(tt.astype(np.float64), t_anchor.astype(np.float64), corr[:, k])
-          for k in range(3)]
-    out = compose(np.column_stack(ct), np.column_stack([cx, cy, cyaw]))
-    rx, ry, ryaw = out[:, 0].copy(), out[:, 1].copy(), wrap_angle(out[:, 2])
-    metrics.update({
-        "matches_accepted": seq_ok - rejected_seq,
-        "matches_rejected": seq_rejected + rejected_seq,
-        "loop_closures_tried": loop_tried,
-        "loop_closures_accepted": loop_ok - rejected_loop,
-        "loop_closures_rejected": loop_gated + rejected_loop,
-        "rejected_after_solve": int(bad.sum()),
-        "cost_odometry": cost_odometry,
-        "cost_initial": cost_initial,
-        "cost_final": sol.cost_final,
-        "solver_evaluations": sol.iterations,
-        "scale_error": sol.scale_error,
-        "heading_bias_deg_per_m": math.degrees(sol.heading_bias),
-    })
-    metrics.update(_moved(tx, ty, tyaw, rx, ry, ryaw))
+    metrics.update(_moved(tx, ty, tyaw, ox, oy, oyaw))
     metrics["summary"] = summary(metrics, cfg)
-    return Refinement(tt.copy(), rx, ry, ryaw, metrics)
+    return Refinement(tt.copy(), ox.copy(), oy.copy(), oyaw.copy(), metrics)
 
 
 def graph_summary(metrics: dict[str, Any]) -> str:
@@ -466,9 +292,6 @@ def summary(metrics: dict[str, Any], cfg: PoseRefinementConfig) -> str:
         else:
             parts.append(f"no local corrections ({gain:.2f} < {cfg.local_min_gain:g} per "
                          "parameter)")
-    if metrics.get("cost_final") is not None:
-        parts.append(f"{metrics['matches_accepted']} matches, "
-                     f"{metrics['loop_closures_accepted']} loop closures")
     parts.append(f"poses moved {metrics.get('moved_mean_m', 0.0):.2f} m mean, "
                  f"{metrics.get('moved_max_m', 0.0):.2f} m max")
     return "pose refinement: " + "; ".join(parts)

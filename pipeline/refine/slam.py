@@ -1,7 +1,8 @@
 """Pose refinement as one model: graph SLAM on the sonar echoes.
 
 1. **Submaps** (:mod:`~pipeline.refine.submaps`): echoes pooled over ``submap_travel_m``
-   of odometry, rigid in their anchor's frame.
+   of odometry, rigid in their anchor's frame; one more anchor, without echoes, at the
+   first pose holds the graph's frame where the odometry has no error yet.
 2. **Scan-to-map matching**, in travel order: submap ``j`` is correlated
    (:mod:`~pipeline.refine.correlative`) against the previous ``local_map_submaps``
    submaps placed by their estimates, around the odometry's prediction (± ``search_xy_m``,
@@ -14,12 +15,18 @@
 4. **Pose graph** (:mod:`~pipeline.refine.graph`): odometry (σ ``odometry_sigma_xy`` m/√m,
    ``odometry_sigma_yaw_deg`` °/√m), matches and closures under a Cauchy loss, the
    odometry's scale error and heading bias as two more variables (priors
-   ``prior_scale``, ``prior_bias_deg_per_m``); constraints whose χ² at the solution
-   exceeds the 3-dof 99.9 % quantile are dropped and the graph solved again.
-5. **Acceptance** (a likelihood-ratio test): the same graph's cost at the odometry
-   against at the solution. Were the odometry right, twice the difference would be χ²
-   with one degree of freedom per anchor coordinate and calibration term the solution
-   moves; the solution replaces the odometry only beyond that χ²'s 99 % quantile.
+   ``prior_scale``, ``prior_bias_deg_per_m``). After each closure and at the end the
+   constraint of largest χ² beyond the 3-dof 99.9 % quantile is dropped and the graph
+   solved again, one at a time until every constraint left is explained (a wrong closure
+   bends the graph and raises the χ² of the right ones; it goes first).
+5. **Acceptance**, two tests the solution must pass to replace the odometry: a
+   likelihood ratio — were the odometry right, twice its cost minus the solution's would
+   be at most χ² with one degree of freedom per constraint coordinate (3 per constraint
+   kept), so it must exceed that χ²'s 99 % quantile — and the echoes, which the graph
+   never saw whole: their consistency ``H/(H+F)``
+   (:class:`~pipeline.refine.scores.Consistency`) must be higher on the solution's poses
+   than on the odometry's (closures that agree with each other but not with the
+   building, e.g. alike rooms, bend the track and scatter the echoes).
 6. **Back onto every pose**: the odometry re-integrated with the estimated calibration,
    then each pose moved by the anchors' corrections interpolated in time.
 
@@ -38,6 +45,7 @@ from formats.angles import wrap_angle
 from formats.arrays import F64
 from pipeline.config import PoseRefinementConfig
 from pipeline.drift import DriftModel, apply_drift
+from pipeline.refine.calibration import consistency_change
 from pipeline.refine.correlative import Correlation, Window, correlate
 from pipeline.refine.echoes import Echoes
 from pipeline.refine.graph import (
@@ -48,6 +56,8 @@ from pipeline.refine.graph import (
     solve,
     sqrt_information,
 )
+from pipeline.refine.scores import MAX_ECHOES_CONSISTENCY, thin
+from pipeline.refine.stretches import track_consistency_gain
 from pipeline.refine.submaps import Submap, build_submaps, path_length_at
 from pipeline.se2 import between, compose, inverse, transform_points
 from pipeline.stages.pose_sync import POSE_OK, PoseTrack, interpolate_poses
@@ -82,6 +92,12 @@ class _Graph:
         self.u.append(sqrt_information(r @ cov @ r.T))
         self.loop.append(loop)
 
+    def drop(self, keep: np.ndarray) -> None:
+        """Forget the constraints not in ``keep``."""
+        for name in ("i", "j", "z", "u", "loop"):
+            setattr(self, name, [v for v, k in zip(getattr(self, name), keep.tolist(),
+                                                   strict=True) if k])
+
     def constraints(self, keep: np.ndarray | None = None) -> MatchConstraints:
         mc = MatchConstraints(np.array(self.i, np.int64), np.array(self.j, np.int64),
                               np.array(self.z).reshape(-1, 3), np.array(self.u).reshape(-1, 3, 3))
@@ -105,6 +121,28 @@ class _Graph:
         idx = np.flatnonzero(inside) if keep is None else np.flatnonzero(keep)[inside]
         chi2[idx] = sol.match_chi2
         return chi2
+
+
+def _start(tt: np.ndarray, tx: F64, ty: F64, tyaw: F64, first: Submap) -> Submap:
+    """An anchor without echoes at the track's first pose, where the odometry has no error
+    yet: the graph's frame is held there, not at the first submap's anchor (already
+    ``submap_travel_m``/2 of drift in)."""
+    empty = np.empty((0, first.px.shape[1]))
+    return Submap(int(tt[0]), np.array([tx[0], ty[0], tyaw[0]]), 0.0, empty, empty.copy(),
+                  np.empty(0), np.empty(0))
+
+
+def _consistent(g: _Graph, last: int, keep: np.ndarray) -> np.ndarray:
+    """The constraints kept once every one the graph explains within χ²'s 99.9 % quantile:
+    the worst is dropped and the graph solved again until none exceeds it (one at a time,
+    since a wrong constraint raises the χ² of the right ones it bends)."""
+    keep = keep.copy()
+    while True:
+        chi2 = g.solve_upto(last, keep)
+        worst = int(np.argmax(np.where(keep, chi2, -1.0))) if keep.any() else -1
+        if worst < 0 or chi2[worst] <= CHI2_OUTLIER:
+            return keep
+        keep[worst] = False
 
 
 def calibrated(delta: F64, length: F64, scale: float, bias: float) -> F64:
@@ -159,6 +197,7 @@ def slam_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig
     if len(submaps) < 2:
         metrics.update(zero, note="fewer than 2 submaps: the odometry")
         return tx.copy(), ty.copy(), tyaw.copy(), metrics
+    submaps = [_start(tt, tx, ty, tyaw, submaps[0]), *submaps]
     odo_anchor = np.array([s.anchor for s in submaps])
     anchor_path = np.array([s.path_m for s in submaps])
     opt = GraphOptions(cfg.odometry_sigma_xy, math.radians(cfg.odometry_sigma_yaw_deg), True,
@@ -167,7 +206,7 @@ def slam_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig
     g = _Graph(submaps, odo, opt, odo_anchor.copy())
     seq = _window(cfg.search_xy_m, cfg.search_yaw_deg, cfg.field_resolution_m)
     wide = _window(cfg.loop_search_xy_m, cfg.loop_search_yaw_deg, cfg.field_resolution_m)
-    seq_ok = seq_bad = loop_tried = loop_gated = 0
+    seq_ok = seq_bad = loop_tried = loop_gated = loop_inconsistent = 0
     for j in range(1, len(submaps)):
         pred = compose(g.est[j - 1], calibrated(odo.delta[j - 1:j], odo.length[j - 1:j],
                                                 g.scale, g.bias)[0])
@@ -195,26 +234,27 @@ def slam_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig
             g.add(i, j, m.pose, m.cov, loop=True)
             closed = True
         if closed:
-            g.solve_upto(j)
-    keep = np.ones(len(g.i), bool)
-    chi2 = g.solve_upto(len(submaps) - 1)
-    bad = chi2 > CHI2_OUTLIER
-    if bad.any():
-        keep = ~bad
-        chi2 = g.solve_upto(len(submaps) - 1, keep)
+            keep = _consistent(g, j, np.ones(len(g.i), bool))
+            if not keep.all():  # a new closure the graph so far cannot explain goes
+                loop_inconsistent += int((~keep).sum())
+                g.drop(keep)
+    keep = _consistent(g, len(submaps) - 1, np.ones(len(g.i), bool))
+    chi2 = g.solve_upto(len(submaps) - 1, keep)
     loop = np.array(g.loop, bool)
     mc = g.constraints(keep)
     cost_odometry = cost_at(odo_anchor, odo, mc, opt)
     cost_solution = _cost_with(g, mc, opt)
-    dof = 3 * (len(submaps) - 1) + 2  # the anchors the solution moves, and the calibration
-    # likelihood ratio: were the odometry right, 2·(its cost − the solution's) would be χ²(dof)
-    accepted = 2 * (cost_odometry - cost_solution) > dof + Z99 * math.sqrt(2 * dof)
+    # likelihood ratio: were the odometry right, 2·(its cost − the solution's) would be at
+    # most χ² with one degree of freedom per constraint coordinate the solution can meet
+    dof = min(3 * int(keep.sum()), 3 * (len(submaps) - 1) + 2)
+    accepted = dof > 0 and 2 * (cost_odometry - cost_solution) > dof + Z99 * math.sqrt(2 * dof)
     metrics.update({
         "matches_accepted": int((keep & ~loop).sum()),
         "matches_rejected": seq_bad + int((~keep & ~loop).sum()),
         "loop_closures_tried": loop_tried,
         "loop_closures_accepted": int((keep & loop).sum()),
-        "loop_closures_rejected": loop_gated + int((~keep & loop).sum()),
+        "loop_closures_rejected": loop_gated + loop_inconsistent + int((~keep & loop).sum()),
+        "loop_closures_inconsistent": loop_inconsistent + int((~keep & loop).sum()),
         "cost_odometry": cost_odometry, "cost_final": cost_solution,
         "scale_error": g.scale, "heading_bias_deg_per_m": math.degrees(g.bias),
         "accepted": bool(accepted),
@@ -228,6 +268,16 @@ def slam_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig
         metrics["note"] = "the graph does not explain the echoes better than the odometry"
         return tx.copy(), ty.copy(), tyaw.copy(), metrics
     rx, ry, ryaw = _onto_poses(tt, tx, ty, tyaw, submaps, g)
+    gain = track_consistency_gain(tt, (tx, ty, tyaw), (rx, ry, ryaw),
+                                   echoes.take(thin(len(echoes), MAX_ECHOES_CONSISTENCY)),
+                                   cfg.field_resolution_m, cfg.field_sigma_m)
+    metrics["consistency_gain"] = gain
+    if not gain > 0:
+        metrics["accepted"] = False
+        metrics["loop_closure_edges"] = []
+        metrics["note"] = (f"the graph's poses leave the echoes {consistency_change(gain, 2)} "
+                           "than the odometry")
+        return tx.copy(), ty.copy(), tyaw.copy(), metrics
     return rx, ry, ryaw, metrics
 
 

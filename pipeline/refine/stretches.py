@@ -71,7 +71,7 @@ def correct_stretches(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, *,
     if not metrics["iterations"]:
         metrics["applied"] = False
         return Corrected(*given, metrics)
-    gain = _track_consistency_gain(t_ns, given, fitted.poses, scored, res, sigma)
+    gain = track_consistency_gain(t_ns, given, fitted.poses, scored, res, sigma)
     metrics["consistency_gain"] = gain
     if held_out == "measure":
         metrics["held_out_consistency_gain"] = _held_out_gain(solve, given, echoes, res, sigma)
@@ -103,7 +103,7 @@ def _held_out_gain(solve: _Solver, given: tuple[F64, F64, F64], echoes: Echoes, 
     if not apart.metrics["iterations"]:
         return 0.0
     scored = odd.take(thin(len(odd), MAX_ECHOES_CONSISTENCY))
-    return _track_consistency_gain(solve.t_ns, given, apart.poses, scored, res, sigma)
+    return track_consistency_gain(solve.t_ns, given, apart.poses, scored, res, sigma)
 
 
 @dataclass(frozen=True)
@@ -242,7 +242,7 @@ def consistency_needed(gain_per_parameter: float, min_consistency_gain: float,
     return 0.0 if gain_per_parameter >= strong_gain else min_consistency_gain
 
 
-def _track_consistency_gain(t_ns: I64, given: tuple[F64, F64, F64],
+def track_consistency_gain(t_ns: I64, given: tuple[F64, F64, F64],
                             corrected: tuple[F64, F64, F64], echoes: Echoes, res: float,
                             sigma: float) -> float:
     """How much more consistent (fraction) ``echoes`` are on the ``corrected`` track than on

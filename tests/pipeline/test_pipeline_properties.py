@@ -105,7 +105,7 @@ def _configs(draw: st.DrawFn) -> Config:
         fov_deg=draw(_fov), mounts=mounts,
     )
     refine = PoseRefinementConfig(
-        enabled=draw(st.booleans()), match_submaps=draw(st.booleans()),
+        enabled=draw(st.booleans()), model=draw(st.sampled_from(["chain", "graph"])),
         submap_travel_m=draw(_pos(10)), max_echo_range_m=draw(_pos(10)),
         calibration_max_scale=draw(st.floats(0, 0.2)),
     )

@@ -37,6 +37,7 @@ def _warm_refinement() -> None:
     from pipeline.refine.kernels import (
         binned_sharpness_placed,
         consistency_placed,
+        correlation_grid,
         free_samples,
         poses_at,
         step_segments,
@@ -51,6 +52,8 @@ def _warm_refinement() -> None:
              np.zeros(1))
     structure_tensor_at(np.zeros((3, 3)), np.zeros((3, 3)), cells, cells, np.ones(3) / 3)
     free_samples(none1, none1, none2, none2, none1, none1, 0.2, 0.0, 0.0, 0.1, np.zeros((2, 2)))
+    correlation_grid(np.zeros(2), 1, 1, none1, none1, 1, np.zeros(3), 0.0, 0.0, 0.05,
+                     np.zeros(1), cells)
 
 
 if __name__ == "__main__":

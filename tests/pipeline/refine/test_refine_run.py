@@ -55,14 +55,13 @@ def test_refined_run_corrects_the_drift_and_is_deterministic(drifted_log: Path,
     assert ref_ate < odo_ate / 2
     pr = a.metrics.pose_refinement
     assert pr is not None
-    assert pr["submaps"] >= 2 and pr["moved_max_m"] > 0.05
+    assert pr["moved_max_m"] > 0.05
     assert pr["search_heading_bias_deg_per_m"] == pytest.approx(0.8, abs=0.3)
     assert "Pose refinement" in (tmp_path / "a" / "report.md").read_text()
     assert pr["summary"].startswith("pose refinement: ") and "°/m" in pr["summary"]
     doc = json.loads((tmp_path / "a" / "metrics.json").read_text())
-    for key in ("matches_accepted", "matches_rejected", "loop_closures_accepted",
-                "loop_closures_rejected", "cost_initial", "cost_final", "moved_mean_m",
-                "scale_estimate", "scale_standard_error", "summary"):
+    for key in ("moved_mean_m", "moved_max_m", "search_scale_error", "scale_estimate",
+                "scale_standard_error", "summary"):
         assert key in doc["pose_refinement"]
 
 

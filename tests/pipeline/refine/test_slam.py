@@ -131,3 +131,52 @@ def test_the_graph_leaves_correct_poses_alone(loop_logs: tuple[Path, Path],
     pr = r.metrics.pose_refinement
     assert pr is not None
     assert pr["moved_max_m"] < 0.05 or pr["accepted"] is False
+
+
+def _square_graph() -> tuple[object, np.ndarray]:
+    """Eight anchors 2 m apart around a 4 m square, its odometry exact, as a
+    ``slam._Graph`` with no submaps."""
+    from pipeline.refine.slam import _Graph
+    from pipeline.se2 import between
+
+    corners = [(0, 0, 0), (2, 0, 0), (4, 0, math.pi / 2), (4, 2, math.pi / 2),
+               (4, 4, math.pi), (2, 4, math.pi), (0, 4, -math.pi / 2), (0, 2, -math.pi / 2)]
+    truth = np.array(corners, float)
+    odo = Odometry(between(truth[:-1], truth[1:]), np.full(7, 2.0))
+    opt = GraphOptions(0.02, math.radians(0.5), True, 0.01, math.radians(2.0), 1.0, True)
+    return _Graph([], odo, opt, truth.copy()), truth
+
+
+def test_a_closure_the_graph_cannot_explain_is_dropped_and_the_right_ones_stay() -> None:
+    from pipeline.refine.slam import _consistent
+
+    g, truth = _square_graph()
+    cov = np.diag([0.05**2, 0.05**2, math.radians(1) ** 2])
+    g.add(0, 7, truth[7], cov, loop=True)  # right
+    g.add(1, 6, truth[6], cov, loop=True)  # right
+    wrong = truth[5] + np.array([1.5, -1.0, math.radians(25)])
+    g.add(2, 5, wrong, cov, loop=True)
+    keep = _consistent(g, 7, np.ones(3, bool))
+    assert keep.tolist() == [True, True, False]
+    assert np.abs(g.est[:, :2] - truth[:, :2]).max() < 0.01  # solved without it
+
+
+def test_the_compiled_correlation_gives_the_numpy_versions_bits() -> None:
+    from pipeline.refine.correlative import (
+        LikelihoodField,
+        _coverage,
+        _loglik,
+        _loglik_reference,
+    )
+
+    rx, ry, sx, sy = _room(np.random.default_rng(0))
+    qx, qy, _, _ = _room(np.random.default_rng(1))
+    fld = LikelihoodField.of_points(rx, ry, res=0.05, sigma=0.1, margin=1.0)
+    cover = _coverage(fld, rx, ry, sx, sy, 0.1)
+    centre = np.array([0.1, -0.05, 0.02])
+    dyaw, offsets = np.linspace(-0.1, 0.1, 5), np.arange(-8, 9) * 0.05
+    fast = _loglik(fld, cover, math.log(0.55), qx, qy, centre, dyaw, offsets)
+    slow = _loglik_reference(fld, cover, math.log(0.55), qx, qy, centre, dyaw, offsets)
+    assert fast.shape == (5, 17, 17) and np.isfinite(fast).all()
+    assert np.array_equal(fast, slow)
+    assert np.ptp(fast) > 1.0  # the grid sees the room, not a flat field
