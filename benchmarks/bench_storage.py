@@ -18,12 +18,9 @@ own RSS row; target ≤ 1.2× of 1×), and whether the two maps are byte-identic
 from __future__ import annotations
 
 import argparse
-import contextlib
-import os
 import statistics
 import sys
 import tempfile
-from collections.abc import Iterator
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
@@ -31,36 +28,7 @@ if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
 from benchmarks.bench_end_to_end import LogSpec, RunFigures, cached_log, run_once  # noqa: E402
-
-LOOPBACK = "127.0.0.1"
-_ENV = {"AWS_ACCESS_KEY_ID": "bench", "AWS_SECRET_ACCESS_KEY": "bench",
-        "AWS_DEFAULT_REGION": "us-east-1"}
-
-
-@contextlib.contextmanager
-def loopback_s3() -> Iterator[str]:
-    """moto's S3 server on 127.0.0.1; the AWS_* variables point the children at it."""
-    import logging
-
-    from moto.server import ThreadedMotoServer
-
-    logging.getLogger("werkzeug").setLevel(logging.ERROR)
-    server = ThreadedMotoServer(ip_address=LOOPBACK, port=0, verbose=False)
-    server.start()
-    _, port = server.get_host_and_port()
-    endpoint = f"http://{LOOPBACK}:{port}"
-    env = {**_ENV, "AWS_ENDPOINT_URL": endpoint}
-    old = {k: os.environ.get(k) for k in env}
-    os.environ.update(env)
-    try:
-        yield endpoint
-    finally:
-        for k, v in old.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
-        server.stop()
+from benchmarks.loopback_s3 import loopback_s3  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> dict[str, float]:

@@ -61,3 +61,34 @@ m "13 mounts 5 m, log claims 200 m" "$S" run "$T/far200" -o "$T/f200" -c "$T/c20
 cp -r "$R/office/office_ros2" "$T/bag" && mv "$T/bag/office_ros2.db3.zstd" "$T/x.db3.zstd"
 sed -i 's#  - office_ros2.db3.zstd#  - ../x.db3.zstd#' "$T/bag/metadata.yaml"
 m "16 metadata names ../x.db3" "$S" info "$T/bag"
+printf 'office.mcap\nb\0ad.mcap\n' > "$T/nul.txt" && cp "$R/office/office.mcap" "$T/"
+m "11 manifest line with a NUL byte" "$S" batch "@$T/nul.txt" -o "$T/mo1" -q
+printf '%s\n' "$(printf 'x%.0s' $(seq 5000))" > "$T/long.txt"
+m "11 manifest name of 5000 chars" "$S" batch "@$T/long.txt" -o "$T/mo2" -q
+python3 - "$T" "$R" <<'EOF'
+import random, struct, sys
+t, r = sys.argv[1], sys.argv[2]
+bag = bytearray(open(f"{r}/office/office.bag", "rb").read())
+k = bag.index(b"index_pos=") + 10
+bag[k:k + 8] = bytes(8)  # unindexed: only a forward walk finds the records
+pos, chunks = 13, []
+while pos + 8 <= len(bag):
+    hlen = struct.unpack_from("<I", bag, pos)[0]
+    dlen = struct.unpack_from("<I", bag, pos + 4 + hlen)[0]
+    h = bytes(bag[pos + 4:pos + 4 + hlen])
+    if h[h.index(b"op=") + 3] == 5:
+        chunks.append(pos)
+    pos += 8 + hlen + dlen
+bag[chunks[1]:chunks[1] + 200] = random.Random(1).randbytes(200)
+open(f"{t}/framing.bag", "wb").write(bag)
+mc = bytearray(open(f"{r}/office/office.mcap", "rb").read())
+mc[-8:] = bytes(8)  # no end magic: scanned
+mc[168222:168222 + 200] = random.Random(2).randbytes(200)  # the second chunk's head
+open(f"{t}/framing.mcap", "wb").write(mc)
+EOF
+m "9 bag framing garbage, no index" "$S" run "$T/framing.bag" -o "$T/fb" -q
+m "9 mcap framing garbage, no summary" "$S" run "$T/framing.mcap" -o "$T/fm" -q
+mkdir -p "$T/gold/goldens/office" && echo '{"acc": 0.9}' > "$T/gold/goldens/office/metrics.json"
+printf '[[log]]\nname = "office"\npath = "%s"\n' "$R/office/office.mcap" > "$T/gold/suite.toml"
+m "4 regress --update over a user dir" "$S" regress --suite "$T/gold/suite.toml" \
+  --goldens "$T/gold/goldens" --update --workers 1 -q

@@ -9,13 +9,11 @@ import typer
 
 from cli.errors import EXIT_FAILURE
 from formats.errors import OutputError
+from formats.writers.atomic import make_dir
 
 
 def _make_parent(path: Path) -> None:
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise OutputError(f"cannot create its directory: {err.strerror or err}", path) from err
+    make_dir(path.parent, f"directory of {path.name}")
 
 
 def regress_suite(

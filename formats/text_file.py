@@ -107,4 +107,7 @@ def read_text(
     try:
         return data.decode(encoding)
     except UnicodeDecodeError as err:
-        raise errors[1](f"cannot read {what}: {err}", path) from err
+        line = data.count(b"\n", 0, err.start) + 1
+        name = encoding.removesuffix("-sig").upper()
+        raise errors[1](f"cannot read {what}: line {line} is not {name} text (byte"
+                        f" {err.object[err.start]:#04x} at offset {err.start})", path) from err

@@ -1,5 +1,6 @@
 """Mutations of valid logs: truncations, bit flips, corrupted record headers and lengths,
-wrong compression names, huge declared sizes, and row-level damage to CSV text.
+random bytes over a record's head, wrong compression names, huge declared sizes, and
+row-level damage to CSV text.
 
 A :class:`Mutation` is plain data (so hypothesis can draw and shrink it, and a failure
 prints a reproducer); :func:`apply` turns a valid file's bytes into the mutated bytes.
@@ -24,7 +25,8 @@ CSV_VALUES: tuple[str, ...] = (
     "9" * 30, "1.2.3", "\u00e9", "-0", "1e-400", " ",
 )
 
-BINARY_KINDS = ("truncate", "flip", "set_int", "delete", "insert", "codec", "zero_run")
+BINARY_KINDS = ("truncate", "flip", "set_int", "delete", "insert", "codec", "zero_run",
+                "overwrite")
 CSV_KINDS = (
     "truncate", "flip", "row_field", "row_drop_field", "row_add_field", "row_swap",
     "row_dup", "row_garbage", "insert",
@@ -39,6 +41,7 @@ class Mutation:
     * ``flip``: xor byte ``offset + i`` with ``bits[i]`` (i = 0..);
     * ``set_int``: write ``value`` as a little-endian ``length``-byte integer at ``offset``;
     * ``insert``: insert ``payload`` at ``offset``; ``zero_run``: ``length`` zero bytes there;
+      ``overwrite``: ``payload`` written over the bytes at ``offset`` (garbage framing);
     * ``codec``: replace the ``index``-th occurrence of ``payload`` by ``other``;
     * ``row_*`` (text): on data line ``index`` (counted modulo the line count), field
       ``field``: set it to ``text`` / drop it / add one / swap with the next line /
@@ -88,6 +91,9 @@ def apply(data: bytes, m: Mutation) -> bytes:
     if m.kind == "zero_run":
         o = m.offset % max(n, 1)
         return data[:o] + bytes(min(m.length, n - o)) + data[o + m.length :]
+    if m.kind == "overwrite":
+        o = m.offset % max(n, 1)
+        return data[:o] + m.payload[: n - o] + data[o + len(m.payload) :]
     if m.kind == "codec":
         hits = _find_all(data, m.payload)
         if not m.payload or not hits:
@@ -266,6 +272,10 @@ def random_mutation(
         return Mutation("insert", offset=rnd.randrange(n), payload=rnd.randbytes(size))
     if kind == "zero_run":
         return Mutation("zero_run", offset=rnd.randrange(n), length=rnd.choice((4, 16, 256)))
+    if kind == "overwrite":  # random bytes over a record head (a length field's place)
+        off = rnd.choice(points)[0] - rnd.randrange(16) if points else rnd.randrange(n)
+        return Mutation("overwrite", offset=max(0, off),
+                        payload=rnd.randbytes(rnd.choice((64, 128, 256))))
     if kind == "codec":
         return Mutation("codec", payload=rnd.choice(CODEC_NAMES[:4]), other=rnd.choice(CODEC_NAMES),
                         index=rnd.randrange(8))
@@ -307,6 +317,8 @@ def mutation_strategy(data: bytes, points: list[tuple[int, int]], text: bool) ->
         st.builds(Mutation, kind=st.just("delete"), offset=offsets, length=st.integers(1, 64)),
         st.builds(Mutation, kind=st.just("zero_run"), offset=offsets,
                   length=st.sampled_from((4, 16, 256))),
+        st.builds(Mutation, kind=st.just("overwrite"), offset=offsets,
+                  payload=st.binary(min_size=64, max_size=256)),
         st.builds(Mutation, kind=st.just("codec"), payload=st.sampled_from(CODEC_NAMES[:4]),
                   other=st.sampled_from(CODEC_NAMES), index=st.integers(0, 7)),
     ]

@@ -371,7 +371,7 @@ def manifest(fx: Fixtures, rnd: random.Random, n: int,
         return lambda: output_names(find_logs([], Config(), manifests=[p]))
 
     for i in range(n):
-        picked = rnd.sample(lines, rnd.randint(1, 4))
+        picked = rnd.sample(lines, min(len(lines), rnd.randint(1, 4)))
         p = fx.root / f"manifest{i}.txt"
         data = "\n".join(picked).encode("utf-8", "surrogateescape")
         shown = [ln if len(ln) < 40 else f"{ln[:20]}...({len(ln)} chars)" for ln in picked]

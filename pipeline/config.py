@@ -32,6 +32,7 @@ from formats.options import (
     SensorsConfig,
     doc_field,
 )
+from formats.path_text import path_text_problem
 from formats.presets import PRESETS
 from formats.ranges import CELL_M, COORD_M, LIMIT_M, MOUNT_M, Range, above, open_range
 from formats.storage.options import StorageConfig
@@ -388,6 +389,10 @@ class Config:
         """Check cross-field rules; raise ConfigError naming the key. Returns self."""
         _check_ranges(self)
         self.storage.check()
+        for key in ("ranges_file", "poses_file", "sensors_file"):
+            problem = path_text_problem(getattr(self.input.csv, key))
+            if problem is not None:
+                raise ConfigError(f"'input.csv.{key}' {problem}")
         return self
 
     def to_dict(self) -> dict[str, Any]:
@@ -489,7 +494,8 @@ def _coerce(tp: Any, value: Any, key: str) -> Any:
 
 def _check_finite(obj: Any, where: str) -> None:
     """Every number of the configuration is finite: the range checks below compare with
-    < and >, which inf passes and NaN makes meaningless (no key means inf or NaN)."""
+    < and >, which inf passes and NaN makes meaningless (no key means inf or NaN). No
+    string holds a NUL byte: no name sonarmap opens or matches can hold one."""
     for f in dataclasses.fields(obj):
         v, key = getattr(obj, f.name), _join(where, f.name)
         items = v if isinstance(v, tuple) else (v,)
@@ -499,6 +505,8 @@ def _check_finite(obj: Any, where: str) -> None:
                 _check_finite(item, k)
             elif isinstance(item, float) and not math.isfinite(item):
                 raise ConfigError(f"'{k}' must be a finite number, got {item!r}")
+            elif isinstance(item, str) and "\x00" in item:
+                raise ConfigError(f"'{k}' must not contain a NUL byte, got {item!r}")
 
 
 # --------------------------------------------------------------------------- ranges

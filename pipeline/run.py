@@ -145,7 +145,7 @@ def run(
                     sv, refinement = _refine_poses(reader, sv, sensors, config)
             # The poses' box: with refinement the refined poses' (a drifted odometry's box
             # may be far larger than the building, beyond grid.max_cells).
-            grid = grid_for(sv, sensors, config)
+            grid = grid_for(sv, sensors, config, label)
             # Thinned now, while little else is in memory (it reads the whole track).
             drawn = _drawn_trajectory(sv.track)
             log.info(
@@ -243,7 +243,7 @@ def prepare(
 ) -> tuple[Survey, SensorTable, GridSpec]:
     """Pass 1 over an open log (:func:`surveyed`) and the map grid of its poses."""
     sv, sensors = surveyed(reader, config, found)
-    return sv, sensors, grid_for(sv, sensors, config)
+    return sv, sensors, grid_for(sv, sensors, config, reader.path)
 
 
 def surveyed(
@@ -261,8 +261,10 @@ def surveyed(
     return sv, sensors
 
 
-def grid_for(sv: Survey, sensors: SensorTable, config: Config) -> GridSpec:
-    """The grid: ``[grid] extent`` if given, else the poses' box grown by the sonars' reach.
+def grid_for(sv: Survey, sensors: SensorTable, config: Config,
+             log: object | None = None) -> GridSpec:
+    """The grid: ``[grid] extent`` if given, else the poses' box grown by the sonars' reach
+    (errors name ``log``).
 
     The box leaves out isolated pose outliers (:meth:`PoseTrack.bulk_bounds`: an odometry
     glitch must not blow the grid up to kilometres); readings placed outside the grid are
@@ -275,7 +277,7 @@ def grid_for(sv: Survey, sensors: SensorTable, config: Config) -> GridSpec:
         if not finite:
             raise InputError(
                 "cannot size the grid: no sensor reports a max range > 0; set [grid] extent "
-                "or [sensors] max_range"
+                "or [sensors] max_range", log
             )
         offsets = np.hypot(sensors.mount_x, sensors.mount_y)
         offset = float(np.nanmax(offsets)) if np.isfinite(offsets).any() else 0.0

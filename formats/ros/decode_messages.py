@@ -62,10 +62,19 @@ class FrameCodes:
         return [self.names[c] for c in order], [lut[c] for c in columns]
 
 
-def message_error(raw: RawBatch, i: int, what: str) -> FormatError:
-    return FormatError(
+class MessageError(FormatError):
+    """One message of a batch does not decode: ``index`` is its place in the batch (the
+    reader skips it and records the loss)."""
+
+    def __init__(self, message: str, index: int) -> None:
+        super().__init__(message)
+        self.index = index
+
+
+def message_error(raw: RawBatch, i: int, what: str) -> MessageError:
+    return MessageError(
         f"message {i} of topic {raw.connection.topic} "
-        f"(log time {int(raw.log_time_ns[i])} ns): {what}"
+        f"(log time {int(raw.log_time_ns[i])} ns): {what}", i
     )
 
 

@@ -13,6 +13,7 @@ integers, strings and byte arrays prefixed by a u32 length, maps by a u32 byte l
 from __future__ import annotations
 
 import array
+import contextlib
 import struct
 import zlib
 from collections.abc import Collection, Iterator
@@ -24,7 +25,8 @@ import numpy.typing as npt
 
 from formats.errors import FormatError
 from formats.magic import MCAP_MAGIC
-from formats.ros.inflate import ChunkError, inflate
+from formats.ros.inflate import MAX_CHUNK_BYTES, ChunkError, inflate
+from formats.ros.resync import mcap_candidates, next_record
 from formats.ros.source import (
     Connection,
     Encoding,
@@ -45,6 +47,16 @@ OP_MESSAGE_INDEX = 0x07
 OP_CHUNK_INDEX = 0x08
 OP_STATISTICS = 0x0B
 OP_DATA_END = 0x0F
+# Opcodes the spec defines (0x01-0x10); 0x80-0xFF are applications' own records (skipped),
+# anything else is damage.
+_LAST_OPCODE = 0x10
+_APPLICATION_OPCODES = 0x80
+# The longest chunk record taken: its compressed records (never longer than what they
+# inflate to, MAX_CHUNK_BYTES, plus an eighth) and its fields; longer is damage.
+_MAX_CHUNK_RECORD = MAX_CHUNK_BYTES + (MAX_CHUNK_BYTES >> 3) + (1 << 16)
+# Where the walk resynchronises after damage: the records of a data section.
+_RESYNC_OPS = np.array([OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK, OP_MESSAGE_INDEX,
+                        OP_DATA_END], np.uint8)
 
 _RECORD_HEAD = 9  # opcode u8 + length u64
 _MESSAGE_HEAD = 22  # channel_id u16, sequence u32, log_time u64, publish_time u64
@@ -312,10 +324,14 @@ class McapSource(FileSource, SourceAccessors):
             raise FormatError("not an MCAP file (bad magic bytes)", self.path)
         if not head.startswith(MCAP_MAGIC):
             raise FormatError(f"unsupported MCAP version {head[5:6]!r}", self.path)
-        if len(head) < len(MCAP_MAGIC) + _RECORD_HEAD or head[len(MCAP_MAGIC)] != OP_HEADER:
-            raise FormatError("truncated or corrupt MCAP header", self.path)
-        if len(MCAP_MAGIC) + _RECORD_HEAD + _length(head, len(MCAP_MAGIC)) > self._size:
+        if len(head) < len(MCAP_MAGIC) + _RECORD_HEAD:
             raise FormatError("truncated within the MCAP header record", self.path)
+        header_end = len(MCAP_MAGIC) + _RECORD_HEAD + _length(head, len(MCAP_MAGIC))
+        if header_end > self._size and self._resync(len(MCAP_MAGIC) + 1) is None:
+            raise FormatError("truncated within the MCAP header record", self.path)
+        if head[len(MCAP_MAGIC)] != OP_HEADER or header_end > self._size:
+            # The records after it may be intact: the summary, or else the scan's resync.
+            self._warn("corrupt MCAP header record (its bytes are lost)")
         if not self._read_summary():
             if self._read_at(self._size - len(MCAP_MAGIC), len(MCAP_MAGIC)) != MCAP_MAGIC:
                 self._warn("no end magic (file truncated or not closed): read by linear scan")
@@ -336,8 +352,11 @@ class McapSource(FileSource, SourceAccessors):
         data = self._read_at(summary_start, footer_at - summary_start)
         chunk_indexes: list[_Block] = []
         stats: tuple[int, int, int, dict[int, int]] | None = None
+        records, stop = _walk(data, 0, len(data))
+        if stop != len(data):
+            return False  # damaged: a record runs past the footer (then the file is scanned)
         try:
-            for pos in _walk(data, 0, len(data))[0].tolist():
+            for pos in records.tolist():
                 op = data[pos]
                 c = _Cursor(data, pos + _RECORD_HEAD, pos + _RECORD_HEAD + _length(data, pos))
                 if op == OP_SCHEMA:
@@ -420,12 +439,26 @@ class McapSource(FileSource, SourceAccessors):
             op = head[0]
             (length,) = struct.unpack_from("<Q", head, 1)
             end = pos + _RECORD_HEAD + length
+            problem = self._framing_problem(op, length, pos)
+            if problem is not None and not summary:
+                nxt = self._resync(pos + 1)
+                if nxt is not None:
+                    self._lose(nxt - pos, f"bytes {pos}-{nxt} are not a record (opcode"
+                                          f" 0x{op:02x}: {problem}): {nxt - pos} bytes"
+                                          " skipped to the next record")
+                    pos = nxt
+                    continue
             if end > self._size:
                 self._bytes_lost += self._size - pos
                 self._warn(
                     f"truncated: record at byte {pos} (opcode 0x{op:02x}) needs {length} bytes,"
                     f" file ends first; {self._size - pos} bytes lost"
                 )
+                break
+            if problem is not None and not summary:
+                self._lose(self._size - pos, f"record at byte {pos} (opcode 0x{op:02x}):"
+                                             f" {problem}; {self._size - pos} bytes at the end"
+                                             " lost")
                 break
             if op == OP_FOOTER:
                 if end + len(MCAP_MAGIC) < self._size:
@@ -438,6 +471,10 @@ class McapSource(FileSource, SourceAccessors):
             if summary or (op == OP_HEADER and pos > len(MCAP_MAGIC)):
                 if op == OP_HEADER:
                     break
+                if op in (OP_SCHEMA, OP_CHANNEL) and length <= _MAX_CHUNK_RECORD:
+                    # The summary repeats them: what a lost chunk held is found here.
+                    with contextlib.suppress(_Short):
+                        self._scan_record(op, f.read(length), 0, length, counts, [])
                 pos = end
                 continue
             if op == OP_CHUNK:
@@ -448,7 +485,8 @@ class McapSource(FileSource, SourceAccessors):
                     self._blocks.append(block)
                     times += [block.start_ns, block.end_ns]
             elif op in (OP_SCHEMA, OP_CHANNEL, OP_MESSAGE):
-                content = f.read(length)
+                # A message's head is all the scan needs (its data is read when mapping).
+                content = f.read(min(length, _MESSAGE_HEAD) if op == OP_MESSAGE else length)
                 try:
                     self._scan_record(op, content, 0, len(content), counts, times)
                 except _Short:
@@ -466,6 +504,69 @@ class McapSource(FileSource, SourceAccessors):
         self._counts = counts
         if times:
             self._start, self._end = min(times), max(times)
+
+    def _framing_problem(self, op: int, length: int, pos: int) -> str | None:
+        """Why the record head at ``pos`` cannot be a record of the data section (damaged
+        framing), or None."""
+        if op == 0 or _LAST_OPCODE < op < _APPLICATION_OPCODES:
+            return "not an opcode"
+        if pos + _RECORD_HEAD + length > self._size:
+            return f"needs {length} bytes, the file ends first"
+        if op in (OP_CHUNK, OP_SCHEMA, OP_CHANNEL) and length > _MAX_CHUNK_RECORD:
+            return f"an implausible length of {length} bytes"
+        if op == OP_MESSAGE and length < _MESSAGE_HEAD:
+            return f"a message record of {length} bytes"
+        return None
+
+    def _resync(self, start: int) -> int | None:
+        """Where the next plausible data-section record starts at or after ``start``
+        (:mod:`formats.ros.resync`), None when there is none."""
+        return next_record(self._read_at, start, self._size, mcap_candidates(_RESYNC_OPS),
+                           self._plausible)
+
+    def _plausible(self, pos: int) -> bool:
+        """Whether a record of the data section starts at ``pos``: a chunk that inflates
+        and matches its CRC, a schema or channel that parses to its exact length, a message
+        of a known channel or a message index followed by another record, a data end."""
+        head = self._read_at(pos, _RECORD_HEAD)
+        if len(head) < _RECORD_HEAD:
+            return False
+        op, length = head[0], _length(head, 0)
+        if self._framing_problem(op, length, pos) is not None:
+            return False
+        end = pos + _RECORD_HEAD + length
+        if op == OP_DATA_END:
+            return length == 4
+        if op == OP_MESSAGE:
+            channel = struct.unpack("<H", self._read_at(pos + _RECORD_HEAD, 2))[0]
+            return channel in self._channels and self._record_head_at(end)
+        if op == OP_MESSAGE_INDEX:
+            body = self._read_at(pos + _RECORD_HEAD, 6)
+            n = struct.unpack_from("<I", body, 2)[0] if len(body) == 6 else -1
+            return n % 16 == 0 and length == 6 + n and self._record_head_at(end)
+        content = self._read_at(pos + _RECORD_HEAD, length)
+        try:
+            if op == OP_CHUNK:
+                _inflated_chunk(content)
+                return True
+            c = _Cursor(content)
+            if op == OP_SCHEMA:
+                parsed = _parse_schema(c) is not None
+            else:
+                _parse_channel(c)
+                parsed = True
+            return parsed and c.pos == len(content)
+        except (ChunkError, _Short):
+            return False
+
+    def _record_head_at(self, pos: int) -> bool:
+        """Whether ``pos`` is the end of the file or a record head that fits in it."""
+        if pos == self._size:
+            return True
+        head = self._read_at(pos, _RECORD_HEAD)
+        if len(head) < _RECORD_HEAD:
+            return False
+        return 0 < head[0] <= _LAST_OPCODE and pos + _RECORD_HEAD + _length(head, 0) <= self._size
 
     def _scan_record(
         self,

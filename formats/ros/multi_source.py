@@ -338,7 +338,10 @@ def _chunks(batches: Iterator[RawBatch]) -> Iterator[list[RawBatch]]:
 
 
 def _start(chunk: list[RawBatch]) -> int:
-    return min(int(raw.log_time_ns.min()) for raw in chunk)
+    """When a chunk starts: the earliest first message of its batches. The first, not the
+    least: the merge takes a batch's prefix up to a limit, and a damaged batch out of
+    order (a corrupt stamp) must still give its first message, or the merge stalls."""
+    return min(int(raw.log_time_ns[0]) for raw in chunk)
 
 
 def _slice(raw: RawBatch, a: int, b: int) -> RawBatch:

@@ -51,10 +51,14 @@ from formats.ros.columns import (
     TransformColumns,
 )
 from formats.ros.decode import decode
+from formats.ros.decode_messages import MessageError
 from formats.ros.source import Connection, MessageSource, RawBatch, messages_lost
 from formats.sensor_config import SensorRing, sensor_setup
 
 RING_TYPES = POINTCLOUD_TYPES | SONARARRAY_TYPES
+# Messages of one batch that may fail to decode one by one (each decode retried without
+# it); past this the rest of the batch is lost too (damage that wide is not one message).
+MAX_BAD_MESSAGES = 32
 RANGE_SOURCE_TYPES = RANGE_TYPES | RING_TYPES
 ODOMETRY = "nav_msgs/msg/Odometry"
 
@@ -109,6 +113,8 @@ class RosLogReader:
         self._selection = self._select()
         self._links: dict[str, tflib.Link] | None = None
         self._range_frames: list[str] | None = None
+        # (topic, log time ns) → why: messages skipped because they do not decode.
+        self._undecodable: dict[tuple[str, int], str] = {}
 
     # ------------------------------------------------------------------ contract
 
@@ -155,7 +161,8 @@ class RosLogReader:
                 f"({', '.join(sel.pose_topics)})"
             )
         notes += self._range_notes()
-        notes += [w for w in self.source.warnings if w not in notes]
+        notes += [w for w in [*self.source.warnings, *self._undecodable_lines()]
+                  if w not in notes]
         notes += getattr(self.source, "notes", [])  # several files: duplicates read once
         name = self.path.name
         several = bool(getattr(self.source, "files", None))  # its lines name their files
@@ -164,13 +171,15 @@ class RosLogReader:
             format=self.format_name,
             start_ns=self.source.start_ns,
             end_ns=self.source.end_ns,
-            message_count=max(0, sum(t.count for t in topics) - messages_lost(self.source)),
+            message_count=max(0, sum(t.count for t in topics) - messages_lost(self.source)
+                              - len(self._undecodable)),
             topics=topics,
             range_topics=list(sel.range_topics),
             pose_topic=sel.pose_topic,
             notes=notes,
             # Each loss names its file (a source's own lines may name only the place).
-            losses=[w if name in w or several else f"{name}: {w}" for w in self.source.warnings],
+            losses=[w if name in w or several else f"{name}: {w}"
+                    for w in [*self.source.warnings, *self._undecodable_lines()]],
             bytes_lost=self.source.bytes_lost,
             files=list(getattr(self.source, "files", [])),
             duplicates_read_once=getattr(self.source, "duplicates_read_once", 0),
@@ -259,7 +268,7 @@ class RosLogReader:
         gen = self.source.raw_batches([c.id for c in self._topics.get(topic, [])])
         try:
             for raw in gen:
-                cols = self._decode(raw)
+                raw, cols = self._decode(raw)
                 assert isinstance(cols, LaserScanColumns)
                 parts.append(cols)
                 count += cols.stamp_ns.shape[0]
@@ -370,14 +379,40 @@ class RosLogReader:
 
     # ------------------------------------------------------------------ helpers
 
-    def _decode(self, raw: RawBatch) -> Columns:
-        """Decode, naming the file in errors the decoder raises without it."""
-        try:
-            return decode(raw)
-        except FormatError as err:
-            if err.path is None:
-                raise FormatError(err.reason, self.path) from err
-            raise
+    def _decode(self, raw: RawBatch) -> tuple[RawBatch, Columns]:
+        """The batch decoded (and the batch its columns are of), naming the file in errors
+        the decoder raises without it. A message that does not decode is skipped and
+        recorded (:meth:`_undecodable_lines`): the batch returned is without it; past
+        MAX_BAD_MESSAGES in one batch, the rest of the batch is lost with them."""
+        for _ in range(MAX_BAD_MESSAGES):
+            try:
+                return raw, decode(raw)
+            except MessageError as err:
+                self._undecodable.setdefault(
+                    (raw.connection.topic, int(raw.log_time_ns[err.index])), err.reason)
+                keep = np.ones(len(raw), bool)
+                keep[err.index] = False
+                raw = RawBatch(raw.connection, raw.log_time_ns[keep], raw.buffer,
+                               raw.offsets[keep], raw.lengths[keep])
+            except FormatError as err:
+                if err.path is None:
+                    raise FormatError(err.reason, self.path) from err
+                raise
+        for t in raw.log_time_ns.tolist():
+            self._undecodable.setdefault((raw.connection.topic, int(t)),
+                                         "in a batch of too many that do not decode")
+        empty = RawBatch(raw.connection, raw.log_time_ns[:0], raw.buffer, raw.offsets[:0],
+                         raw.lengths[:0])
+        return empty, decode(empty)
+
+    def _undecodable_lines(self) -> list[str]:
+        """One loss line per topic whose messages did not decode."""
+        first: dict[str, tuple[int, str]] = {}
+        for (topic, _t), reason in self._undecodable.items():
+            n, why = first.get(topic, (0, reason))
+            first[topic] = (n + 1, why)
+        return [f"{topic}: {n} messages do not decode and are lost (first: {why})"
+                for topic, (n, why) in sorted(first.items())]
 
     def _sensor_id(self, name: str) -> int:
         sid = self._sensor_ids.get(name)
@@ -405,7 +440,7 @@ class RosLogReader:
         ranges: list[RangeBatch] = []
         poses: dict[tuple[str, str], list[PoseBatch]] = {}
         for raw in group:
-            cols = self._decode(raw)
+            raw, cols = self._decode(raw)
             topic = raw.connection.topic
             if isinstance(cols, RangeColumns):
                 ranges.append(self._range_batch(raw, cols, state))
@@ -564,7 +599,7 @@ class RosLogReader:
         tables: list[tuple[TransformColumns, bool]] = []
         frames: dict[str, None] = {}
         for raw in self.source.raw_batches(ids):
-            cols = self._decode(raw)
+            raw, cols = self._decode(raw)
             if isinstance(cols, TransformColumns):
                 tables.append((cols, _is_static_tf(raw.connection.topic)))
             elif isinstance(cols, RangeColumns):
@@ -616,7 +651,7 @@ class RosLogReader:
                 for raw in gen:
                     if raw.connection.topic in firsts:
                         continue
-                    cols = self._decode(raw)
+                    raw, cols = self._decode(raw)
                     if isinstance(cols, RangeColumns) and len(cols.stamp_ns):
                         firsts[raw.connection.topic] = cols
                     if len(firsts) == len(topics):

@@ -30,6 +30,7 @@ from formats.errors import FormatError
 from formats.magic import ROS1_MAGIC
 from formats.options import ReaderOptions, ReaderSettings
 from formats.ros.inflate import MAX_CHUNK_BYTES, ChunkError, inflate, inflate_prefix
+from formats.ros.resync import ROS1_MAX_HEADER, next_record, ros1_candidates
 from formats.ros.source import Connection, FileSource, RawBatch, normalize_msgtype
 from formats.storage.location import Location, as_location
 
@@ -198,6 +199,7 @@ class Ros1BagSource(FileSource):
                     f"rosbag format version {version} is not supported (only 2.0)", self.path
                 )
             raise FormatError("not a ROS 1 bag (no '#ROSBAG V2.0' magic line)", self.path)
+        reason = ""
         try:
             header, _data, end = self._record_at(len(ROS1_MAGIC))
             if _op(header) != OP_BAGHEADER:
@@ -206,11 +208,18 @@ class Ros1BagSource(FileSource):
             conn_count = _u32(header, "conn_count")
             chunk_count = _u32(header, "chunk_count")
         except _Corrupt as err:
-            raise FormatError(f"corrupt bag header ({err})", self.path) from err
+            # Its records may be intact: read them by scanning from the first one found.
+            first = self._resync(len(ROS1_MAGIC) + 1)
+            if first is None:
+                raise FormatError(f"corrupt bag header ({err})", self.path) from err
+            reason = f"corrupt bag header ({err}; {first - len(ROS1_MAGIC)} bytes lost)"
+            self._bytes_lost += first - len(ROS1_MAGIC)
+            end, index_pos = first, 0
         self._data_start = end
 
-        reason = ""
-        if index_pos == 0:
+        if reason:
+            pass  # the bag header is lost: scan
+        elif index_pos == 0:
             reason = "bag is not indexed (index_pos 0, recording not closed)"
         elif index_pos < end or index_pos > self._size:
             reason = f"index position {index_pos} is outside the file ({self._size} bytes)"
@@ -229,7 +238,7 @@ class Ros1BagSource(FileSource):
             scan = self._scan()
             conns, chunks = scan.conns, scan.chunks
             lost = self._size - scan.end
-            self._bytes_lost = lost + scan.lost
+            self._bytes_lost += lost + scan.lost
             n = sum(c.count for c in conns.values())
             cut = f" ({scan.salvaged} of them from a cut-off chunk)" if scan.salvaged else ""
             self._warnings.append(
@@ -262,13 +271,16 @@ class Ros1BagSource(FileSource):
         self._file.seek(pos)
         return self._file.read(n)
 
-    def _record_at(self, pos: int) -> tuple[dict[str, bytes], bytes, int]:
-        """Header fields, data and end position of the record at ``pos`` in the file."""
+    def _header_at(
+        self, pos: int, max_header: int = _MAX_HEADER
+    ) -> tuple[dict[str, bytes], int, int]:
+        """Header fields, data length and end of the record at ``pos`` (the file is left at
+        its data); the whole record must lie within the file."""
         raw = self._read_at(pos, 4)
         if len(raw) < 4:
             raise _Corrupt(f"record at byte {pos} cut off")
         (hlen,) = _U32.unpack(raw)
-        if hlen > _MAX_HEADER:
+        if hlen > max_header:
             raise _Corrupt(f"record at byte {pos} has an implausible header length {hlen}")
         if pos + 8 + hlen > self._size:
             raise _Corrupt(f"record at byte {pos} cut off")
@@ -281,10 +293,46 @@ class Ros1BagSource(FileSource):
         # may declare up to 4 GiB in a file of a few KiB.
         if pos + 8 + hlen + dlen > self._size:
             raise _Corrupt(f"record at byte {pos} cut off")
+        return header, dlen, pos + 8 + hlen + dlen
+
+    def _record_at(self, pos: int) -> tuple[dict[str, bytes], bytes, int]:
+        """Header fields, data and end position of the record at ``pos`` in the file."""
+        header, dlen, end = self._header_at(pos)
         data = self._file.read(dlen)
         if len(data) < dlen:
             raise _Corrupt(f"record at byte {pos} cut off")
-        return header, data, pos + 8 + hlen + dlen
+        return header, data, end
+
+    def _resync(self, start: int) -> int | None:
+        """Where the next plausible record starts at or after ``start`` (damaged framing
+        skipped: :mod:`formats.ros.resync`), None when there is none."""
+        return next_record(self._read_at, start, self._size, ros1_candidates, self._plausible)
+
+    def _plausible(self, pos: int) -> bool:
+        """Whether a chunk, connection, index data or chunk info record starts at ``pos``:
+        its header parses and holds the fields its op needs, sizes agreeing."""
+        try:
+            header, dlen, _end = self._header_at(pos, ROS1_MAX_HEADER)
+            op = _op(header)
+            if op == OP_CHUNK:
+                compression = header.get("compression", b"").decode("ascii", "replace")
+                size = _u32(header, "size")
+                return compression in ("none", "bz2", "lz4") and size <= MAX_CHUNK_BYTES and (
+                    compression != "none" or size == dlen)
+            if op == OP_CONNECTION:
+                _u32(header, "conn")
+                return "topic" in header
+            if op == OP_IDXDATA:
+                _u32(header, "conn")
+                return _u32(header, "ver") == 1 and dlen == 12 * _u32(header, "count")
+            if op == OP_CHUNKINFO:
+                _u64(header, "chunk_pos")
+                _time(header, "start_time")
+                _time(header, "end_time")
+                return _u32(header, "ver") == 1 and dlen == 8 * _u32(header, "count")
+        except _Corrupt:
+            return False
+        return False  # a message outside a chunk, a second bag header: not resynced to
 
     def _read_index(
         self, index_pos: int, conn_count: int, chunk_count: int
@@ -332,9 +380,21 @@ class Ros1BagSource(FileSource):
             try:
                 header, data, end = self._record_at(pos)
                 op = _op(header)
-            except _Corrupt:
-                res.salvaged = self._scan_partial_chunk(pos, res)
-                break
+            except _Corrupt as err:
+                # A chunk whose header is intact and whose data is cut off (by the end of
+                # the file, or by a damaged length) gives its intact start; the walk goes
+                # on after what it gave, or after the damage.
+                salvaged, resume = self._scan_partial_chunk(pos, res)
+                res.salvaged += salvaged
+                nxt = self._resync(resume)
+                if nxt is None:  # nothing intact after it: the tail
+                    break
+                res.lost += nxt - resume if salvaged else nxt - pos
+                res.lines.append(f"bytes {pos}-{nxt} are not a record ({err}): {nxt - pos}"
+                                 " bytes skipped to the next record"
+                                 + (f" ({salvaged} messages recovered)" if salvaged else ""))
+                pos = nxt
+                continue
             if op == OP_CHUNK:
                 try:
                     raw = _decompress(
@@ -360,16 +420,27 @@ class Ros1BagSource(FileSource):
                     res.conns.setdefault(rec.id, rec)
             pos = end
             res.end = end
+        self._keep_known(res)
         return res
 
-    def _scan_partial_chunk(self, pos: int, res: _ScanResult) -> int:
-        """Recover the intact messages of a chunk cut off by the end of the file."""
-        data = self._partial_chunk_data(pos)
-        if data is None:
-            return 0
-        return self._index_chunk(pos, data, res, partial=True)
+    def _scan_partial_chunk(self, pos: int, res: _ScanResult) -> tuple[int, int]:
+        """Recover the intact messages of a chunk whose data is cut off; returns how many,
+        and where to look for the next record (after an uncompressed chunk's recovered
+        bytes, else the byte after ``pos``)."""
+        found = self._partial_chunk(pos)
+        if found is None:
+            return 0, pos + 1
+        data, data_start, compression = found
+        n = self._index_chunk(pos, data, res, partial=True)
+        return n, (data_start + len(data) if n and compression == "none" else pos + 1)
 
     def _partial_chunk_data(self, pos: int) -> bytes | None:
+        found = self._partial_chunk(pos)
+        return None if found is None else found[0]
+
+    def _partial_chunk(self, pos: int) -> tuple[bytes, int, str] | None:
+        """(what its data inflates to, where its data starts, compression) of a chunk
+        record at ``pos`` whose header is intact, or None."""
         raw = self._read_at(pos, 4)
         if len(raw) < 4:
             return None
@@ -385,9 +456,14 @@ class Ros1BagSource(FileSource):
                 return None
             compression = header.get("compression", b"").decode("ascii", "replace")
             size = _u32(header, "size")
-            return _decompress(compression, self._file.read(), size, partial=True)
+            if size > MAX_CHUNK_BYTES:
+                return None
+            # At most what ``size`` bytes compress to (every codec stays within 1/8 more).
+            data = self._file.read(size + (size >> 3) + (1 << 16))
+            inflated = _decompress(compression, data, size, partial=True)
         except _Corrupt:
             return None
+        return inflated, pos + 8 + hlen, compression
 
     def _index_chunk(self, pos: int, raw: bytes, res: _ScanResult, *, partial: bool) -> int:
         """Index the message records of an uncompressed chunk; returns messages found."""
@@ -411,8 +487,8 @@ class Ros1BagSource(FileSource):
                 break
             try:
                 if op == OP_MSGDATA:
-                    cid = _u32(header, "conn")
-                    times.setdefault(cid, []).append(_time(header, "time"))
+                    cid, t = _u32(header, "conn"), _time(header, "time")
+                    times.setdefault(cid, []).append(t)
                     offsets.setdefault(cid, []).append(off)
                 elif op == OP_CONNECTION:
                     rec = _conn_record(header, bytes(mv[off + 8 + hlen : end]))
@@ -424,20 +500,45 @@ class Ros1BagSource(FileSource):
             res.lost += n - off
             res.lines.append(f"chunk at byte {pos}: its last {n - off} bytes are not whole"
                              " records (lost)")
+        # Every connection id is kept here: its connection record may come later (the
+        # index section of a bag whose first chunk was lost); _keep_known filters.
         index = {
             cid: (np.asarray(t, np.int64), np.asarray(offsets[cid], np.int64))
             for cid, t in times.items()
-            if cid in res.conns
         }
         if not index:
             return 0
         counts = {cid: int(t.shape[0]) for cid, (t, _o) in index.items()}
-        for cid, k in counts.items():
-            res.conns[cid].count += k
         start = min(int(t.min()) for t, _o in index.values())
         stop = max(int(t.max()) for t, _o in index.values())
         res.chunks.append(_Chunk(pos, start, stop, counts, index, partial))
         return sum(counts.values())
+
+    def _keep_known(self, res: _ScanResult) -> None:
+        """Keep the scanned chunks' messages of the connections found (anywhere in the
+        file), count them; messages of connections whose records were lost are lost."""
+        kept: list[_Chunk] = []
+        unknown: dict[int, int] = {}
+        for ch in res.chunks:
+            assert ch.index is not None
+            for cid, (t, _o) in ch.index.items():
+                if cid not in res.conns:
+                    unknown[cid] = unknown.get(cid, 0) + int(t.shape[0])
+            ch.index = {c: v for c, v in ch.index.items() if c in res.conns}
+            if not ch.index:
+                continue
+            ch.counts = {c: int(v[0].shape[0]) for c, v in ch.index.items()}
+            ch.start_ns = min(int(t.min()) for t, _o in ch.index.values())
+            ch.end_ns = max(int(t.max()) for t, _o in ch.index.values())
+            for c, k in ch.counts.items():
+                res.conns[c].count += k
+            kept.append(ch)
+        res.chunks = kept
+        if unknown:
+            n = sum(unknown.values())
+            self._messages_lost += n
+            res.lines.append(f"{n} messages of connections {sorted(unknown)} whose connection"
+                             " records were lost")
 
     # ------------------------------------------------------------------ MessageSource
 
@@ -534,17 +635,24 @@ class Ros1BagSource(FileSource):
         try:
             return buf, {cid: self._locate(buf, *index[cid]) for cid in present if cid in index}
         except _Corrupt as err:
-            res = _ScanResult(conns={c: _ConnRecord(c, "", {}) for c in present})
-            self._index_chunk(chunk.pos, buf.tobytes(), res, partial=True)
-            if not res.chunks or res.chunks[0].index is None:
-                raise
-            self._warnings.append(
-                f"{self.path}: chunk at byte {chunk.pos}: its index does not match its records"
-                f" ({err}); records walked"
-            )
-            walked = res.chunks[0].index
+            walked = self._walk_chunk(chunk, buf, present, f"its index does not match its"
+                                      f" records ({err})")
             return buf, {cid: self._locate(buf, *walked[cid]) for cid in present
                          if cid in walked}
+
+    def _walk_chunk(
+        self, chunk: _Chunk, buf: npt.NDArray[np.uint8], present: list[int], why: str
+    ) -> dict[int, tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]]:
+        """(log times, record offsets) per connection found by walking a chunk's records,
+        when its index records cannot be used (``why``, said once in :attr:`warnings`)."""
+        res = _ScanResult(conns={c: _ConnRecord(c, "", {}) for c in present})
+        self._index_chunk(chunk.pos, buf.tobytes(), res, partial=True)
+        if not res.chunks or res.chunks[0].index is None:
+            raise _Corrupt(f"{why}; no records found walking it")
+        line = f"{self.path}: chunk at byte {chunk.pos}: {why}; records walked"
+        if line not in self._warnings:  # every pass over the bag meets it again
+            self._warnings.append(line)
+        return res.chunks[0].index
 
     def _lose(self, chunk: _Chunk, line: str) -> None:
         """Record a chunk as lost, once (every pass over the bag meets it again)."""
@@ -574,7 +682,11 @@ class Ros1BagSource(FileSource):
         buf = np.frombuffer(raw, np.uint8)
         if chunk.index is not None:
             return buf, chunk.index
-        return buf, self._read_chunk_index(end, chunk, set(present))
+        try:
+            return buf, self._read_chunk_index(end, chunk, set(present))
+        except _Corrupt as err:  # the chunk is intact, the index records after it are not
+            return buf, self._walk_chunk(chunk, buf, present,
+                                         f"its index records are unreadable ({err})")
 
     def _read_chunk_index(
         self, pos: int, chunk: _Chunk, present: set[int]

@@ -27,6 +27,7 @@ import numpy as np
 import yaml
 
 from formats.errors import FormatError
+from formats.path_text import path_text_problem, shown
 from formats.ros.inflate import MAX_RATIO, ChunkError, inflate_message
 from formats.ros.mcap_source import McapSource
 from formats.ros.source import (
@@ -37,6 +38,7 @@ from formats.ros.source import (
     messages_lost,
     normalize_msgtype,
 )
+from formats.ros.sqlite_salvage import Salvage
 from formats.storage.location import Location, Url, as_location
 from formats.text_file import read_text
 
@@ -49,6 +51,9 @@ SQLITE_BATCH_ROWS = 4096
 def _inside_bag(bag: Location, name: str, meta: Location) -> Location:
     """The storage file ``name`` of ``metadata.yaml``, which must lie inside the bag
     directory (no absolute path, no ``..``, no symlink leading out): FormatError else."""
+    problem = path_text_problem(name)
+    if problem is not None:
+        raise FormatError(f"metadata names a storage file {shown(name)} that {problem}", meta)
     if isinstance(bag, Url):  # a prefix: no symlinks, only the name can lead out
         parts = PurePosixPath(name).parts
         if name.startswith("/") or ".." in parts or "://" in name or not parts:
@@ -96,6 +101,8 @@ class Sqlite3File(SourceAccessors):
         self.path = path
         self._name = display or path  # the path to name in errors (not a temp copy)
         self._warnings: list[str] = []
+        self._messages_lost = 0
+        self._salvage = ""  # why the rows are read by id ranges (a damaged database)
         if not path.is_file() or path.stat().st_size == 0:
             what = "empty file (0 bytes)" if path.is_file() else "missing file"
             raise FormatError(f"{what}, not a rosbag2 sqlite3 database", self._name)
@@ -128,13 +135,22 @@ class Sqlite3File(SourceAccessors):
             )
         defs: dict[str, tuple[str, str]] = {}
         if "message_definitions" in tables:
-            for typ, enc, text in db.execute(
-                "SELECT topic_type, encoding, encoded_message_definition FROM message_definitions"
-            ):
-                if typ and enc in ("ros2msg", "ros2idl"):
-                    defs[str(typ)] = (str(text), str(enc))
-        counts = dict(db.execute("SELECT topic_id, COUNT(*) FROM messages GROUP BY topic_id"))
-        t0, t1 = db.execute("SELECT MIN(timestamp), MAX(timestamp) FROM messages").fetchone()
+            try:
+                for typ, enc, text in db.execute(
+                    "SELECT topic_type, encoding, encoded_message_definition"
+                    " FROM message_definitions"
+                ):
+                    if typ and enc in ("ros2msg", "ros2idl"):
+                        defs[str(typ)] = (str(text), str(enc))
+            except sqlite3.Error as err:  # the built-in definitions of known types remain
+                defs.clear()
+                self._warnings.append(f"message definitions unreadable ({_reason(err)});"
+                                      " they are not used")
+        try:
+            counts = dict(db.execute("SELECT topic_id, COUNT(*) FROM messages GROUP BY topic_id"))
+            t0, t1 = db.execute("SELECT MIN(timestamp), MAX(timestamp) FROM messages").fetchone()
+        except sqlite3.Error as err:  # damaged pages: the rows sqlite can still read
+            counts, t0, t1 = self._count_by_rows(err)
         self._start = None if t0 is None else int(t0)
         self._end = None if t1 is None else int(t1)
         self._connections: dict[int, Connection] = {}
@@ -152,50 +168,108 @@ class Sqlite3File(SourceAccessors):
                 count=int(counts.get(tid, 0)),
             )
 
+    def _count_by_rows(self, err: sqlite3.Error) -> tuple[dict[int, int], int | None,
+                                                          int | None]:
+        """Per-topic counts and the time span from the rows sqlite can still read
+        (:class:`~formats.ros.sqlite_salvage.Salvage`); the error again when it cannot."""
+        salvage = Salvage(self._db)
+        if salvage.span is None:
+            raise err
+        counts: dict[int, int] = {}
+        t0: int | None = None
+        t1: int | None = None
+        for rows in salvage.rows("topic_id, timestamp, id", "", ()):
+            tids = np.fromiter((r[0] for r in rows), np.int64, len(rows))
+            times = np.fromiter((r[1] for r in rows), np.int64, len(rows))
+            for tid, n in zip(*np.unique(tids, return_counts=True), strict=True):
+                counts[int(tid)] = counts.get(int(tid), 0) + int(n)
+            t0 = int(times.min()) if t0 is None else min(t0, int(times.min()))
+            t1 = int(times.max()) if t1 is None else max(t1, int(times.max()))
+        self._salvage = f"database is damaged ({_reason(err)})"
+        return counts, t0, t1
+
     def raw_batches(self, connection_ids: Collection[int]) -> Iterator[RawBatch]:
         """Messages ordered by (timestamp, id), SQLITE_BATCH_ROWS rows at a time; each page
-        becomes one batch per topic sharing one buffer."""
+        becomes one batch per topic sharing one buffer. In a damaged database the rows
+        after the damage are read by id ranges around what sqlite cannot read (each
+        range in time order); the rows lost are counted."""
         ids = sorted({int(c) for c in connection_ids} & set(self._connections))
         if not ids:
             return
+        if self._salvage:
+            yield from self._salvaged(ids, self._salvage, None)
+            return
         marks = ",".join("?" * len(ids))
         done = 0
+        last: tuple[int, int] | None = None
         try:
             # The timestamp index stores (timestamp, rowid): this streams without sorting.
             cur = self._db.execute(
-                f"SELECT topic_id, timestamp, data FROM messages WHERE topic_id IN ({marks}) "
-                "ORDER BY timestamp, id",
+                f"SELECT topic_id, timestamp, data, id FROM messages WHERE topic_id IN ({marks})"
+                " ORDER BY timestamp, id",
                 ids,
             )
         except sqlite3.Error as err:
-            raise FormatError(f"cannot read messages: {err}", self._name) from err
+            yield from self._salvaged(ids, f"cannot read messages ({_reason(err)})", None)
+            return
         while True:
             try:
                 rows = cur.fetchmany(SQLITE_BATCH_ROWS)
                 if not rows:
                     return
-                tids = np.fromiter((r[0] for r in rows), np.int64, len(rows))
-                times = np.fromiter((r[1] for r in rows), np.int64, len(rows))
-                blobs = [r[2] for r in rows]
-                lengths = np.fromiter(map(len, blobs), np.int64, len(rows))
-                joined = b"".join(blobs)
+                batches = list(self._batches(rows, ids))
             # sqlite3.Error: corrupt pages; TypeError/ValueError: a corrupt row whose
             # columns hold values of the wrong type (text data, NULL, ...).
             except (sqlite3.Error, TypeError, ValueError, OverflowError) as err:
-                self._warnings.append(
-                    f"database is corrupt after {done} messages ({_reason(err)});"
-                    " the rest of this file is lost"
-                )
+                why = f"database is corrupt after {done} messages ({_reason(err)})"
+                yield from self._salvaged(ids, why, last)
                 return
             done += len(rows)
-            offsets = np.cumsum(lengths) - lengths
-            buf = np.frombuffer(joined, np.uint8)
-            for tid in ids:
-                sel = np.flatnonzero(tids == tid)
-                if sel.size:
-                    yield RawBatch(
-                        self._connections[tid], times[sel], buf, offsets[sel], lengths[sel]
-                    )
+            last = (int(rows[-1][1]), int(rows[-1][3]))
+            yield from batches
+
+    def _batches(self, rows: list[tuple[Any, ...]], ids: list[int]) -> Iterator[RawBatch]:
+        """Rows (topic_id, timestamp, data, ...) as one batch per topic of ``ids``."""
+        tids = np.fromiter((r[0] for r in rows), np.int64, len(rows))
+        times = np.fromiter((r[1] for r in rows), np.int64, len(rows))
+        blobs = [r[2] for r in rows]
+        lengths = np.fromiter(map(len, blobs), np.int64, len(rows))
+        joined = b"".join(blobs)
+        offsets = np.cumsum(lengths) - lengths
+        buf = np.frombuffer(joined, np.uint8)
+        for tid in ids:
+            sel = np.flatnonzero(tids == tid)
+            if sel.size:
+                yield RawBatch(self._connections[tid], times[sel], buf, offsets[sel], lengths[sel])
+
+    def _salvaged(self, ids: list[int], why: str,
+                  after: tuple[int, int] | None) -> Iterator[RawBatch]:
+        """The rows of topics ``ids`` read by id ranges (after (timestamp, id) ``after``:
+        those were read already); the loss said once in :attr:`warnings`."""
+        salvage = Salvage(self._db)
+        if salvage.span is None:
+            self._warn_once(f"{why}; the rest of this file is lost", 0)
+            return
+        marks = ",".join("?" * len(ids))
+        for rows in salvage.rows("topic_id, timestamp, data, id", f"topic_id IN ({marks})",
+                                 ids):
+            if after is not None:
+                rows = [r for r in rows if (int(r[1]), int(r[3])) > after]
+            rows.sort(key=lambda r: (int(r[1]), int(r[3])))
+            try:
+                batches = list(self._batches(rows, ids)) if rows else []
+            except (TypeError, ValueError, OverflowError):  # a row of wrong types
+                salvage.rows_lost += len(rows)
+                continue
+            yield from batches
+        self._warn_once(f"{why}; the rest read row by row: {salvage.rows_lost} rows sqlite"
+                        " cannot read are lost", salvage.rows_lost)
+
+    def _warn_once(self, line: str, lost: int) -> None:
+        """A loss said and counted once (every pass over the bag meets it again)."""
+        if line not in self._warnings:
+            self._warnings.append(line)
+            self._messages_lost += lost
 
     def close(self) -> None:
         self._db.close()

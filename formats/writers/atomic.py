@@ -17,7 +17,8 @@ from pathlib import Path, PurePath
 from types import TracebackType
 from typing import BinaryIO
 
-from formats.errors import OutputError
+from formats.errors import InputError, OutputError
+from formats.path_text import NAME_MAX
 from formats.writers.output_marker import (
     not_replaceable_file_reason,
     not_replaceable_reason,
@@ -32,9 +33,10 @@ __all__ = [
     "check_output_file",
     "clean_stale_entries",
     "clean_stale_siblings",
+    "fsync_path",
+    "make_dir",
 ]
 
-NAME_MAX = 255  # bytes in one path component (Linux, macOS, Windows)
 # What _sibling_name adds around the name: ".", ".tmp-", a pid (up to 10 digits), "-", 8 hex.
 _SIBLING_EXTRA = len(".") + len(".tmp-") + 10 + len("-") + 8
 
@@ -53,7 +55,16 @@ def check_path_names(path: Path) -> None:
                               f"{NAME_MAX})", path)
 
 
-def _fsync_path(path: Path) -> None:
+def make_dir(path: Path, what: str) -> None:
+    """Create directory ``path`` (and its parents) if missing; OutputError "cannot create
+    the <what>: <reason>" naming it when the system refuses."""
+    try:
+        Path(path).mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise OutputError(f"cannot create the {what}: {err.strerror or err}", path) from err
+
+
+def fsync_path(path: Path) -> None:
     """fsync a file or directory by path (directories: makes renames inside them durable)."""
     flags = os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) if path.is_dir() else os.O_RDONLY
     fd = os.open(path, flags)
@@ -61,6 +72,14 @@ def _fsync_path(path: Path) -> None:
         os.fsync(fd)
     finally:
         os.close(fd)
+
+
+def _names_other_file(err: OSError, tmp: Path) -> bool:
+    """Whether ``err`` names a file outside the temporary directory ``tmp`` (one the work
+    read: everything an output directory writes is inside ``tmp``)."""
+    name = err.filename
+    return isinstance(name, str) and not _inside(Path(os.path.abspath(name)),
+                                                 Path(os.path.abspath(tmp)))
 
 
 def _sibling_name(final: Path, tag: str) -> Path:
@@ -221,8 +240,10 @@ class OutputDir:
         self._check_final()
         try:
             self.final.parent.mkdir(parents=True, exist_ok=True)
-        except OSError as err:
-            raise OutputError(f"cannot create parent directory: {err}", self.final.parent) from err
+        except OSError as err:  # named by OUT, the user's name, and where it failed
+            where = f" (at {err.filename})" if isinstance(err.filename, str) else ""
+            raise OutputError(f"cannot create the output directory: "
+                              f"{err.strerror or err}{where}", self.final) from err
         # The symlink check again: mkdir may have just created the parent.
         self._check_final()
         clean_stale_siblings(self.final)
@@ -259,6 +280,9 @@ class OutputDir:
             return
         if exc_type is not None:
             _remove(tmp)
+            if isinstance(exc, OSError) and _names_other_file(exc, tmp):
+                # Not the output's: a file the work read (a name too long, EACCES ...).
+                raise InputError(f"cannot open: {exc.strerror or exc}", exc.filename) from exc
             if isinstance(exc, OSError) or (
                 isinstance(exc, OutputError) and exc.path and _inside(Path(exc.path), tmp)
             ):
@@ -317,8 +341,8 @@ class OutputDir:
                 for fname in filenames:
                     p = Path(dirpath) / fname
                     if not p.is_symlink():
-                        _fsync_path(p)
-                _fsync_path(Path(dirpath))
+                        fsync_path(p)
+                fsync_path(Path(dirpath))
         except OSError as err:
             raise OutputError(f"cannot sync output files: {err}", self.final) from err
 
@@ -345,7 +369,7 @@ class OutputDir:
         self.committed = True
         # Some filesystems refuse directory fsync; the rename itself is done.
         with contextlib.suppress(OSError):
-            _fsync_path(final.parent)
+            fsync_path(final.parent)
         if old is not None:
             shutil.rmtree(old, ignore_errors=True)
 
@@ -404,13 +428,19 @@ def atomic_open(path: Path) -> Iterator[BinaryIO]:
         os.replace(tmp, path)
     except OSError as err:
         tmp.unlink(missing_ok=True)
+        if _names_other_file(err, tmp) and Path(os.path.abspath(err.filename)) != Path(
+                os.path.abspath(path)):
+            # Not the output's: a file the work read (a name too long, EACCES ...).
+            raise InputError(f"cannot open: {err.strerror or err}", err.filename) from err
+        if isinstance(err, FileNotFoundError) and not path.parent.is_dir():
+            raise OutputError("parent directory does not exist", path) from err
         raise OutputError(f"cannot write: {err.strerror or err}", path) from err
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
     # Some filesystems refuse directory fsync; the data itself is synced.
     with contextlib.suppress(OSError):
-        _fsync_path(path.parent)
+        fsync_path(path.parent)
 
 
 def atomic_write_bytes(path: Path, data: bytes) -> None:

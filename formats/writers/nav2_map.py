@@ -29,6 +29,7 @@ import yaml
 from formats.arrays import F64
 from formats.errors import FormatError
 from formats.map_types import DEFAULT_MAX_CELLS, GridSpec
+from formats.path_text import path_text_problem, shown
 from formats.ranges import CELL_M, COORD_M, Range
 from formats.text_file import read_bounded, read_text
 from formats.writers.atomic import atomic_write_bytes, atomic_write_text
@@ -275,6 +276,9 @@ def _image_path(yaml_path: Path, doc: dict[str, Any]) -> Path:
     image = doc.get("image")
     if not isinstance(image, str) or not image:
         raise FormatError("map YAML has no 'image' (or it is empty)", yaml_path)
+    problem = path_text_problem(image)
+    if problem is not None:
+        raise FormatError(f"map YAML 'image' {shown(image)} {problem}", yaml_path)
     return Path(image) if Path(image).is_absolute() else yaml_path.parent / image
 
 

@@ -2,7 +2,8 @@
 
 A directory is sonarmap's output when it holds ``.sonarmap-output`` — a JSON object
 ``{"written_by": "sonarmap", "files": [...]}`` listing every file the run wrote (relative
-POSIX paths, sorted: deterministic bytes) — or, for outputs written before the marker
+POSIX paths, sorted: deterministic bytes); a regression golden's ``.sonarmap-golden`` says
+``"written_by": "sonarmap regress --update"`` — or, for outputs written before the marker
 existed, when its content says sonarmap wrote it: ``metrics.json`` whose ``run`` holds a
 ``tool_version`` and a ``config_hash``, or ``features.parquet`` whose schema metadata holds
 ``tool_version``, ``config_hash`` and ``units``. File names alone prove nothing. Such a
@@ -28,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 __all__ = [
+    "GOLDEN_MARKER",
     "MAX_PROOF_BYTES",
     "OUTPUT_MARKER",
     "ReadRange",
@@ -43,6 +45,11 @@ __all__ = [
 ]
 
 OUTPUT_MARKER = ".sonarmap-output"
+#: A regression golden's marker (``sonarmap regress --update``): the same proof, its own
+#: name and writer (goldens kept their bytes when the rule became one).
+GOLDEN_MARKER = ".sonarmap-golden"
+# Each marker's file name and the ``written_by`` it must say.
+_MARKERS = ((OUTPUT_MARKER, "sonarmap"), (GOLDEN_MARKER, "sonarmap regress --update"))
 
 #: ``read(name, offset, length)``: ``length`` bytes of file ``name`` from ``offset`` (a
 #: negative offset counts from the end, like HTTP's ``Range: bytes=-N``); fewer at the end
@@ -76,10 +83,11 @@ def written_files(names: Collection[str], read: ReadRange) -> frozenset[str] | N
     """Which of ``names`` (a directory's files, relative POSIX paths) sonarmap wrote, when
     something proves the directory is its output; None when nothing does."""
     present = frozenset(names)
-    if OUTPUT_MARKER in present:
-        listed = _marker_listing(read(OUTPUT_MARKER, 0, MAX_PROOF_BYTES))
-        if listed is not None:
-            return present & (listed | {OUTPUT_MARKER})
+    for marker, writer in _MARKERS:
+        if marker in present:
+            listed = _marker_listing(read(marker, 0, MAX_PROOF_BYTES), writer)
+            if listed is not None:
+                return present & (listed | {marker})
     if any(n in present and stamped(_KIND_OF_NAME[n], n, read)
            for n in ("metrics.json", "features.parquet")):
         return present & RUN_FILES
@@ -128,10 +136,10 @@ def _json(data: bytes | None) -> dict[str, Any]:
     return out if isinstance(out, dict) else {}
 
 
-def _marker_listing(data: bytes | None) -> frozenset[str] | None:
+def _marker_listing(data: bytes | None, writer: str) -> frozenset[str] | None:
     d = _json(data)
     files = d.get("files")
-    if d.get("written_by") != "sonarmap" or not isinstance(files, list):
+    if d.get("written_by") != writer or not isinstance(files, list):
         return None
     if not all(isinstance(f, str) for f in files):
         return None

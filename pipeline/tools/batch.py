@@ -50,6 +50,7 @@ from formats.errors import (
     OutputError,
     SonarmapError,
 )
+from formats.path_text import path_text_problem, shown
 from formats.storage.location import Location, Url, as_location
 from formats.storage.urls import is_url
 from formats.tables import markdown_table
@@ -182,7 +183,11 @@ def read_manifest(path: Path) -> list[LogInput]:
             continue  # only whole-line comments: a path may contain '#'
         parts = [part.strip() for part in _SEPARATOR.split(s)]
         if not all(parts):
-            raise InputError(f"line {number}: an empty path beside '+' in {s!r}", path)
+            raise InputError(f"line {number}: an empty path beside '+' in {shown(s)}", path)
+        for part in parts:
+            problem = None if is_url(part) else path_text_problem(part)
+            if problem is not None:
+                raise InputError(f"line {number}: the path {shown(part)} {problem}", path)
         files = tuple(_manifest_path(path, part) for part in parts)
         out.append(files[0] if len(files) == 1 else files)
     return out
@@ -424,9 +429,17 @@ def _map_one_checked(
     cfg = config_from_dict(config)
     configure(cfg.storage)  # this worker reaches URLs with the batch's options
     for f in files:
-        # False on any OSError (a name too long: run says why); a URL asks its server
-        if not (f.exists() if isinstance(f, Url) else os.path.lexists(f)):
-            raise InputError("no such file or directory", f)
+        if isinstance(f, Url):  # a URL asks its server
+            if not f.exists():
+                raise InputError("no such file or directory", f)
+            continue
+        try:
+            os.lstat(f)
+        except FileNotFoundError:
+            raise InputError("no such file or directory", f) from None
+        except (OSError, ValueError) as err:  # a name too long, a NUL byte, EACCES ...
+            reason = err.strerror if isinstance(err, OSError) and err.strerror else err
+            raise InputError(f"cannot open: {reason}", f) from None
     path = log_text(files)
     final = out_dir / name
     config_hash = cfg.hash()
@@ -629,12 +642,9 @@ def run_batch(
         also = f" ({unread[0].path}: {unread[0].reason})" if unread else ""
         raise InputError(f"no logs found in {where}{also}")
     if isinstance(out_dir, Path):
-        try:
-            out_dir.mkdir(parents=True, exist_ok=True)
-        except OSError as err:
-            raise OutputError(f"cannot create output directory: {err.strerror or err}",
-                              out_dir) from err
-        from formats.writers.atomic import clean_stale_entries
+        from formats.writers.atomic import clean_stale_entries, make_dir
+
+        make_dir(out_dir, "output directory")
 
         # Staging left by interrupted batches (their processes are dead), whatever log it
         # was for; a concurrent batch's live staging stays.

@@ -1,8 +1,9 @@
 """A generated log (simulated or emulated) written with what it is scored against: the
-reference map (nav2 YAML + PGM) and the true trajectory CSV, all or nothing refused."""
+reference map (nav2 YAML + PGM) and the true trajectory CSV: all written or none."""
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 from typing import Protocol
 
@@ -12,6 +13,7 @@ from formats.arrays import F64, I64
 from formats.errors import OutputError
 from formats.log_writers import LogContent, write_log
 from formats.map_types import GridSpec
+from formats.writers.atomic import atomic_write_text
 from formats.writers.nav2_map import write_nav2_map
 from formats.writers.trajectory_csv import trajectory_csv_text
 
@@ -65,9 +67,17 @@ def write_log_with_reference(
     for q in (out, yaml_path, pgm_path, csv_path):
         if q.exists() or q.is_symlink():
             raise OutputError("exists already, not overwriting", q)
-    log_path = write_log(content, out, fmt, compression=compression)
-    tp = trajectory
-    with csv_path.open("x", encoding="utf-8", newline="") as f:
-        f.write(trajectory_csv_text(tp.t_ns, tp.x, tp.y, tp.yaw))
-    write_nav2_map(yaml_path, probability, grid)
+    try:
+        log_path = write_log(content, out, fmt, compression=compression)
+        tp = trajectory
+        atomic_write_text(csv_path, trajectory_csv_text(tp.t_ns, tp.x, tp.y, tp.yaw))
+        write_nav2_map(yaml_path, probability, grid)
+    except BaseException:
+        # All or nothing: every one of these names was free before (checked above).
+        for q in (out, csv_path, yaml_path, pgm_path):
+            if q.is_dir() and not q.is_symlink():
+                shutil.rmtree(q, ignore_errors=True)
+            else:
+                q.unlink(missing_ok=True)
+        raise
     return [log_path, yaml_path, pgm_path, csv_path]

@@ -48,6 +48,7 @@ __all__ = [
     "Tolerances",
     "load_tolerances",
     "regress",
+    "show_value",
     "tolerances_toml",
 ]
 
@@ -152,7 +153,7 @@ class Regression:
         rows = self.failed if failed_only else self.rows
         head = ("metric", "golden", "current", "tolerance", "status")
         body = [
-            (r.metric, _show(r.golden), _show(r.current), r.tolerance,
+            (r.metric, show_value(r.golden), show_value(r.current), r.tolerance,
              ("ok" if r.ok else "REGRESSED") + (f" ({r.detail})" if r.detail else ""))
             for r in rows
         ]
@@ -167,7 +168,8 @@ def _plain(v: Any) -> Any:
     return v
 
 
-def _show(v: Any) -> str:
+def show_value(v: Any) -> str:
+    """A compared value as tables print it (``n/a`` for none, 6 significant digits)."""
     if v is None:
         return "n/a"
     if isinstance(v, float):

@@ -26,7 +26,7 @@ def test_missing_unreadable_and_wrong_encoding(tmp_path: Path) -> None:
         read_text(tmp_path / "d", "trajectory file")
     p = tmp_path / "latin1.csv"
     p.write_bytes(b"caf\xe9\n")
-    with pytest.raises(FormatError, match=r"latin1\.csv: cannot read trajectory file: .*utf-8"):
+    with pytest.raises(FormatError, match=r"latin1\.csv: cannot read trajectory file: line 1 is not UTF-8"):
         read_text(p, "trajectory file")
 
 

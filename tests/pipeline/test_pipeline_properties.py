@@ -28,8 +28,9 @@ from pipeline.config import (
 from pipeline.stages.ingest import ordered_ranges
 
 # Strings as TOML holds them: any Unicode scalar value (quotes, backslashes, controls,
-# astral characters), no surrogates.
-_text = st.text(st.characters(blacklist_categories=("Cs",)), max_size=12)
+# astral characters), no surrogates; no NUL (a configuration refuses it: no name holds one).
+_text = st.text(st.characters(blacklist_categories=("Cs",), blacklist_characters="\x00"),
+                max_size=12)
 _name = _text.filter(bool)
 
 

@@ -38,9 +38,11 @@ def _broken(t: Target, kind: str, work: Path) -> Path:
     data = t.valid_bytes()
     if kind == "header":  # cut inside the container header / CSV header
         m = Mutation("truncate", offset=10)
-    else:  # text in a numeric field (CSV) / garbage over the first record (binary)
+    else:  # text in a numeric field (CSV) / zeros over every record (binary: a damaged
+        # first record alone is skipped, the records after it read)
         m = (Mutation("row_field", index=3, field=2, text="abc") if t.text
-             else Mutation("zero_run", offset=13 if t.walker != "sqlite" else 0, length=256))
+             else Mutation("zero_run", offset=13 if t.walker != "sqlite" else 0,
+                           length=len(data)))
     return t.materialize(work, apply(data, m))
 
 

@@ -85,8 +85,8 @@ def test_a_logged_max_range_below_zero_is_none_and_the_default_applies(tmp_path:
     log, _ = _csv_log(tmp_path, "-5.0")
     code, err = _cli("run", log, "-o", tmp_path / "o", "-q")
     assert code == 1
-    assert err == ("sonarmap: error: cannot size the grid: no sensor reports a max range > 0; "
-                   "set [grid] extent or [sensors] max_range\n")
+    assert err == (f"sonarmap: error: {log}: cannot size the grid: no sensor reports a max"
+                   " range > 0; set [grid] extent or [sensors] max_range\n")
     (tmp_path / "c.toml").write_text("[sensors]\nmax_range = 5.0\n")
     code, err = _cli("run", log, "-o", tmp_path / "o", "-c", tmp_path / "c.toml", "-q")
     assert code == 0, err

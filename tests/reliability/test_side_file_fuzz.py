@@ -9,7 +9,7 @@ import random
 import pytest
 
 from fuzz import side_files
-from fuzz.side_files import CLASSES, MANIFEST_LINES, build_fixtures, run_cli
+from fuzz.side_files import CLASSES, MANIFEST_PATH_LINES, build_fixtures, run_cli
 
 
 @pytest.fixture(scope="module")
@@ -27,10 +27,7 @@ SAMPLE = {"config numbers": 6, "config text": 3, "truth map": 4, "tolerances": 3
 def test_side_file_class_has_no_defect(fixtures: side_files.Fixtures, name: str) -> None:
     rnd = random.Random(f"58:{name}")
     make = CLASSES[name]
-    if name == "manifest":  # the path bytes a file system refuses are another issue's item
-        cases = list(side_files.manifest(fixtures, rnd, 8, MANIFEST_LINES))
-    else:
-        cases = list(make(fixtures, rnd, 2))
+    cases = list(make(fixtures, rnd, 8 if name == "manifest" else 2))
     outcomes = [(c, run_cli(c)) for c in rnd.sample(cases, min(SAMPLE[name], len(cases)))]
     defects = [o.detail for _, o in outcomes if o.defect]
     assert not defects, "\n".join(defects)
@@ -55,3 +52,13 @@ def test_hostile_numbers_are_refused_with_one_line_naming_the_key(
     truth = {c.what: c for c in side_files.truth_map(fixtures, rnd, 0)}
     o = run_cli(truth["truth resolution: 1.0e-4"])
     assert o.status == "rejected" and "'resolution' must be in [0.001, 100] m" in o.detail
+
+
+def test_every_manifest_path_line_is_refused_with_one_line(fixtures: side_files.Fixtures) -> None:
+    """The lines whose path bytes the OS refuses, each alone (the class draws them mixed)."""
+    for line in MANIFEST_PATH_LINES:
+        rnd = random.Random(0)
+        case = next(side_files.manifest(fixtures, rnd, 1, (line,)))
+        outcome = run_cli(case)
+        assert outcome.status == "rejected", outcome.detail
+        assert "line 1: the path" in outcome.detail

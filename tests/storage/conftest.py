@@ -1,8 +1,8 @@
-"""Fixtures: the loopback S3 and HTTP servers (see loopback.py), sample logs on both."""
+"""Fixtures: the loopback S3 (benchmarks/loopback_s3.py) and HTTP (loopback.py) servers,
+sample logs on both."""
 
 from __future__ import annotations
 
-import os
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -11,7 +11,9 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from loopback import http_server, s3_env, s3_server
+from loopback import http_server
+
+from benchmarks.loopback_s3 import loopback_s3
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -19,17 +21,8 @@ ROOT = Path(__file__).resolve().parents[2]
 @pytest.fixture(scope="session")
 def s3_endpoint() -> Iterator[str]:
     """moto's S3 server; the AWS_* variables point boto at it for the whole session."""
-    with s3_server() as endpoint:
-        old = {k: os.environ.get(k) for k in s3_env(endpoint)}
-        os.environ.update(s3_env(endpoint))
-        try:
-            yield endpoint
-        finally:
-            for k, v in old.items():
-                if v is None:
-                    os.environ.pop(k, None)
-                else:
-                    os.environ[k] = v
+    with loopback_s3() as endpoint:
+        yield endpoint
 
 
 @pytest.fixture

@@ -1,5 +1,5 @@
-"""Storage servers on loopback for the tests (127.0.0.1 only, random ports, stopped by the
-tests): moto's S3 API server and a plain HTTP server with Range support.
+"""A plain HTTP server with Range support on loopback for the tests (127.0.0.1 only, a
+random port, stopped by the tests); moto's S3 server is benchmarks/loopback_s3.py.
 
 The HTTP server serves ``root``; it answers ``Range: bytes=a-b`` with 206 and records
 every request (method, path, range) so tests can see that readers use ranged reads.
@@ -9,8 +9,6 @@ Paths under ``/forbidden/`` answer 403, paths under ``/slow/`` wait ``slow_s`` f
 from __future__ import annotations
 
 import contextlib
-import logging
-import os
 import re
 import socket
 import threading
@@ -19,7 +17,8 @@ from collections.abc import Iterator
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 
-LOOPBACK = "127.0.0.1"
+from benchmarks.loopback_s3 import LOOPBACK
+
 _RANGE = re.compile(r"bytes=(\d+)-(\d*)")
 
 
@@ -113,32 +112,8 @@ def http_server(root: Path, slow_s: float = 0.0) -> Iterator[RangeServer]:
         thread.join(5)
 
 
-S3_ENV = {"AWS_ACCESS_KEY_ID": "testing", "AWS_SECRET_ACCESS_KEY": "testing-secret",
-          "AWS_DEFAULT_REGION": "us-east-1", "AWS_SESSION_TOKEN": "testing-token"}
-
-
-@contextlib.contextmanager
-def s3_server() -> Iterator[str]:
-    """moto's S3 API server on loopback; yields its endpoint URL."""
-    from moto.server import ThreadedMotoServer
-
-    logging.getLogger("werkzeug").setLevel(logging.ERROR)
-    server = ThreadedMotoServer(ip_address=LOOPBACK, port=0, verbose=False)
-    server.start()
-    _host, port = server.get_host_and_port()
-    try:
-        yield f"http://{LOOPBACK}:{port}"
-    finally:
-        server.stop()
-
-
 def closed_port() -> int:
     """A loopback port nothing listens on (bound, then closed)."""
     with socket.socket() as s:
         s.bind((LOOPBACK, 0))
         return int(s.getsockname()[1])
-
-
-def s3_env(endpoint: str) -> dict[str, str]:
-    return {**S3_ENV, "AWS_ENDPOINT_URL": endpoint, "NO_PROXY": LOOPBACK,
-            "no_proxy": LOOPBACK, "HOME": os.environ.get("HOME", "/tmp")}

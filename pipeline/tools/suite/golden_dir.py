@@ -4,8 +4,10 @@ A golden keeps what ``regress`` compares and nothing a rerun would not reproduce
 ``metrics.json`` (without ``timing``), ``map.yaml``, ``map.pgm``, ``config.toml`` (the
 log's configuration as the suite gives it) and, for a log with a truth, ``evaluation.json``
 (its ``run_dir`` the golden's own path) — plus :data:`GOLDEN_MARKER`, a JSON list of those
-files. ``--update`` replaces only a directory that holds the marker and nothing but the
-files it lists; any other directory under ``--goldens`` is left as it is (its row fails).
+files. ``--update`` replaces only what the ownership rule of every sonarmap output proves
+sonarmap wrote (:mod:`formats.writers.output_marker`: the marker, read within a bound, and
+nothing but the files it lists); any other directory under ``--goldens`` is left as it is
+(its row fails). An old golden is read within a bound (:func:`same_golden`).
 
 Replacement is atomic: the new golden is written and fsynced in a hidden sibling
 ``.<name>.tmp-<pid>-<hex>``, then exchanged with the old one in one step
@@ -26,9 +28,11 @@ import shutil
 from pathlib import Path
 from typing import Any
 
-from formats.errors import OutputError
-from formats.writers.atomic import clean_stale_entries
+from formats.errors import OutputError, SonarmapError
+from formats.text_file import read_bounded
+from formats.writers.atomic import clean_stale_entries, fsync_path
 from formats.writers.dir_swap import exchange
+from formats.writers.output_marker import GOLDEN_MARKER, not_replaceable_reason, written_files_in
 
 __all__ = [
     "GOLDEN_FILES",
@@ -41,7 +45,6 @@ __all__ = [
     "stage_golden",
 ]
 
-GOLDEN_MARKER = ".sonarmap-golden"
 GOLDEN_FILES = ("metrics.json", "map.yaml", "map.pgm", "config.toml")
 EVALUATION = "evaluation.json"
 _OLD = re.compile(r"\.(?P<name>.+)\.old-(?P<pid>\d+)-[0-9a-f]{8}")
@@ -51,40 +54,22 @@ def _json_text(data: dict[str, Any]) -> str:
     return json.dumps(data, indent=2) + "\n"
 
 
-def _listed(d: Path) -> set[str] | None:
-    try:
-        data = json.loads((d / GOLDEN_MARKER).read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return None
-    files = data.get("files") if isinstance(data, dict) else None
-    if not isinstance(files, list) or not all(isinstance(f, str) for f in files):
-        return None
-    return set(files)
-
-
 def golden_refusal(d: Path) -> str | None:
-    """None when ``--update`` may write ``d`` (absent, or a golden it wrote holding only its
-    files); else why not, as a phrase for the row's reason."""
+    """None when ``--update`` may write ``d``: absent, or a directory sonarmap can prove it
+    wrote holding only what it wrote (the ownership rule of every output,
+    :func:`formats.writers.output_marker.not_replaceable_reason`: a marker read within a
+    bound, no symlinked directory); else why not, as a phrase for the row's reason."""
     if d.is_symlink():
         return "is a symlink"
     if not d.exists():
         return None
     if not d.is_dir():
         return "is not a directory"
-    listed = _listed(d)
-    if listed is None:
+    reason = not_replaceable_reason(d)
+    if reason == "is not a sonarmap output":
         return (f"has no {GOLDEN_MARKER} (not a golden sonarmap wrote: remove it once to let "
                 "--update write it)")
-    try:
-        present = {p.name for p in d.iterdir()}
-    except OSError as err:
-        return f"cannot be listed ({err.strerror or err})"
-    extra = sorted(present - listed - {GOLDEN_MARKER})
-    if extra:
-        return f"holds files sonarmap did not write ({', '.join(extra[:3])})"
-    if any((d / n).is_dir() or (d / n).is_symlink() for n in present):
-        return "holds a directory or a symlink"
-    return None
+    return reason
 
 
 def stage_golden(run_dir: Path, staged: Path, config_text: str,
@@ -112,20 +97,19 @@ def same_golden(staged: Path, final: Path) -> bool:
     names = {p.name for p in staged.iterdir()}
     if names != {p.name for p in final.iterdir()}:
         return False
-    return all((staged / n).read_bytes() == (final / n).read_bytes() for n in names)
+    for n in names:
+        ours = (staged / n).read_bytes()
+        try:  # the old golden's file: bounded, a regular file (never blocks on a FIFO)
+            theirs = read_bounded(final / n, "golden file", len(ours))
+        except SonarmapError:
+            return False
+        if theirs != ours:
+            return False
+    return True
 
 
 def _sibling(final: Path, tag: str) -> Path:
     return final.parent / f".{final.name}.{tag}-{os.getpid()}-{secrets.token_hex(4)}"
-
-
-def _fsync(path: Path) -> None:
-    flags = os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) if path.is_dir() else os.O_RDONLY
-    fd = os.open(path, flags)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
 
 
 def replace_golden(staged: Path, final: Path) -> None:
@@ -140,8 +124,8 @@ def replace_golden(staged: Path, final: Path) -> None:
         tmp.mkdir()
         for src in sorted(staged.iterdir()):
             shutil.copyfile(src, tmp / src.name)
-            _fsync(tmp / src.name)
-        _fsync(tmp)
+            fsync_path(tmp / src.name)
+        fsync_path(tmp)
         if not final.exists():
             os.rename(tmp, final)
         elif exchange(tmp, final):
@@ -156,7 +140,7 @@ def replace_golden(staged: Path, final: Path) -> None:
             shutil.rmtree(tmp, ignore_errors=True)
         raise OutputError(f"cannot write the golden: {err.strerror or err}", final) from err
     with contextlib.suppress(OSError):
-        _fsync(final.parent)
+        fsync_path(final.parent)
 
 
 def recover_goldens(goldens: Path) -> list[Path]:
@@ -170,7 +154,8 @@ def recover_goldens(goldens: Path) -> list[Path]:
             if m is None or not p.is_dir() or p.is_symlink():
                 continue
             final = goldens / m["name"]
-            if not final.exists() and _listed(p) is not None and not alive(int(m["pid"])):
+            if (not final.exists() and written_files_in(p) is not None
+                    and not alive(int(m["pid"]))):
                 os.rename(p, final)
                 restored.append(final)
     clean_stale_entries(goldens)

@@ -17,6 +17,7 @@ from typing import Any
 
 from formats.tables import markdown_table, text_table
 from formats.writers.junit_xml import JUnitCase
+from pipeline.tools.regress import show_value
 from pipeline.tools.suite.check import CheckResult
 from pipeline.tools.suite.run_suite import SuiteResult
 
@@ -26,16 +27,8 @@ _LABEL = {"ok": "ok", "regressed": "REGRESSED", "error": "ERROR", "new": "new go
           "updated": "updated", "unchanged": "unchanged"}
 
 
-def _show(v: Any) -> str:
-    if v is None:
-        return "n/a"
-    if isinstance(v, float):
-        return f"{v:.6g}"
-    return str(v)
-
-
 def _metric_line(r: dict[str, Any]) -> str:
-    return (f"{r['metric']}: golden {_show(r['golden'])}, current {_show(r['current'])}, "
+    return (f"{r['metric']}: golden {show_value(r['golden'])}, current {show_value(r['current'])}, "
             f"tolerance {r['tolerance']}" + (f" ({r['detail']})" if r["detail"] else ""))
 
 
@@ -43,7 +36,7 @@ def _log_rows(outcomes: Sequence[CheckResult]) -> list[list[str]]:
     rows = []
     for o in outcomes:
         s = o.summary
-        rows.append([o.name, _LABEL.get(o.status, o.status), _show(s.get("features", "")),
+        rows.append([o.name, _LABEL.get(o.status, o.status), show_value(s.get("features", "")),
                      "" if s.get("f1") is None else f"{s['f1']:.4f}",
                      s.get("cells_changed", "") or "", f"{o.seconds:.1f}", o.reason])
     return rows
@@ -54,7 +47,7 @@ _METRIC_HEAD = ("log", "metric", "golden", "current", "tolerance", "detail")
 
 
 def _metric_rows(outcomes: Sequence[CheckResult]) -> list[list[str]]:
-    return [[o.name, r["metric"], _show(r["golden"]), _show(r["current"]), r["tolerance"],
+    return [[o.name, r["metric"], show_value(r["golden"]), show_value(r["current"]), r["tolerance"],
              r["detail"]] for o in outcomes if o.status == "regressed" for r in o.failed_rows]
 
 
@@ -76,7 +69,7 @@ def moved_lines(o: CheckResult) -> list[str]:
         return [f"{o.name}: unchanged"]
     if o.status == "error":
         return [f"{o.name}: FAILED: {o.reason}"]
-    moved = [f"  {r['metric']}: {_show(r['golden'])} -> {_show(r['current'])}"
+    moved = [f"  {r['metric']}: {show_value(r['golden'])} -> {show_value(r['current'])}"
              + (f" ({r['detail']})" if r["detail"] else "") for r in o.rows]
     return [f"{o.name}: updated" + ("" if moved else " (compared values the same; "
                                    "other bytes moved)"), *moved, *(f"  note: {n}" for n in

@@ -23,7 +23,8 @@ from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from formats.errors import InputError, OutputError, SonarmapError
+from formats.errors import InputError, SonarmapError
+from formats.writers.atomic import make_dir
 from pipeline.config import load_config
 from pipeline.cores import usable_cores
 from pipeline.tools.batch import MEMORY_LIMIT
@@ -178,20 +179,12 @@ def run_suite(
     tol = load_tolerances(tolerances or suite.tolerances)
     goldens = Path(goldens)
     if update:
-        try:
-            goldens.mkdir(parents=True, exist_ok=True)
-        except OSError as err:
-            raise OutputError(f"cannot create the goldens directory: {err.strerror or err}",
-                              goldens) from err
+        make_dir(goldens, "goldens directory")
         recover_goldens(goldens)
     elif not goldens.is_dir():
         raise InputError("goldens directory not found (make it with --update)", goldens)
     if diff_dir is not None and not update:
-        try:
-            diff_dir.mkdir(parents=True, exist_ok=True)
-        except OSError as err:
-            raise OutputError(f"cannot create the diff directory: {err.strerror or err}",
-                              diff_dir) from err
+        make_dir(diff_dir, "diff directory")
         for log in suite.logs:  # a picture of an earlier run must not outlive its change
             (diff_dir / f"{log.name}.png").unlink(missing_ok=True)
     done: dict[str, CheckResult] = {}

@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from formats.errors import ConfigError
+from formats.path_text import path_text_problem, shown
 from formats.toml_file import read_toml
 
 __all__ = ["Suite", "SuiteLog", "display_path", "read_suite"]
@@ -81,6 +82,9 @@ def _string(value: Any, key: str, suite: Path, where: str) -> str:
 
 def _file(value: Any, key: str, suite: Path, where: str, *, directory_ok: bool) -> Path:
     text = _string(value, key, suite, where)
+    problem = path_text_problem(text)
+    if problem is not None:
+        raise _fail(suite, where, f"{key} {shown(text)} {problem}")
     p = Path(text).expanduser()
     p = p if p.is_absolute() else suite.parent / p
     if not p.exists():

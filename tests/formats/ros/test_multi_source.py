@@ -326,3 +326,25 @@ def test_any_split_of_a_recording_reads_back_as_the_recording(
     # merge slack.
     pieces = list(src.raw_batches([c.id for c in src.connections]))
     assert lateness(as_the_reader_sees_it(pieces)) <= MERGE_SLACK_NS
+
+
+def test_a_batch_out_of_time_order_does_not_stall_the_merge() -> None:
+    """A corrupt stamp puts a batch out of order ([5 s, 1 s]): the merge still ends,
+    giving every message once (it once looped forever on such a batch)."""
+    from formats.ros.multi_source import _merge_by_time
+    from formats.ros.source import Connection, RawBatch
+
+    conn = Connection(id=1, topic="/t", msgtype="std_msgs/msg/Empty", encoding="cdr",
+                      msgdef="", msgdef_format="", count=0)
+    buf = np.zeros(8, np.uint8)
+
+    def batch(times: list[int]) -> RawBatch:
+        n = len(times)
+        return RawBatch(conn, np.array(times, np.int64), buf, np.zeros(n, np.int64),
+                        np.zeros(n, np.int64))
+
+    s = 10**9
+    out = list(_merge_by_time([iter([batch([5 * s, 1 * s])]), iter([batch([3 * s, 4 * s])])],
+                              slack_ns=0))
+    times = sorted(t for _, raw in out for t in raw.log_time_ns.tolist())
+    assert times == [1 * s, 3 * s, 4 * s, 5 * s]

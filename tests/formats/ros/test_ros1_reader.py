@@ -23,7 +23,7 @@ from ros1_bags import (
 from rosbags.highlevel import AnyReader
 
 from formats.contract import LogReader, MountBatch, PoseBatch, RangeBatch
-from formats.errors import ConfigError, FormatError, TopicError
+from formats.errors import ConfigError, TopicError
 from formats.options import InputConfig, MountConfig, SensorsConfig
 from formats.presets import PRESETS
 from formats.ros.reader import RosLogReader
@@ -452,22 +452,29 @@ def test_truncated_bag_yields_intact_part_with_a_note(tmp_path: Path) -> None:
     assert "bytes at the end lost" in info.notes[0]
 
 
-def test_decoder_errors_name_the_file(tmp_path: Path) -> None:
+def test_a_message_that_does_not_decode_is_lost_and_named(tmp_path: Path) -> None:
+    """Issue 58 item 9: one bad message loses itself, not the log; the loss names the
+    file, the topic and the message."""
     from rosbags.rosbag1 import Writer
 
     path = tmp_path / "bad.bag"
-    from ros1_bags import store
+    from ros1_bags import range_msg, store
 
     with Writer(path) as w:
         conn = w.add_connection("/sonar", "sensor_msgs/msg/Range", typestore=store())
-        w.write(conn, T0, bytes(range(20)))
-    with (
-        open_ros1_bag(path) as reader,
-        pytest.raises(
-            FormatError, match=rf"^{path}: message 0 of topic /sonar \(log time {T0} ns\)"
-        ),
-    ):
-        _collect(reader, ("ranges",))
+        for k in range(5):
+            msg = range_msg(T0 + k * 10**8, "s0", 1.0 + k)
+            w.write(conn, T0 + k * 10**8, store().serialize_ros1(msg, "sensor_msgs/msg/Range"))
+        w.write(conn, T0 + 5 * 10**8, bytes(range(20)))  # the sixth: garbage
+        w.write(conn, T0 + 6 * 10**8, store().serialize_ros1(
+            range_msg(T0 + 6 * 10**8, "s0", 7.0), "sensor_msgs/msg/Range"))
+    with open_ros1_bag(path) as reader:
+        ranges = _ranges(_collect(reader, ("ranges",)))
+        (loss,) = reader.info().losses
+    assert ranges.range_m.tolist() == [1.0, 2.0, 3.0, 4.0, 5.0, 7.0]
+    t_bad = T0 + 5 * 10**8
+    assert loss.startswith(f"bad.bag: /sonar: 1 messages do not decode and are lost (first:"
+                           f" message 5 of topic /sonar (log time {t_bad} ns)")
 
 
 def test_reader_works_on_any_source_object(tmp_path: Path) -> None:

@@ -258,5 +258,5 @@ def test_atomic_write_replaces_and_leaves_no_temp(tmp_path: Path) -> None:
 
 def test_atomic_write_error_is_output_error(tmp_path: Path) -> None:
     p = tmp_path / "missing_dir" / "f.bin"
-    with pytest.raises(OutputError, match=r"missing_dir/f\.bin: cannot write"):
+    with pytest.raises(OutputError, match=r"missing_dir/f\.bin: parent directory does not exist"):
         atomic_write_bytes(p, b"x")

@@ -29,7 +29,7 @@ def staged(d: Path, tag: str, size: int = 1000) -> Path:
     files = ["config.toml", "map.pgm", "map.yaml", "metrics.json"]
     for name in files:
         (d / name).write_text((tag * size)[:size], encoding="utf-8")
-    (d / GOLDEN_MARKER).write_text(json.dumps({"written_by": "test", "files": files}) + "\n",
+    (d / GOLDEN_MARKER).write_text(json.dumps({"written_by": "sonarmap regress --update", "files": files}) + "\n",
                                    encoding="utf-8")
     return d
 
