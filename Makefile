@@ -48,7 +48,7 @@ test: lint layers typecheck unit
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks
 
-# Thousands of mutated logs per format through every reader (about 12 minutes).
+# Thousands of mutated logs per format through every reader (about an hour on 2 cores).
 fuzz: $(STAMP)
 	$(BIN)/python -m fuzz.run_fuzz --examples 1000 --values 300 --side-files 40
 

@@ -379,8 +379,9 @@ def thickness(results: list[tuple[list[Row], str]]) -> str:
     return "\n".join(lines)
 
 
-def figure(results: list[tuple[list[Row], str]], path: Path, height: int = 360) -> None:
-    """The map.png images of each log in a row, scaled to ``height`` px, labelled."""
+def figure(results: list[tuple[list[Row], str]], path: Path, height: int = 180) -> None:
+    """The map.png images of each log in a row, scaled to ``height`` px, labelled; saved with a
+    256-colour palette so the figure stays small in the repository."""
     from PIL import Image, ImageDraw, ImageFont
 
     from formats.writers.atomic import atomic_write_bytes
@@ -413,7 +414,7 @@ def figure(results: list[tuple[list[Row], str]], path: Path, height: int = 360) 
         full.paste(img, (0, y))
         y += img.height
     buf = io.BytesIO()
-    full.save(buf, format="PNG", optimize=True)
+    full.quantize(colors=256, dither=Image.Dither.NONE).save(buf, format="PNG", optimize=True)
     atomic_write_bytes(path, buf.getvalue())
 
 
