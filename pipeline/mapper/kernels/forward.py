@@ -28,9 +28,8 @@ from numba import njit
 
 from pipeline.mapper.kernels.attribution import reach_cells
 from pipeline.mapper.kernels.cone import edge_sector_spans, max_sector_spans
+from pipeline.mapper.kernels.specular import MAX_BINS, shade, shadow_bins
 from pipeline.mapper.types import F32, F64, I32, B
-
-MAX_BINS = 2048  # angular bins of one cone's occlusion profile
 
 
 @njit(cache=True, inline="always")
@@ -66,7 +65,7 @@ def detection_counts(
                               height, rows, c0s, c1s)
         ca, sa = math.cos(a), math.sin(a)
         t_edge = math.tan(hb)
-        nb = min(MAX_BINS, math.ceil(2.0 * hb * r_out / res) + 1)
+        nb = shadow_bins(hb, r_out, res)
         bin_w = 2.0 * t_edge / nb
         stop[:nb] = np.inf
         passed[:] = False
@@ -87,12 +86,7 @@ def detection_counts(
                     dist = math.sqrt(dx * dx + dy * dy)
                     t = (dy * ca - dx * sa) / along
                     if sweep == 0:
-                        rel = t + t_edge
-                        hw = 0.5 * res / max(dist, res) * (1.0 + t * t)
-                        k0 = max(0, math.floor((rel - hw) / bin_w))
-                        k1 = min(nb - 1, math.floor((rel + hw) / bin_w))
-                        for kb in range(k0, k1 + 1):
-                            stop[kb] = min(stop[kb], dist)
+                        shade(stop, nb, dist, t, t_edge, res, bin_w)
                         continue
                     kb = math.floor((t + t_edge) / bin_w)
                     if dist > stop[min(max(kb, 0), nb - 1)]:

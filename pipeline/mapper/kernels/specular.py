@@ -55,6 +55,20 @@ def shadow_bins(hb: float, r_out: float, res: float) -> int:
     return min(MAX_BINS, math.ceil(2.0 * hb * r_out / res) + 1)
 
 
+@njit(cache=True, inline="always")
+def shade(stop: F64, nb: int, dist: float, t: float, t_edge: float, res: float,
+          bin_w: float) -> None:
+    """Stop at ``dist`` the rays of the bins (of ``nb``) that a cell at distance ``dist`` and
+    tangent offset ``t`` off the axis covers: half a cell over the distance, in tangent units
+    (stretched by ``1 + t²``); bins start at tangent ``-t_edge`` and are ``bin_w`` wide."""
+    rel = t + t_edge
+    hw = 0.5 * res / max(dist, res) * (1.0 + t * t)
+    k0 = max(0, math.floor((rel - hw) / bin_w))
+    k1 = min(nb - 1, math.floor((rel + hw) / bin_w))
+    for kb in range(k0, k1 + 1):
+        stop[kb] = min(stop[kb], dist)
+
+
 @njit(cache=True, nogil=True)
 def shadow_offsets(cones: F64, half_fov: F64, res: float) -> I64:
     """Where each reading's shadow profile starts in :func:`shadow_profiles`' ``stops``
@@ -127,12 +141,7 @@ def shadow_profiles(
                     stopped[i] = True
                     count += 1
                 t = (dy * ca - dx * sa) / along
-                rel = t + t_edge
-                hw = 0.5 * res / max(dist, res) * (1.0 + t * t)
-                k0 = max(0, math.floor((rel - hw) / bin_w))
-                k1 = min(nb - 1, math.floor((rel + hw) / bin_w))
-                for kb in range(k0, k1 + 1):
-                    stop[kb] = min(stop[kb], dist)
+                shade(stop, nb, dist, t, t_edge, res, bin_w)
     return count
 
 
