@@ -75,6 +75,9 @@ LABELS = {
 }
 # Shown in the figure (the ablation without correction is in the tables only).
 FIGURE_KEYS = ("default", "attribution", "with_correction", "classic", "octomap")
+# Short captions: a narrow map's tile is only ~60 px wide.
+FIGURE_LABELS = {"default": "default", "attribution": "§9", "with_correction": "paper",
+                 "classic": "classic", "octomap": "OctoMap"}
 
 
 @dataclass
@@ -387,7 +390,7 @@ def figure(results: list[tuple[list[Row], str]], path: Path, height: int = 180) 
     from formats.writers.atomic import atomic_write_bytes
 
     pad, label_h = 8, 36
-    font = ImageFont.load_default(size=18)
+    font = ImageFont.load_default(size=14)
     rows_img = []
     for rows, caption in results:
         tiles = []
@@ -396,16 +399,18 @@ def figure(results: list[tuple[list[Row], str]], path: Path, height: int = 180) 
                 rgb = src.convert("RGB")
             w = max(1, round(rgb.width * height / rgb.height))
             tiles.append((rgb.resize((w, height), Image.Resampling.LANCZOS), r))
-        width = sum(t.width for t, _ in tiles) + pad * (len(tiles) + 1)
+        texts = [f"{FIGURE_LABELS[r.key]} {r.f1:.3f}" for _, r in tiles]
+        slots = [max(t.width, math.ceil(font.getlength(text)))
+                 for (t, _), text in zip(tiles, texts, strict=True)]
+        width = max(sum(slots) + pad * (len(tiles) + 1), math.ceil(font.getlength(caption)) + pad)
         canvas = Image.new("RGB", (width, height + 2 * label_h + pad), "white")
         draw = ImageDraw.Draw(canvas)
         draw.text((pad, 6), caption, fill="black", font=font)
         x = pad
-        for tile, r in tiles:
+        for (tile, _), text, slot in zip(tiles, texts, slots, strict=True):
             canvas.paste(tile, (x, label_h))
-            draw.text((x, label_h + height + 6), f"{LABELS[r.key]}: F1 {r.f1:.3f}",
-                      fill="black", font=font)
-            x += tile.width + pad
+            draw.text((x, label_h + height + 6), text, fill="black", font=font)
+            x += slot + pad
         rows_img.append(canvas)
     full = Image.new("RGB", (max(i.width for i in rows_img), sum(i.height for i in rows_img)),
                      "white")
