@@ -56,11 +56,20 @@ def reach_cells(cones: F64, res: float) -> int:
 
 
 @njit(cache=True)
-def _span_buffers(cones: F64, res: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def span_buffers(cones: F64, res: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Span buffers large enough for the widest arc of the table."""
     size = max_sector_spans(reach_cells(cones, res) * res, res)
     return (np.empty(size, dtype=np.int64), np.empty(size, dtype=np.int64),
             np.empty(size, dtype=np.int64))
+
+
+@njit(cache=True, inline="always")
+def spread_echo(hits: F32, cand_r: np.ndarray, cand_c: np.ndarray, m: int,
+                dilution: float) -> None:
+    """Spread one echo over its ``m`` candidate cells: ``1 / m ** dilution`` each."""
+    w = 1.0 / float(m) ** dilution
+    for k in range(m):
+        hits[cand_r[k], cand_c[k]] += w
 
 
 @njit(cache=True, inline="always")
@@ -78,7 +87,7 @@ def count_arcs(cones: F64, up_down: B, r_inner: F64, gx: float, gy: float, res: 
     """Count every cell of every echo's arc (``r_inner[k]`` to ``cones[k, 2]``) once more in
     the row difference grid ``diff`` (:func:`empty_span_counts`)."""
     height, width = diff.shape[0], diff.shape[1] - 1
-    rows, c0s, c1s = _span_buffers(cones, res)
+    rows, c0s, c1s = span_buffers(cones, res)
     for i in range(cones.shape[0]):
         n = _arc_spans(cones, up_down, r_inner, i, gx, gy, res, width, height, rows, c0s, c1s)
         for k in range(n):
@@ -98,7 +107,7 @@ def attribute_echoes(cones: F64, up_down: B, r_inner: F64, gx: float, gy: float,
     echo arcs cover it). Each of the ``n`` candidates gets ``1 / n**dilution`` of the echo.
     """
     height, width = hits.shape
-    rows, c0s, c1s = _span_buffers(cones, res)
+    rows, c0s, c1s = span_buffers(cones, res)
     size = reach_cells(cones, res) ** 2
     cand_r = np.empty(size, dtype=np.int64)
     cand_c = np.empty(size, dtype=np.int64)
@@ -116,9 +125,7 @@ def attribute_echoes(cones: F64, up_down: B, r_inner: F64, gx: float, gy: float,
         if m == 0:
             lost += 1
             continue
-        w = 1.0 / float(m) ** dilution
-        for k in range(m):
-            hits[cand_r[k], cand_c[k]] += w
+        spread_echo(hits, cand_r, cand_c, m, dilution)
     return lost
 
 

@@ -26,8 +26,8 @@ import math
 import numpy as np
 from numba import njit
 
-from pipeline.mapper.kernels.attribution import reach_cells
-from pipeline.mapper.kernels.cone import edge_sector_spans, max_sector_spans
+from pipeline.mapper.kernels.attribution import span_buffers
+from pipeline.mapper.kernels.cone import edge_sector_spans
 from pipeline.mapper.kernels.specular import MAX_BINS, shade, shadow_bins
 from pipeline.mapper.types import F32, F64, I32, B
 
@@ -51,10 +51,7 @@ def detection_counts(
     zero column), so rows of a span without a surface are skipped."""
     height, width = occ.shape
     bins = stats.shape[1] - 1
-    size = max_sector_spans(reach_cells(cones, res) * res, res)
-    rows = np.empty(size, dtype=np.int64)
-    c0s = np.empty(size, dtype=np.int64)
-    c1s = np.empty(size, dtype=np.int64)
+    rows, c0s, c1s = span_buffers(cones, res)
     stop = np.empty(MAX_BINS, dtype=np.float64)
     passed = np.zeros(bins + 1, dtype=np.bool_)
     for i in range(cones.shape[0]):

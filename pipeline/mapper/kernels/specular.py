@@ -26,12 +26,11 @@ import math
 import numpy as np
 from numba import njit
 
-from pipeline.mapper.kernels.attribution import reach_cells
+from pipeline.mapper.kernels.attribution import reach_cells, span_buffers, spread_echo
 from pipeline.mapper.kernels.cone import (
     cone_row_span,
     cone_rows,
     edge_sector_spans,
-    max_sector_spans,
 )
 from pipeline.mapper.types import F32, F64, I32, I64, B
 
@@ -92,11 +91,7 @@ def shadow_profiles(
     only these readings' entries, so calls on disjoint readings may run side by side;
     returns how many readings have a shadow."""
     height, width = cons.shape
-    reach = reach_cells(cones, res)
-    size = max_sector_spans(reach * res, res)
-    rows = np.empty(size, dtype=np.int64)
-    c0s = np.empty(size, dtype=np.int64)
-    c1s = np.empty(size, dtype=np.int64)
+    rows, c0s, c1s = span_buffers(cones, res)
     count = 0
     for i in range(lo, hi):
         ox, oy, r_out = cones[i, 0], cones[i, 1], cones[i, 2]
@@ -167,10 +162,7 @@ def trace_readings(
     then the cells are visited."""
     height, width = free_out.shape
     reach = reach_cells(cones, res)
-    size = max_sector_spans(reach * res, res)
-    rows = np.empty(size, dtype=np.int64)
-    c0s = np.empty(size, dtype=np.int64)
-    c1s = np.empty(size, dtype=np.int64)
+    rows, c0s, c1s = span_buffers(cones, res)
     cand_r = np.empty(reach * reach, dtype=np.int64)
     cand_c = np.empty(reach * reach, dtype=np.int64)
     dbuf = np.empty(width + 1, dtype=np.float64)
@@ -266,9 +258,7 @@ def trace_readings(
         if m == 0:
             lost += 1
             continue
-        w = 1.0 / float(m) ** dilution
-        for k in range(m):
-            hits[cand_r[k], cand_c[k]] += w
+        spread_echo(hits, cand_r, cand_c, m, dilution)
     return lost
 
 
