@@ -16,7 +16,7 @@ import numpy as np
 
 from formats.arrays import F64, I32, I64
 from formats.errors import ConfigError
-from pipeline.tools.simulate.world import World, segment_distances
+from pipeline.tools.simulate.world import World, circle_distances, segment_distances
 
 # Upper bound on ray×obstacle pairs evaluated at once (memory ≈ 8 B × a few arrays each).
 _MAX_PAIRS = 1 << 21
@@ -60,16 +60,7 @@ def cast_rays(world: World, ox: F64, oy: F64, theta: F64) -> tuple[F64, F64]:
         cos_inc = np.abs(ux * ey[0, j] - uy * ex[0, j]) / elen[0, j]
     cir = world.circles
     if cir.shape[0]:
-        fx, fy = ox[:, None] - cir[None, :, 0], oy[:, None] - cir[None, :, 1]
-        b = ux[:, None] * fx + uy[:, None] * fy
-        c = fx * fx + fy * fy - cir[None, :, 2] ** 2
-        disc = b * b - c
-        with np.errstate(invalid="ignore"):
-            root = np.sqrt(disc)
-        t = -b - root
-        # Origins inside a circle (c < 0) see nothing of it.
-        ok = (disc >= 0) & (c > 0) & (t > 0)
-        t = np.where(ok, t, np.inf)
+        t, root = circle_distances(cir, ox, oy, ux, uy)
         j = np.argmin(t, axis=1)
         rows = np.arange(t.shape[0])
         tc = t[rows, j]

@@ -123,6 +123,21 @@ def segment_distances(seg: F64, ox: F64, oy: F64, ux: F64, uy: F64) -> F64:
     ok = (denom != 0) & (t > 0) & (s >= 0) & (s <= 1)
     return np.where(ok, t, np.inf)
 
+
+def circle_distances(cir: F64, ox: F64, oy: F64, ux: F64, uy: F64) -> tuple[F64, F64]:
+    """(N, M) distance along each of N rays (origin ``ox, oy``, unit direction ``ux, uy``)
+    to each of M circles ``cir`` (x, y, r), inf where the ray misses it or starts inside it,
+    and ``sqrt(disc) = |u · (p − c)|``, the radial component at the hit (r·cos incidence)."""
+    fx, fy = ox[:, None] - cir[None, :, 0], oy[:, None] - cir[None, :, 1]
+    b = ux[:, None] * fx + uy[:, None] * fy
+    c = fx * fx + fy * fy - cir[None, :, 2] ** 2
+    disc = b * b - c
+    with np.errstate(invalid="ignore"):
+        root = np.sqrt(disc)
+    t = -b - root
+    # Origins inside a circle (c < 0) see nothing of it.
+    return np.where((disc >= 0) & (c > 0) & (t > 0), t, np.inf), root
+
 def _mark(out: F32, grid: GridSpec, px: F64, py: F64) -> None:
     col = np.floor((px - grid.origin_x) / grid.resolution).astype(np.int64)
     row = np.floor((py - grid.origin_y) / grid.resolution).astype(np.int64)

@@ -14,7 +14,7 @@ import math
 import numpy as np
 
 from formats.arrays import F64, I64
-from pipeline.tools.simulate.world import World, segment_distances
+from pipeline.tools.simulate.world import World, circle_distances, segment_distances
 from pipeline.tools.sonar.echo import Fan
 from pipeline.tools.sonar.model import SonarPhysics
 from pipeline.tools.sonar.surfaces import critical_angles
@@ -44,13 +44,7 @@ def cast_surfaces(world: World, ox: F64, oy: F64, ux: F64, uy: F64) -> tuple[F64
         key = np.where(np.isfinite(best), j, -1)
     cir = world.circles
     if cir.shape[0]:
-        fx, fy = ox[:, None] - cir[None, :, 0], oy[:, None] - cir[None, :, 1]
-        b = ux[:, None] * fx + uy[:, None] * fy
-        c = fx * fx + fy * fy - cir[None, :, 2] ** 2
-        disc = b * b - c
-        with np.errstate(invalid="ignore"):
-            t = -b - np.sqrt(disc)
-        t = np.where((disc >= 0) & (c > 0) & (t > 0), t, np.inf)
+        t, _ = circle_distances(cir, ox, oy, ux, uy)
         j = np.argmin(t, axis=1)
         tc = t[rows, j]
         hx = ox + tc * ux - cir[j, 0]
