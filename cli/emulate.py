@@ -7,6 +7,17 @@ from typing import Annotated
 
 import typer
 
+from cli.drift_options import (
+    DriftHeadingBias,
+    DriftHeadingWalk,
+    DriftScale,
+    DriftSlips,
+    DriftSlipScale,
+    DriftSlipYaw,
+    DriftWheelOdometry,
+    DriftXY,
+    DriftYaw,
+)
 from cli.errors import handle_errors
 from formats.presets import PRESETS
 
@@ -99,35 +110,16 @@ def emulate(
         str,
         typer.Option("--compression", help="Chunk compression: none; ros1 bz2/lz4; mcap lz4/zstd."),
     ] = "none",
-    drift_scale: Annotated[
-        float, typer.Option("--drift-scale", help="Odometry scale error, fraction (0.03: 3 % too long).")
-    ] = 0.0,
-    drift_heading_bias: Annotated[
-        float, typer.Option("--drift-heading-bias", help="Odometry heading bias, degrees per metre driven.")
-    ] = 0.0,
-    drift_xy: Annotated[
-        float, typer.Option("--drift-xy", help="Odometry position noise, m per √m.")
-    ] = 0.0,
-    drift_yaw: Annotated[
-        float, typer.Option("--drift-yaw", help="Odometry yaw noise, rad per √rad.")
-    ] = 0.0,
+    drift_scale: DriftScale = 0.0,
+    drift_heading_bias: DriftHeadingBias = 0.0,
+    drift_xy: DriftXY = 0.0,
+    drift_yaw: DriftYaw = 0.0,
     drift_seed: Annotated[int, typer.Option("--drift-seed", help="Seed of the drift noise.")] = 0,
-    drift_heading_walk: Annotated[
-        float, typer.Option("--drift-heading-walk", help="Odometry heading random walk, rad per √m driven.")
-    ] = 0.0,
-    drift_slips: Annotated[
-        float, typer.Option("--drift-slips", help="Wheel slips per 100 m driven (Poisson).")
-    ] = 0.0,
-    drift_slip_yaw: Annotated[
-        float, typer.Option("--drift-slip-yaw", help="Std of one slip's heading error, degrees.")
-    ] = 0.0,
-    drift_slip_scale: Annotated[
-        float, typer.Option("--drift-slip-scale", help="Std of one slip's scale error over 0.5 m, fraction.")
-    ] = 0.0,
-    drift_wheel_odometry: Annotated[
-        bool, typer.Option("--drift-wheel-odometry", help="Set every --drift-* term left at 0 to "
-                           "typical wheel-odometry figures (docs/POSE_REFINEMENT.md).")
-    ] = False,
+    drift_heading_walk: DriftHeadingWalk = 0.0,
+    drift_slips: DriftSlips = 0.0,
+    drift_slip_yaw: DriftSlipYaw = 0.0,
+    drift_slip_scale: DriftSlipScale = 0.0,
+    drift_wheel_odometry: DriftWheelOdometry = False,
     raw_odometry: Annotated[
         bool,
         typer.Option("--raw-odometry", help="Log the laser log's own wheel odometry (CARMEN "

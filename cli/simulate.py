@@ -7,6 +7,17 @@ from typing import Annotated
 
 import typer
 
+from cli.drift_options import (
+    DriftHeadingBias,
+    DriftHeadingWalk,
+    DriftScale,
+    DriftSlips,
+    DriftSlipScale,
+    DriftSlipYaw,
+    DriftWheelOdometry,
+    DriftXY,
+    DriftYaw,
+)
 from cli.errors import handle_errors
 
 
@@ -56,28 +67,15 @@ def register(app: typer.Typer) -> None:
             typer.Option(help="Fraction of crosstalk readings (default: 0.01 ideal, 0.02 "
                          "realistic)."),
         ] = None,
-        drift_xy: Annotated[float, typer.Option(help="Odometry position drift, m per √m.")] = 0.0,
-        drift_yaw: Annotated[float, typer.Option(help="Odometry yaw drift, rad per √rad.")] = 0.0,
-        drift_scale: Annotated[
-            float, typer.Option(help="Odometry scale error, fraction (0.03: 3 % too long).")
-        ] = 0.0,
-        drift_heading_bias: Annotated[
-            float, typer.Option(help="Odometry heading bias, degrees per metre driven.")
-        ] = 0.0,
-        drift_heading_walk: Annotated[
-            float, typer.Option(help="Odometry heading random walk, rad per √m driven.")
-        ] = 0.0,
-        drift_slips: Annotated[float, typer.Option(help="Wheel slips per 100 m driven.")] = 0.0,
-        drift_slip_yaw: Annotated[
-            float, typer.Option(help="Std of one slip's heading error, degrees.")
-        ] = 0.0,
-        drift_slip_scale: Annotated[
-            float, typer.Option(help="Std of one slip's scale error over 0.5 m, fraction.")
-        ] = 0.0,
-        drift_wheel_odometry: Annotated[
-            bool, typer.Option(help="Set every --drift-* term left at 0 to typical "
-                               "wheel-odometry figures (docs/POSE_REFINEMENT.md).")
-        ] = False,
+        drift_xy: DriftXY = 0.0,
+        drift_yaw: DriftYaw = 0.0,
+        drift_scale: DriftScale = 0.0,
+        drift_heading_bias: DriftHeadingBias = 0.0,
+        drift_heading_walk: DriftHeadingWalk = 0.0,
+        drift_slips: DriftSlips = 0.0,
+        drift_slip_yaw: DriftSlipYaw = 0.0,
+        drift_slip_scale: DriftSlipScale = 0.0,
+        drift_wheel_odometry: DriftWheelOdometry = False,
         compression: Annotated[str, typer.Option(help="ros1: none/bz2/lz4; mcap: none/lz4/zstd.")] = "none",
     ) -> None:
         """Simulate a sonar ring on a robot driving through WORLD; write the log plus its
