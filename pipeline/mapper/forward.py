@@ -91,9 +91,20 @@ def unknown_rate(p_d: F64, floor: float) -> float:
 
 
 def reach_detection(reaches: F64) -> F64:
-    """``p(θ)`` per oriented bin from the reached surface cells ``(on the arc, passed)``,
-    smoothed by the uniform prior (Laplace)."""
-    out: F64 = (reaches[0] + 1.0) / (reaches[0] + reaches[1] + 2.0)
+    """``p(θ)`` per oriented bin from the reached surface cells ``(on the arc, passed)``:
+    each bin's share under the uniform prior (Laplace), then the closest curve that does not
+    rise with incidence (a surface's backscatter falls off its normal), weighted by the
+    bins' counts (pool adjacent violators; a bin with few reaches takes its neighbours')."""
+    weight = reaches[0] + reaches[1] + 2.0
+    share = (reaches[0] + 1.0) / weight
+    blocks: list[list[float]] = []  # [mean, weight, bins]
+    for v, w in zip(share.tolist(), weight.tolist(), strict=True):
+        blocks.append([v, w, 1.0])
+        while len(blocks) > 1 and blocks[-2][0] < blocks[-1][0]:
+            v2, w2, n2 = blocks.pop()
+            v1, w1, n1 = blocks.pop()
+            blocks.append([(v1 * w1 + v2 * w2) / (w1 + w2), w1 + w2, n1 + n2])
+    out: F64 = np.repeat([b[0] for b in blocks], [int(b[2]) for b in blocks])
     return out
 
 
