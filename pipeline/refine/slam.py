@@ -56,8 +56,7 @@ from pipeline.refine.graph import (
     solve,
     sqrt_information,
 )
-from pipeline.refine.scores import MAX_ECHOES_CONSISTENCY, thin
-from pipeline.refine.stretches import track_consistency_gain
+from pipeline.refine.scores import MAX_ECHOES_CONSISTENCY, thin, track_consistency
 from pipeline.refine.submaps import Submap, build_submaps, path_length_at
 from pipeline.se2 import between, compose, inverse, transform_points
 from pipeline.stages.pose_sync import POSE_OK, PoseTrack, interpolate_poses
@@ -182,11 +181,10 @@ def _match(g: _Graph, refs: list[int], j: int, prediction: F64, window: Window,
                      res=cfg.field_resolution_m, sigma=cfg.field_sigma_m)
 
 
-def slam_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig
-               ) -> tuple[F64, F64, F64, dict[str, Any]]:
-    """The refined poses of ``track`` (same stamps) and what the graph did."""
-    tt = np.asarray(track.t_ns)
-    tx, ty, tyaw = np.asarray(track.x), np.asarray(track.y), np.asarray(track.yaw)
+def slam_track(tt: np.ndarray, tx: F64, ty: F64, tyaw: F64, echoes: Echoes,
+               cfg: PoseRefinementConfig) -> tuple[F64, F64, F64, dict[str, Any]]:
+    """The refined poses of the odometry ``(tt, tx, ty, tyaw)`` (same stamps; ``echoes``
+    placed on it) and what the graph did."""
     echoes = echoes.within(cfg.max_echo_range_m)
     path = path_length_at(tt, tx, ty, echoes.t_ns) if len(echoes) else np.empty(0)
     submaps = build_submaps(echoes, path, travel_m=cfg.submap_travel_m,
@@ -268,9 +266,10 @@ def slam_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig
         metrics["note"] = "the graph does not explain the echoes better than the odometry"
         return tx.copy(), ty.copy(), tyaw.copy(), metrics
     rx, ry, ryaw = _onto_poses(tt, tx, ty, tyaw, submaps, g)
-    gain = track_consistency_gain(tt, (tx, ty, tyaw), (rx, ry, ryaw),
-                                   echoes.take(thin(len(echoes), MAX_ECHOES_CONSISTENCY)),
-                                   cfg.field_resolution_m, cfg.field_sigma_m)
+    scored = echoes.take(thin(len(echoes), MAX_ECHOES_CONSISTENCY))
+    gain = (track_consistency(tt, rx, ry, ryaw, scored, cfg.field_resolution_m, cfg.field_sigma_m)
+            / track_consistency(tt, tx, ty, tyaw, scored, cfg.field_resolution_m,
+                                cfg.field_sigma_m) - 1.0)
     metrics["consistency_gain"] = gain
     if not gain > 0:
         metrics["accepted"] = False
