@@ -30,7 +30,17 @@ import numpy as np
 from formats.angles import wrap_angle
 from formats.arrays import F64, I64
 from pipeline.config import PoseRefinementConfig
-from pipeline.refine.calibration import Calibration, Lean, calibrate, consistency_change
+from pipeline.refine.calibration import (
+    MAX_SLOPE,
+    MIN_GAIN,
+    MIN_Z,
+    STRONG_GAIN,
+    WINDOW_M,
+    Calibration,
+    Lean,
+    calibrate,
+    consistency_change,
+)
 from pipeline.refine.echoes import Echoes
 from pipeline.refine.scores import MAX_ECHOES_CONSISTENCY, thin, track_consistency
 from pipeline.stages.pose_sync import PoseTrack
@@ -47,45 +57,43 @@ class Refinement:
     metrics: dict[str, Any]
 
 
+def calibration_gates() -> dict[str, Any]:
+    """The calibration's acceptance as refinement runs it (:mod:`pipeline.refine.calibration`
+    constants; the scale's two patch models, its window recentred)."""
+    return {"min_gain": MIN_GAIN, "strong_gain": STRONG_GAIN, "max_slope": MAX_SLOPE,
+            "min_z": MIN_Z, "systematic": Lean(), "window_m": WINDOW_M, "tilt": "fallback",
+            "recentre": True}
+
+
 def configured_calibration(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes,
-                           cfg: PoseRefinementConfig, bias_centre: float = 0.0,
-                           max_bias: float | None = None) -> Calibration:
-    """The odometry calibration ``cfg`` asks for (:func:`pipeline.refine.calibration.calibrate`)
-    from ``echoes`` out to ``max_echo_range_m``, and those out to ``calibration_far_range_m``
-    for the scale where it reaches further; the heading bias within ``bias_centre ±
-    max_bias`` (default: ``calibration_max_bias_deg_per_m`` about 0)."""
+                           cfg: PoseRefinementConfig, **gates: Any) -> Calibration:
+    """The odometry calibration (:func:`pipeline.refine.calibration.calibrate`) from
+    ``echoes`` out to ``max_echo_range_m``, and those out to ``calibration_far_range_m``
+    for the scale where it reaches further; the heading bias within
+    ±``calibration_max_bias_deg_per_m``, the scale within ±``calibration_max_scale``;
+    ``gates`` replace :func:`calibration_gates`'s."""
     far = (echoes.within(cfg.calibration_far_range_m)
            if cfg.calibration_far_range_m > cfg.max_echo_range_m else None)
     return calibrate(
         t_ns, x, y, yaw, echoes.within(cfg.max_echo_range_m),
         max_scale=cfg.calibration_max_scale,
-        max_bias=(math.radians(cfg.calibration_max_bias_deg_per_m) if max_bias is None
-                  else max_bias),
-        bias_centre=bias_centre,
-        res=cfg.field_resolution_m, sigma=cfg.field_sigma_m,
-        min_gain=cfg.calibration_min_gain, strong_gain=cfg.calibration_strong_gain,
-        scale_score=cfg.calibration_scale_score,
-        max_slope=cfg.calibration_max_slope, min_z=cfg.calibration_scale_min_z,
-        systematic=Lean(cfg.calibration_scale_systematic,
-                        cfg.calibration_scale_systematic_negative),
-        window_m=cfg.calibration_scale_window_m,
-        tilt=cfg.calibration_scale_tilt,
-        recentre=cfg.calibration_scale_recentre,
-        far_echoes=far,
+        max_bias=math.radians(cfg.calibration_max_bias_deg_per_m),
+        res=cfg.field_resolution_m, sigma=cfg.field_sigma_m, far_echoes=far,
+        **{**calibration_gates(), **gates},
     )
 
 
 def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) -> Refinement:
     """Refine the odometry ``track`` from ``echoes`` (see the module docstring; echoes
     beyond ``max_echo_range_m``, out to ``calibration_far_range_m``, serve the scale alone)."""
-    from pipeline.refine.slam import slam_track
+    from pipeline.refine.slam import SUBMAP_MIN_ECHOES, slam_track
 
     tt = np.asarray(track.t_ns)
     tx, ty, tyaw = np.asarray(track.x), np.asarray(track.y), np.asarray(track.yaw)
     near = echoes.within(cfg.max_echo_range_m)
     metrics: dict[str, Any] = {"model": "graph", "echoes": len(near)}
     best: tuple[F64, F64, F64] = (tx, ty, tyaw)
-    if len(near) >= cfg.submap_min_echoes:
+    if len(near) >= SUBMAP_MIN_ECHOES:
         cal = configured_calibration(tt, tx, ty, tyaw, echoes, cfg)
         _calibration_metrics(cal, metrics)
         best = cal.correct(tx, ty, tyaw)
@@ -184,23 +192,23 @@ def summary(metrics: dict[str, Any], cfg: PoseRefinementConfig) -> str:
         z = metrics.get("scale_z", math.nan)
         why = (f"the far echoes disagree: {metrics['scale_far_estimate']:+.1%} ± "
                f"{metrics['scale_far_standard_error']:.1%}" if "scale_far_estimate" in metrics
-               else f"z {z:.1f} < {cfg.calibration_scale_min_z:g}"
-               if not z >= cfg.calibration_scale_min_z
+               else f"z {z:.1f} < {MIN_Z:g}"
+               if not z >= MIN_Z
                else f"fixed-point slope {metrics['scale_fixed_point_slope']:.2f}")
         parts.append(f"scale error not established ({metrics['scale_estimate']:+.1%} ± "
                      f"{metrics['scale_standard_error']:.1%}, {why}{reach}), not applied")
     elif "scale_fixed_point_slope" in metrics:
         parts.append("scale error undetermined (fixed-point slope "
                      f"{metrics['scale_fixed_point_slope']:.2f}), not applied")
-    elif cfg.calibration_max_scale > 0 and cfg.calibration_scale_score == "surfaces":
+    elif cfg.calibration_max_scale > 0:
         parts.append("scale error undetermined (no surface seen from two places), not applied")
     bias = metrics.get("search_heading_bias_deg_per_m")
     if bias:
         parts.append(f"heading bias {bias:+.2f}°/m")
     elif bias is not None:
         parts.append("no heading bias" + _why_no_bias(metrics.get("heading_bias_rejected"),
-                                                      cfg.calibration_min_gain,
-                                                      cfg.calibration_strong_gain))
+                                                      MIN_GAIN,
+                                                      STRONG_GAIN))
     if "submaps" in metrics:
         parts.append(graph_clause(metrics))
     parts.append(f"poses moved {metrics.get('moved_mean_m', 0.0):.2f} m mean, "

@@ -64,6 +64,14 @@ from pipeline.stages.pose_sync import POSE_OK, PoseTrack, interpolate_poses
 ARC_STRIDE = 1  # the query scores every point of an echo's arc
 CHI2_OUTLIER = 16.27  # χ² with 3 degrees of freedom at 99.9 %: a constraint the solution rejects
 Z99 = 2.326  # the standard normal's 99 % quantile (χ²(dof) ≈ dof + z·√(2·dof))
+SUBMAP_MIN_ECHOES = 60  # a shorter stretch joins the next submap (too few echoes to match)
+SUBMAP_MAX_POINTS = 400  # echoes kept per submap (evenly thinned)
+LOCAL_MAP_SUBMAPS = 3  # a submap is matched against this many previous ones
+MAX_AMBIGUITY = 0.99  # a closure whose distinct second pose is this likely is ambiguous
+# Priors on the odometry's systematic error (σ): a few percent of scale and a fraction of a
+# degree per metre are typical of uncalibrated wheel odometry (docs/POSE_REFINEMENT.md).
+PRIOR_SCALE = 0.01
+PRIOR_BIAS_DEG_PER_M = 2.0
 
 
 @dataclass
@@ -188,7 +196,7 @@ def slam_track(tt: np.ndarray, tx: F64, ty: F64, tyaw: F64, echoes: Echoes,
     echoes = echoes.within(cfg.max_echo_range_m)
     path = path_length_at(tt, tx, ty, echoes.t_ns) if len(echoes) else np.empty(0)
     submaps = build_submaps(echoes, path, travel_m=cfg.submap_travel_m,
-                            min_echoes=cfg.submap_min_echoes, max_points=cfg.submap_max_points)
+                            min_echoes=SUBMAP_MIN_ECHOES, max_points=SUBMAP_MAX_POINTS)
     metrics: dict[str, Any] = {"model": "graph", "echoes": len(echoes), "submaps": len(submaps)}
     zero = {"matches_accepted": 0, "matches_rejected": 0, "loop_closures_accepted": 0,
             "loop_closures_rejected": 0, "accepted": False}
@@ -199,7 +207,7 @@ def slam_track(tt: np.ndarray, tx: F64, ty: F64, tyaw: F64, echoes: Echoes,
     odo_anchor = np.array([s.anchor for s in submaps])
     anchor_path = np.array([s.path_m for s in submaps])
     opt = GraphOptions(cfg.odometry_sigma_xy, math.radians(cfg.odometry_sigma_yaw_deg), True,
-                       cfg.prior_scale, math.radians(cfg.prior_bias_deg_per_m), 1.0, True)
+                       PRIOR_SCALE, math.radians(PRIOR_BIAS_DEG_PER_M), 1.0, True)
     odo = Odometry(between(odo_anchor[:-1], odo_anchor[1:]), np.diff(anchor_path))
     g = _Graph(submaps, odo, opt, odo_anchor.copy())
     seq = _window(cfg.search_xy_m, cfg.search_yaw_deg, cfg.field_resolution_m)
@@ -208,7 +216,7 @@ def slam_track(tt: np.ndarray, tx: F64, ty: F64, tyaw: F64, echoes: Echoes,
     for j in range(1, len(submaps)):
         pred = compose(g.est[j - 1], calibrated(odo.delta[j - 1:j], odo.length[j - 1:j],
                                                 g.scale, g.bias)[0])
-        refs = list(range(max(0, j - cfg.local_map_submaps), j))
+        refs = list(range(max(0, j - LOCAL_MAP_SUBMAPS), j))
         m = _match(g, refs, j, pred, seq, cfg)
         if m is not None and m.score >= cfg.min_score:
             g.add(j - 1, j, m.pose, m.cov, loop=False)
@@ -218,15 +226,15 @@ def slam_track(tt: np.ndarray, tx: F64, ty: F64, tyaw: F64, echoes: Echoes,
             g.est[j] = pred
             seq_bad += 1
         d = np.hypot(g.est[:j, 0] - g.est[j, 0], g.est[:j, 1] - g.est[j, 1])
-        far = anchor_path[j] - anchor_path[:j] >= cfg.loop_min_path_m
+        far = anchor_path[j] - anchor_path[:j] >= 2 * cfg.loop_radius_m
         cand = np.flatnonzero((d <= cfg.loop_radius_m) & far)
-        cand = cand[np.argsort(d[cand], kind="stable")][: cfg.loop_max_per_submap]
+        cand = cand[np.argsort(d[cand], kind="stable")][:1]
         closed = False
         for i in cand.tolist():
             loop_tried += 1
             refs = [r for r in (i - 1, i, i + 1) if 0 <= r < j]
             m = _match(g, refs, j, g.est[j], wide, cfg)
-            if m is None or m.score < cfg.min_score or m.ambiguity > cfg.max_ambiguity:
+            if m is None or m.score < cfg.min_score or m.ambiguity > MAX_AMBIGUITY:
                 loop_gated += 1
                 continue
             g.add(i, j, m.pose, m.cov, loop=True)
