@@ -83,6 +83,11 @@ def configured_calibration(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes,
     )
 
 
+_START_KEYS = ("accepted", "note", "loop_closures_accepted", "loop_closures_rejected",
+               "matches_accepted", "scale_error", "heading_bias_deg_per_m", "consistency_gain",
+               "consistency_gain_over_calibration")
+
+
 def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) -> Refinement:
     """Refine the odometry ``track`` from ``echoes`` (see the module docstring; echoes
     beyond ``max_echo_range_m``, out to ``calibration_far_range_m``, serve the scale alone)."""
@@ -103,9 +108,12 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
         if cal.scale_error != 0.0 or cal.heading_bias != 0.0:
             starts.append(("odometry", (tx, ty, tyaw)))
         graph: dict[str, Any] = {}
+        tried: dict[str, Any] = {}
         for name, start in starts:
-            gx, gy, gyaw, gm = slam_track(tt, *start, near.on_track(tt, *start), cfg)
+            gx, gy, gyaw, gm = slam_track(tt, *start, near.on_track(tt, *start), cfg,
+                                          scale=0.0 if name == "calibration" else cal.scale_error)
             gm["start"] = name
+            tried[name] = gm
             if gm["accepted"]:
                 mine = track_consistency(tt, gx, gy, gyaw, scored, cfg.field_resolution_m,
                                          cfg.field_sigma_m)
@@ -118,6 +126,8 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
                 gm["note"] = "the echoes are less consistent than on the calibrated odometry"
             graph = graph or gm
         metrics.update(graph)
+        metrics["starts"] = {name: {k: gm[k] for k in _START_KEYS if k in gm}
+                             for name, gm in tried.items()}
     else:
         metrics.update(submaps=0, matches_accepted=0, matches_rejected=0,
                        loop_closures_accepted=0, loop_closures_rejected=0, accepted=False,

@@ -35,6 +35,7 @@ scipy's ``least_squares`` with a sparse Jacobian pattern solves the graph (deter
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -190,9 +191,12 @@ def _match(g: _Graph, refs: list[int], j: int, prediction: F64, window: Window,
 
 
 def slam_track(tt: np.ndarray, tx: F64, ty: F64, tyaw: F64, echoes: Echoes,
-               cfg: PoseRefinementConfig) -> tuple[F64, F64, F64, dict[str, Any]]:
+               cfg: PoseRefinementConfig, scale: float = 0.0
+               ) -> tuple[F64, F64, F64, dict[str, Any]]:
     """The refined poses of the odometry ``(tt, tx, ty, tyaw)`` (same stamps; ``echoes``
-    placed on it) and what the graph did."""
+    placed on it) and what the graph did. ``scale``: the odometry's scale error as the
+    echoes' surfaces measured it (the scale's prior mean in the final solve: loop closures
+    do not observe the scale)."""
     echoes = echoes.within(cfg.max_echo_range_m)
     path = path_length_at(tt, tx, ty, echoes.t_ns) if len(echoes) else np.empty(0)
     submaps = build_submaps(echoes, path, travel_m=cfg.submap_travel_m,
@@ -244,6 +248,7 @@ def slam_track(tt: np.ndarray, tx: F64, ty: F64, tyaw: F64, echoes: Echoes,
             if not keep.all():  # a new closure the graph so far cannot explain goes
                 loop_inconsistent += int((~keep).sum())
                 g.drop(keep)
+    g.opt = opt = dataclasses.replace(opt, scale_centre=scale)
     keep = _consistent(g, len(submaps) - 1, np.ones(len(g.i), bool))
     chi2 = g.solve_upto(len(submaps) - 1, keep)
     loop = np.array(g.loop, bool)
