@@ -220,6 +220,11 @@ class PoseRefinementConfig:
 
     enabled: bool = doc_field("refine the poses before mapping (also: run --refine-poses)",
                          default=False)
+    model: str = doc_field(
+        "'graph': the one model (calibration, then the pose graph with the scale and heading "
+        "bias as variables; pipeline/refine/refine.py); 'chain': the calibration, the walls' "
+        "compass and local stretch corrections it replaces (pipeline/refine/chain.py, kept "
+        "for comparison)", default="graph")
     max_echo_range_m: float = doc_field(
         "echoes farther than this are not matched (a sonar's range is reliable to a few "
         "metres), m", default=3.0)
@@ -242,9 +247,6 @@ class PoseRefinementConfig:
         "revisit), m", default=6.0)
     loop_search_yaw_deg: float = doc_field("loop closures: matched within ± this yaw, degrees",
                                            default=40.0)
-    min_score: float = doc_field(
-        "a match is kept when the reference explains this fraction of its echoes (mean "
-        "evidence, 0-1)", default=0.7)
     odometry_sigma_xy: float = doc_field("odometry translation noise σ, m per √m travelled",
                                          default=0.02)
     odometry_sigma_yaw_deg: float = doc_field("odometry heading noise σ, degrees per √m "
@@ -480,7 +482,7 @@ RANGES: dict[str, Range] = {
         "submap_travel_m": above(0, 1e4, "m"), "max_echo_range_m": above(0, 1000, "m"),
         "field_sigma_m": Range(2e-3, 100, "m"),
         "search_xy_m": above(0, 100, "m"), "search_yaw_deg": above(0, 180, "deg"),
-        "min_score": _PROB, "loop_radius_m": above(0, 1e4, "m"),
+        "loop_radius_m": above(0, 1e4, "m"),
         "loop_search_xy_m": above(0, 100, "m"), "loop_search_yaw_deg": above(0, 180, "deg"),
         "odometry_sigma_xy": above(0, 10, "m/√m"), "odometry_sigma_yaw_deg": above(0, 90),
         "calibration_max_scale": Range(0, 0.5, hi_open=True),
@@ -539,7 +541,8 @@ def _check_ranges(cfg: Config) -> None:
     need(0 < pr.calibration_max_bias_deg_per_m <= 45,
          "pose_refinement.calibration_max_bias_deg_per_m", "must be in (0, 45]",
          pr.calibration_max_bias_deg_per_m)
-    need(0 < pr.min_score < 1, "pose_refinement.min_score", "must be in (0, 1)", pr.min_score)
+    need(pr.model in ("graph", "chain"), "pose_refinement.model", "must be 'graph' or 'chain'",
+         pr.model)
     sc = cfg.sensors
     _check_limits("sensors", sc.min_range, sc.max_range)
     for i, mt in enumerate(sc.mounts):

@@ -98,7 +98,13 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
     near = echoes.within(cfg.max_echo_range_m)
     metrics: dict[str, Any] = {"model": "graph", "echoes": len(near)}
     best: tuple[F64, F64, F64] = (tx, ty, tyaw)
-    if len(near) >= SUBMAP_MIN_ECHOES:
+    if len(near) >= SUBMAP_MIN_ECHOES and cfg.model == "chain":
+        from pipeline.refine.chain import chain_track
+
+        cal, best, chained = chain_track(tt, tx, ty, tyaw, echoes, cfg)
+        _calibration_metrics(cal, metrics)
+        metrics.update(chained)
+    elif len(near) >= SUBMAP_MIN_ECHOES:
         cal = configured_calibration(tt, tx, ty, tyaw, echoes, cfg)
         _calibration_metrics(cal, metrics)
         best = cal.correct(tx, ty, tyaw)
@@ -221,6 +227,11 @@ def summary(metrics: dict[str, Any], cfg: PoseRefinementConfig) -> str:
                                                       STRONG_GAIN))
     if "submaps" in metrics:
         parts.append(graph_clause(metrics))
+    elif metrics.get("model") == "chain":
+        local = metrics.get("local", {})
+        parts.append("chain: compass " + ("applied" if metrics.get("compass", {}).get("applied")
+                                          else "not applied") + ", local corrections "
+                     + ("applied" if local.get("applied") else "not applied"))
     parts.append(f"poses moved {metrics.get('moved_mean_m', 0.0):.2f} m mean, "
                  f"{metrics.get('moved_max_m', 0.0):.2f} m max")
     return "pose refinement: " + "; ".join(parts)

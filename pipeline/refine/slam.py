@@ -7,10 +7,10 @@
    (:mod:`~pipeline.refine.correlative`) against the previous ``local_map_submaps``
    submaps placed by their estimates, around the odometry's prediction (± ``search_xy_m``,
    ``search_yaw_deg``); the match's posterior mean and covariance become a constraint.
-3. **Loop closures**: earlier submaps (``loop_min_path_m`` of travel back) whose estimate
-   lies within ``loop_radius_m`` are correlated over ± ``loop_search_xy_m``,
-   ``loop_search_yaw_deg``; kept when the score reaches ``min_score`` and the best
-   distinct pose's likelihood ratio stays below ``max_ambiguity``. Each kept closure
+3. **Loop closures**: earlier submaps (twice ``loop_radius_m`` of travel back) whose
+   estimate lies within ``loop_radius_m`` are correlated over ± ``loop_search_xy_m``,
+   ``loop_search_yaw_deg``; kept when the score reaches :data:`MIN_SCORE` and the best
+   distinct pose's likelihood ratio stays below :data:`MAX_AMBIGUITY`. Each kept closure
    re-solves the graph, so the next search starts from the corrected estimate.
 4. **Pose graph** (:mod:`~pipeline.refine.graph`): odometry (σ ``odometry_sigma_xy`` m/√m,
    ``odometry_sigma_yaw_deg`` °/√m), matches and closures under a Cauchy loss, the
@@ -68,6 +68,7 @@ Z99 = 2.326  # the standard normal's 99 % quantile (χ²(dof) ≈ dof + z·√(2
 SUBMAP_MIN_ECHOES = 60  # a shorter stretch joins the next submap (too few echoes to match)
 SUBMAP_MAX_POINTS = 400  # echoes kept per submap (evenly thinned)
 LOCAL_MAP_SUBMAPS = 3  # a submap is matched against this many previous ones
+MIN_SCORE = 0.7  # a match is kept when the reference explains this share of its echoes
 MAX_AMBIGUITY = 0.99  # a closure whose distinct second pose is this likely is ambiguous
 # Priors on the odometry's systematic error (σ): a few percent of scale and a fraction of a
 # degree per metre are typical of uncalibrated wheel odometry (docs/POSE_REFINEMENT.md).
@@ -222,7 +223,7 @@ def slam_track(tt: np.ndarray, tx: F64, ty: F64, tyaw: F64, echoes: Echoes,
                                                 g.scale, g.bias)[0])
         refs = list(range(max(0, j - LOCAL_MAP_SUBMAPS), j))
         m = _match(g, refs, j, pred, seq, cfg)
-        if m is not None and m.score >= cfg.min_score:
+        if m is not None and m.score >= MIN_SCORE:
             g.add(j - 1, j, m.pose, m.cov, loop=False)
             g.est[j] = m.pose
             seq_ok += 1
@@ -238,7 +239,7 @@ def slam_track(tt: np.ndarray, tx: F64, ty: F64, tyaw: F64, echoes: Echoes,
             loop_tried += 1
             refs = [r for r in (i - 1, i, i + 1) if 0 <= r < j]
             m = _match(g, refs, j, g.est[j], wide, cfg)
-            if m is None or m.score < cfg.min_score or m.ambiguity > MAX_AMBIGUITY:
+            if m is None or m.score < MIN_SCORE or m.ambiguity > MAX_AMBIGUITY:
                 loop_gated += 1
                 continue
             g.add(i, j, m.pose, m.cov, loop=True)

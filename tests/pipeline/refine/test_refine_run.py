@@ -65,6 +65,21 @@ def test_refined_run_corrects_the_drift_and_is_deterministic(drifted_log: Path,
         assert key in doc["pose_refinement"]
 
 
+def test_the_chain_it_replaces_still_runs_on_request(drifted_log: Path, tmp_path: Path) -> None:
+    # model = "chain": the calibration, the walls' compass, local corrections (chain.py)
+    from pipeline.run import run
+
+    cfg = Config(pose_refinement=PoseRefinementConfig(enabled=True, model="chain"))
+    res = run(drifted_log, tmp_path / "c", cfg)
+    truth = drifted_log.with_name("room.truth.csv")
+    assert ate(tmp_path / "c" / "trajectory.csv", truth) < ate(
+        tmp_path / "c" / "odometry.csv", truth) / 2
+    pr = res.metrics.pose_refinement
+    assert pr is not None and pr["model"] == "chain"
+    assert "compass" in pr and "local" in pr and "submaps" not in pr
+    assert "chain: compass" in pr["summary"]
+
+
 def mcap_paths(run_dir: Path) -> dict[str, list[tuple[float, float]]]:
     """map.mcap's nav_msgs/Path topics, read back with the mcap library and rosbags."""
     from mcap.reader import make_reader

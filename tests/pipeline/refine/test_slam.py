@@ -19,8 +19,7 @@ from pipeline.tools.trajectory_error import trajectory_error
 
 GRAPH = dataclasses.replace(
     PoseRefinementConfig(), enabled=True, submap_travel_m=3.0, search_xy_m=0.5,
-    search_yaw_deg=8.0, loop_radius_m=3.0, loop_search_xy_m=1.5, loop_search_yaw_deg=20.0,
-    min_score=0.7)
+    search_yaw_deg=8.0, loop_radius_m=3.0, loop_search_xy_m=1.5, loop_search_yaw_deg=20.0)
 
 LOOP = Path(__file__).resolve().parents[3] / "sample_logs" / "worlds" / "loop.toml"
 
