@@ -16,6 +16,7 @@ echoes with those two as variables (:mod:`~pipeline.refine.slam`).
    :class:`~pipeline.refine.scores.Consistency`) replaces the odometry; a graph solution
    must beat the calibrated odometry to be taken.
 
+``model = "chain"`` runs the chain this replaces instead (:mod:`~pipeline.refine.chain`).
 Everything is numpy and scipy without randomness, so the same input gives the same bytes.
 """
 
