@@ -44,6 +44,7 @@ from pipeline.refine.calibration import (
 )
 from pipeline.refine.echoes import Echoes
 from pipeline.refine.scores import MAX_ECHOES_CONSISTENCY, thin, track_consistency
+from pipeline.refine.threads import parallel_map
 from pipeline.stages.pose_sync import PoseTrack
 
 
@@ -116,9 +117,14 @@ def refine_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig) ->
             starts.append(("odometry", (tx, ty, tyaw)))
         graph: dict[str, Any] = {}
         tried: dict[str, Any] = {}
-        for name, start in starts:
-            gx, gy, gyaw, gm = slam_track(tt, *start, near.on_track(tt, *start), cfg,
-                                          scale=0.0 if name == "calibration" else cal.scale_error)
+        def solved(named: tuple[str, tuple[F64, F64, F64]]
+                   ) -> tuple[F64, F64, F64, dict[str, Any]]:
+            name, start = named
+            return slam_track(tt, *start, near.on_track(tt, *start), cfg,
+                              scale=0.0 if name == "calibration" else cal.scale_error)
+
+        for (name, _), (gx, gy, gyaw, gm) in zip(starts, parallel_map(solved, starts),
+                                                 strict=True):  # the two starts side by side
             gm["start"] = name
             tried[name] = gm
             if gm["accepted"]:
