@@ -24,7 +24,7 @@ over the fine grid, ``w ∝ exp(ℓ − ℓ_max)``:
   optimum, as a likelihood ratio ``exp(ℓ_other − ℓ_max)`` (near 1: another pose fits as
   well: a repeated structure).
 
-All numpy, no randomness: the same input gives the same bits.
+Compiled kernels with numpy references, no randomness: the same input gives the same bits.
 """
 
 from __future__ import annotations
@@ -121,7 +121,23 @@ def _coverage(fld: LikelihoodField, rx: F64, ry: F64, sx: F64, sy: F64, sigma: f
               ) -> np.ndarray:
     """Cells the reference's beams looked at: along each ray from an echo's sensor to each
     of its arc points and ``2σ`` beyond (a wall there would have answered; behind it the
-    echo says nothing)."""
+    echo says nothing). Compiled (:func:`pipeline.refine.kernels.beam_coverage`;
+    :func:`_coverage_reference` in numpy)."""
+    from pipeline.refine.kernels import beam_coverage
+
+    h, w = fld.values.shape
+    rx, ry = np.ascontiguousarray(rx, np.float64), np.ascontiguousarray(ry, np.float64)
+    sx, sy = np.ascontiguousarray(sx, np.float64), np.ascontiguousarray(sy, np.float64)
+    length = np.hypot(rx - sx[:, None], ry - sy[:, None])
+    reach = length + 2 * sigma
+    n = max(2, math.ceil(float(reach.max()) / (0.5 * fld.res)) + 1)
+    return np.asarray(beam_coverage(rx, ry, sx, sy, length, np.linspace(0.0, 1.0, n),
+                                    2 * sigma, fld.origin_x, fld.origin_y, fld.res, h, w))
+
+
+def _coverage_reference(fld: LikelihoodField, rx: F64, ry: F64, sx: F64, sy: F64,
+                        sigma: float) -> np.ndarray:
+    """:func:`_coverage` in numpy (the kernel's tests compare the two)."""
     h, w = fld.values.shape
     dx, dy = rx - sx[:, None], ry - sy[:, None]
     length = np.hypot(dx, dy)

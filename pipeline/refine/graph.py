@@ -141,6 +141,19 @@ class _Problem:
         """The residuals' Jacobian (sparse, analytic): rows as :meth:`residuals`."""
         from scipy.sparse import coo_matrix
 
+        rows, cols, vals, n_rows = self._entries(v)
+        return coo_matrix((vals, (rows, cols)), shape=(n_rows, self.n_var)).tocsr()
+
+    def jacobian_dense(self, v: F64) -> F64:
+        """:meth:`jacobian` as a dense array, filled directly (the same values: each entry
+        ``0 + value`` as the sparse matrix's ``toarray`` sums it)."""
+        rows, cols, vals, n_rows = self._entries(v)
+        out = np.zeros((n_rows, self.n_var))
+        np.add.at(out, (rows, cols), vals)
+        return out
+
+    def _entries(self, v: F64) -> tuple[I64, I64, F64, int]:
+        """The Jacobian's non-zero entries: rows, columns, values and the number of rows."""
         x, k, b = self.unpack(v)
         rows: list[I64] = []
         cols: list[I64] = []
@@ -204,8 +217,7 @@ class _Problem:
             cols.append(np.array([self.n_var - 2, self.n_var - 1]))
             vals.append(np.array([1.0 / self.opt.prior_scale, 1.0 / self.opt.prior_bias]))
             r += 2
-        return coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                          shape=(r, self.n_var)).tocsr()
+        return np.concatenate(rows), np.concatenate(cols), np.concatenate(vals), r
 
     def sparsity(self) -> object:
         from scipy.sparse import lil_matrix
@@ -261,10 +273,7 @@ def solve(x0: F64, odo: Odometry, matches: MatchConstraints, opt: GraphOptions) 
 
     prob = _Problem(x0, odo, matches, opt)
     if prob.n_var <= DENSE_MAX_VARIABLES:
-        def jac(v: F64) -> object:
-            return np.asarray(prob.jacobian(v).toarray())  # type: ignore[attr-defined]
-
-        how: dict[str, object] = {"jac": jac, "tr_solver": "exact"}
+        how: dict[str, object] = {"jac": prob.jacobian_dense, "tr_solver": "exact"}
     else:
         how = {"jac": prob.jacobian, "tr_solver": "lsmr", "tr_options": _LSMR}
     v0 = np.concatenate([x0.ravel(), [opt.scale_centre, 0.0] if opt.calibrate else []])

@@ -539,3 +539,27 @@ def correlation_grid(table: np.ndarray, h: int, w: int, fx: np.ndarray, fy: np.n
                 for b in range(n_cells):
                     out[k, a, b] += best[a, b]
     return out
+
+
+@njit(cache=True, nogil=True)
+def beam_coverage(rx: np.ndarray, ry: np.ndarray, sx: np.ndarray, sy: np.ndarray,
+                  length: np.ndarray, u: np.ndarray, beyond: float, origin_x: float,
+                  origin_y: float, res: float, h: int, w: int) -> np.ndarray:
+    """Cells (``h × w``, row-major from ``origin``) a ray crosses: from each echo's sensor
+    ``(sx[e], sy[e])`` towards each of its arc points ``(rx[e, p], ry[e, p])`` (``length``
+    their distance) and ``beyond`` m past it, sampled at the fractions ``u`` of that reach
+    (:func:`pipeline.refine.correlative._coverage`, whose numpy version it replaces bit for
+    bit: the same operations in the same order)."""
+    cover = np.zeros((h, w), np.bool_)
+    for e in range(rx.shape[0]):
+        for p in range(rx.shape[1]):
+            dx = rx[e, p] - sx[e]
+            dy = ry[e, p] - sy[e]
+            ratio = (length[e, p] + beyond) / max(length[e, p], 1e-9)
+            for q in range(u.shape[0]):
+                scale = ratio * u[q]
+                ix = np.int64(math.floor((sx[e] + dx * scale - origin_x) / res))
+                iy = np.int64(math.floor((sy[e] + dy * scale - origin_y) / res))
+                if 0 <= ix < w and 0 <= iy < h:
+                    cover[iy, ix] = True
+    return cover

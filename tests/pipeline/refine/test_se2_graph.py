@@ -74,3 +74,25 @@ def test_a_wrong_loop_closure_has_a_large_chi2() -> None:
     assert sol.match_chi2[0] > 16.0  # what drops it (slam.CHI2_OUTLIER) before the last solve
     # the Cauchy loss bounds its pull: a closure 2.2 m off moves no anchor by as much
     assert np.abs(sol.anchors[:, :2] - truth[:, :2]).max() < 1.5
+
+
+def test_the_dense_jacobian_is_the_sparse_ones_entries() -> None:
+    from pipeline.refine.graph import _Problem
+
+    truth = square()
+    rel = between(truth[:-1], truth[1:])
+    odo = Odometry(rel * 1.03, np.hypot(rel[:, 0], rel[:, 1]))
+    i, j = np.array([0, 3, 15]), np.array([1, 12, 0])
+    u = np.repeat(sqrt_information(np.diag([0.05**2, 0.03**2, 0.02**2]))[None], 3, 0)
+    mc = MatchConstraints(i, j, between(truth[i], truth[j]) + 0.01, u)
+    prob = _Problem(truth, odo, mc, opts(True))
+    v = np.concatenate([truth.ravel() + 0.01 * np.sin(np.arange(48)), [0.02, -0.01]])
+    dense = prob.jacobian_dense(v)
+    sparse = prob.jacobian(v).toarray()  # type: ignore[attr-defined]
+    assert dense.shape == (3 + 45 + 9 + 2, 50)
+    assert np.array_equal(dense, sparse) and not np.signbit(dense[dense == 0]).any()
+    # the finite differences of the residuals agree with the analytic entries
+    h = 1e-7
+    fd = np.column_stack([(prob.residuals(v + h * e) - prob.residuals(v - h * e)) / (2 * h)
+                          for e in np.eye(50)])
+    np.testing.assert_allclose(dense, fd, atol=1e-4 * np.abs(dense).max())

@@ -178,3 +178,20 @@ def test_the_compiled_correlation_gives_the_numpy_versions_bits() -> None:
     assert fast.shape == (5, 17, 17) and np.isfinite(fast).all()
     assert np.array_equal(fast, slow)
     assert np.ptp(fast) > 1.0  # the grid sees the room, not a flat field
+
+
+def test_the_compiled_coverage_gives_the_numpy_versions_cells() -> None:
+    from pipeline.refine.correlative import LikelihoodField, _coverage, _coverage_reference
+
+    rx, ry, sx, sy = _room(np.random.default_rng(2))
+    for res, sigma in ((0.05, 0.1), (0.2, 0.2)):
+        fld = LikelihoodField.of_points(rx, ry, res=res, sigma=sigma, margin=1.0)
+        fast = _coverage(fld, rx, ry, sx, sy, sigma)
+        slow = _coverage_reference(fld, rx, ry, sx, sy, sigma)
+        assert fast.shape == fld.values.shape and fast.dtype == np.bool_
+        assert np.array_equal(fast, slow)
+        assert 0.05 < fast.mean() < 0.95  # the beams cover part of the box, not all of it
+    # a field that does not reach the sensors: the rays' cells outside it are dropped
+    near = LikelihoodField.of_points(rx[:5], ry[:5], res=0.05, sigma=0.1, margin=0.1)
+    assert np.array_equal(_coverage(near, rx, ry, sx, sy, 0.1),
+                          _coverage_reference(near, rx, ry, sx, sy, 0.1))
