@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -263,28 +264,46 @@ def robust_cost(r: F64, scale: float) -> float:
 # rough (a square graph took > 200 evaluations instead of 13).
 DENSE_MAX_VARIABLES = 400
 _LSMR = {"atol": 1e-12, "btol": 1e-12}
+SOLVER = "sparse"
 
 
-def solve(x0: F64, odo: Odometry, matches: MatchConstraints, opt: GraphOptions) -> Solution:
-    """Optimise the anchors (and the calibration) from ``x0``. Small graphs take exact
-    trust-region steps (the sparse iterative solver stops early on them: FHW's walk row,
-    ATE 1.73 m against 0.70 m exact), large ones sparse steps (:data:`DENSE_MAX_VARIABLES`)."""
+def _trust_region(prob: _Problem, v0: F64, opt: GraphOptions) -> Any:
     from scipy.optimize import least_squares
 
-    prob = _Problem(x0, odo, matches, opt)
     if prob.n_var <= DENSE_MAX_VARIABLES:
         how: dict[str, object] = {"jac": prob.jacobian_dense, "tr_solver": "exact"}
     else:
         how = {"jac": prob.jacobian, "tr_solver": "lsmr", "tr_options": _LSMR}
-    v0 = np.concatenate([x0.ravel(), [opt.scale_centre, 0.0] if opt.calibrate else []])
-    cost0 = robust_cost(prob.residuals(v0), opt.robust_scale)
     if opt.linear_start:  # least squares first: a robust loss ignores what starts far off
         v0 = least_squares(prob.residuals, v0, method="trf", x_scale="jac", max_nfev=50,
                            xtol=1e-8, ftol=1e-8, **how).x
-    res = least_squares(
+    return least_squares(
         prob.residuals, v0, method="trf", loss="cauchy", f_scale=opt.robust_scale,
         x_scale="jac", max_nfev=200, xtol=1e-10, ftol=1e-10, **how,
     )
+
+
+def solve(x0: F64, odo: Odometry, matches: MatchConstraints, opt: GraphOptions,
+          method: str | None = None) -> Solution:
+    """Optimise the anchors (and the calibration) from ``x0``. ``method``
+    (default :data:`SOLVER`): ``"sparse"``, Levenberg-Marquardt steps on the sparse Jacobian
+    (:mod:`pipeline.refine.sparse_lm`); ``"trust-region"``, scipy's least_squares: small
+    graphs take exact trust-region steps (the sparse iterative solver stops early on them:
+    FHW's walk row, ATE 1.73 m against 0.70 m exact), large ones sparse iterative steps
+    (:data:`DENSE_MAX_VARIABLES`)."""
+    prob = _Problem(x0, odo, matches, opt)
+    v0 = np.concatenate([x0.ravel(), [opt.scale_centre, 0.0] if opt.calibrate else []])
+    cost0 = robust_cost(prob.residuals(v0), opt.robust_scale)
+    if (method or SOLVER) == "sparse":
+        from pipeline.refine.sparse_lm import minimise
+
+        if opt.linear_start:  # least squares first: a robust loss ignores what starts far off
+            v0 = minimise(prob.residuals, prob.jacobian, v0, loss_scale=None, max_nfev=50,
+                          xtol=1e-8, ftol=1e-8).x
+        res = minimise(prob.residuals, prob.jacobian, v0, loss_scale=opt.robust_scale,
+                       max_nfev=200, xtol=1e-10, ftol=1e-10)
+    else:
+        res = _trust_region(prob, v0, opt)
     x, k, b = prob.unpack(res.x)
     x = x.copy()
     x[:, 2] = wrap_angle(x[:, 2])

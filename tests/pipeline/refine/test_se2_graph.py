@@ -96,3 +96,31 @@ def test_the_dense_jacobian_is_the_sparse_ones_entries() -> None:
     fd = np.column_stack([(prob.residuals(v + h * e) - prob.residuals(v - h * e)) / (2 * h)
                           for e in np.eye(50)])
     np.testing.assert_allclose(dense, fd, atol=1e-4 * np.abs(dense).max())
+
+
+def test_the_sparse_steps_reach_the_trust_regions_solution() -> None:
+    truth = square()
+    rel = between(truth[:-1], truth[1:])
+    length = np.hypot(rel[:, 0], rel[:, 1])
+    b = math.radians(1.0)
+    c, s = np.cos(b * length / 2), np.sin(b * length / 2)
+    odo = np.column_stack([1.05 * (c * rel[:, 0] - s * rel[:, 1]),
+                           1.05 * (s * rel[:, 0] + c * rel[:, 1]), rel[:, 2] + b * length])
+    x0 = [truth[0]]
+    for d in odo:
+        x0.append(compose(x0[-1], d))
+    i, j = np.r_[np.arange(15), 15, 2], np.r_[np.arange(1, 16), 0, 9]
+    z = between(truth[i], truth[j])
+    z[-1] += [1.0, -0.8, 0.3]  # one wrong closure: the Cauchy loss bounds it
+    u = np.repeat(sqrt_information(np.diag([0.05**2, 0.05**2, math.radians(2) ** 2]))[None], 17, 0)
+    args = (np.array(x0), Odometry(odo, 1.05 * length), MatchConstraints(i, j, z, u))
+    opt = GraphOptions(0.02, math.radians(0.5), True, 0.1, math.radians(2.0), 1.0, True)
+    sparse = solve(*args, opt, method="sparse")
+    exact = solve(*args, opt, method="trust-region")
+    assert sparse.cost_final == pytest.approx(exact.cost_final, rel=1e-6)
+    np.testing.assert_allclose(sparse.anchors, exact.anchors, atol=1e-5)
+    assert sparse.scale_error == pytest.approx(exact.scale_error, abs=1e-6)
+    assert sparse.heading_bias == pytest.approx(exact.heading_bias, abs=1e-7)
+    assert sparse.match_chi2[-1] > 16.0 and sparse.match_chi2[:-1].max() < 16.0
+    again = solve(*args, opt, method="sparse")
+    assert np.array_equal(again.anchors, sparse.anchors)  # deterministic to the bit
