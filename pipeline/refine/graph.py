@@ -108,6 +108,7 @@ class _Problem:
         self.opt = opt
         self.w_odo = 1.0 / _odometry_sigmas(odo, opt)
         self.n_var = 3 * self.n + (2 if opt.calibrate else 0)
+        self._pattern: tuple[I64, I64, I64] | None = None
 
     def unpack(self, v: F64) -> tuple[F64, float, float]:
         x = v[: 3 * self.n].reshape(self.n, 3)
@@ -140,10 +141,19 @@ class _Problem:
 
     def jacobian(self, v: F64) -> object:
         """The residuals' Jacobian (sparse, analytic): rows as :meth:`residuals`."""
-        from scipy.sparse import coo_matrix
+        from scipy.sparse import coo_matrix, csr_matrix
 
         rows, cols, vals, n_rows = self._entries(v)
-        return coo_matrix((vals, (rows, cols)), shape=(n_rows, self.n_var)).tocsr()
+        if self._pattern is None:  # the entries' places in CSR order, found once per problem
+            numbered = coo_matrix((np.arange(1.0, vals.shape[0] + 1), (rows, cols)),
+                                  shape=(n_rows, self.n_var)).tocsr()
+            numbered.sort_indices()
+            if numbered.nnz < vals.shape[0]:  # entries sharing a place: summed each time
+                return coo_matrix((vals, (rows, cols)), shape=(n_rows, self.n_var)).tocsr()
+            self._pattern = (numbered.data.astype(np.int64) - 1, numbered.indices,
+                             numbered.indptr)
+        order, indices, indptr = self._pattern
+        return csr_matrix((vals[order], indices, indptr), shape=(n_rows, self.n_var))
 
     def jacobian_dense(self, v: F64) -> F64:
         """:meth:`jacobian` as a dense array, filled directly (the same values: each entry

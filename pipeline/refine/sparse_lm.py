@@ -42,12 +42,21 @@ def _cost(f: F64, scale: float | None) -> float:
     return float(0.5 * scale**2 * np.sum(np.log1p((f / scale) ** 2)))
 
 
+def _rows_scaled(jm: object, w: F64) -> object:
+    """The CSR matrix ``jm`` with row ``i`` times ``w[i]`` (``diag(w)·jm``)."""
+    from scipy.sparse import csr_matrix
+
+    m = csr_matrix(jm, copy=True)
+    m.data *= np.repeat(w, np.diff(m.indptr))
+    return m
+
+
 def minimise(fun: Callable[[F64], F64], jac: Callable[[F64], object], v0: F64, *,
              loss_scale: float | None, max_nfev: int, ftol: float, xtol: float) -> Result:
     """``fun``'s residuals at a local minimum of the (robust) cost from ``v0``; ``jac``
     returns the residuals' Jacobian as a scipy sparse matrix; ``loss_scale`` the Cauchy
     loss's scale ``C`` (None: plain least squares)."""
-    from scipy.sparse import csc_matrix, diags
+    from scipy.sparse import csc_matrix, identity
     from scipy.sparse.linalg import splu
 
     x = np.array(v0, dtype=np.float64)
@@ -64,16 +73,21 @@ def minimise(fun: Callable[[F64], F64], jac: Callable[[F64], object], v0: F64, *
             z = (f / loss_scale) ** 2
             rho1 = 1.0 / (1.0 + z)
             w = np.sqrt(np.maximum(rho1 - 2.0 * rho1**2 * z, EPS))
-            fs, js = f * rho1 / w, diags(w) @ jm
-        a = csc_matrix(js.T @ js)  # type: ignore[attr-defined]
+            fs, js = f * rho1 / w, _rows_scaled(jm, w)
+        # JᵀJ with every diagonal entry stored (a zero one too), so the damping adds in place
+        a = csc_matrix(js.T @ js + 0.0 * identity(x.shape[0], format="csc"))  # type: ignore[attr-defined]
+        a.sort_indices()
+        on_diag = np.flatnonzero(a.indices == np.repeat(np.arange(a.shape[1]), np.diff(a.indptr)))
         g = np.asarray(js.T @ fs)  # type: ignore[attr-defined]
-        d = np.maximum(d, a.diagonal())
+        d = np.maximum(d, a.data[on_diag])
         scaling = np.maximum(d, 1e-12 * max(float(d.max()), 1e-300))
         if float(np.abs(g).max(initial=0.0)) <= 1e-14 * max(1.0, cost):
             break
         done = False
         while nfev < max_nfev:
-            step = -splu(csc_matrix(a + diags(lam * scaling)), permc_spec="COLAMD").solve(g)
+            damped = a.copy()
+            damped.data[on_diag] += lam * scaling
+            step = -splu(damped, permc_spec="COLAMD").solve(g)
             x_new = x + step
             f_new = fun(x_new)
             nfev += 1
