@@ -18,8 +18,9 @@ remove most of its drift. Residuals, each whitened by its square-root informatio
   given standard deviations.
 
 ``⊖`` subtracts poses component-wise with the angle wrapped. A robust loss (Cauchy,
-scale ``robust_scale``) bounds the pull of a wrong match. The Jacobian's sparsity pattern
-is given, so finite differences cost a few residual evaluations per iteration.
+scale ``robust_scale``) bounds the pull of a wrong match. The Jacobian is analytic; small
+graphs take exact trust-region steps on it dense, large ones sparse Levenberg-Marquardt
+steps (:data:`DENSE_MAX_VARIABLES`).
 """
 
 from __future__ import annotations
@@ -230,27 +231,6 @@ class _Problem:
             r += 2
         return np.concatenate(rows), np.concatenate(cols), np.concatenate(vals), r
 
-    def sparsity(self) -> object:
-        from scipy.sparse import lil_matrix
-
-        rows = 3 + 3 * (self.n - 1) + 3 * len(self.matches) + (2 if self.opt.calibrate else 0)
-        s = lil_matrix((rows, self.n_var), dtype=np.int8)
-        s[0:3, 0:3] = 1
-        r = 3
-        for i in range(self.n - 1):
-            s[r:r + 3, 3 * i:3 * i + 6] = 1
-            if self.opt.calibrate:
-                s[r:r + 3, self.n_var - 2:] = 1
-            r += 3
-        for i, j in zip(self.matches.i.tolist(), self.matches.j.tolist(), strict=True):
-            s[r:r + 3, 3 * i:3 * i + 3] = 1
-            s[r:r + 3, 3 * j:3 * j + 3] = 1
-            r += 3
-        if self.opt.calibrate:
-            s[r, self.n_var - 2] = 1
-            s[r + 1, self.n_var - 1] = 1
-        return s.tocsr()
-
     def match_chi2(self, v: F64) -> F64:
         x, _, _ = self.unpack(v)
         m = self.matches
@@ -267,23 +247,22 @@ def robust_cost(r: F64, scale: float) -> float:
     return float(0.5 * np.sum(scale**2 * np.log1p((r / scale) ** 2)))
 
 
-# Variables up to which the trust-region steps are solved exactly on the dense Jacobian
-# (an SVD, O(n³): ~0.5 s single-threaded at 700 variables, so ~130 anchors, about 1 km of
-# 8 m submaps); larger graphs use the sparse iterative solver (lsmr), run to full precision
-# because at its default tolerances the calibration's dense columns made its steps too
-# rough (a square graph took > 200 evaluations instead of 13).
+# Variables up to which the steps are exact trust-region steps on the dense Jacobian (an
+# SVD, O(m·n²): ~0.5 s single-threaded at 700 variables, so ~130 anchors, about 1 km of 8 m
+# submaps); larger graphs take Levenberg-Marquardt steps on the sparse Jacobian
+# (:mod:`pipeline.refine.sparse_lm`, a sparse LU per step). The sparse steps on small graphs
+# too were measured (docs/POSE_REFINEMENT.md, "Time"): 20-25 % less CPU per run, the same
+# solution to 1e-5 m on most solves, but a different local minimum on a few with wrong
+# closures, and the Intel lab's walk row moved (ATE 0.241 → 0.304 m): not the default there.
+# (scipy's iterative lsmr steps, used for large graphs before, stopped early: FHW's walk row
+# solved by them reached ATE 1.73 m against 0.70 m exact.)
 DENSE_MAX_VARIABLES = 400
-_LSMR = {"atol": 1e-12, "btol": 1e-12}
-SOLVER = "sparse"
 
 
 def _trust_region(prob: _Problem, v0: F64, opt: GraphOptions) -> Any:
     from scipy.optimize import least_squares
 
-    if prob.n_var <= DENSE_MAX_VARIABLES:
-        how: dict[str, object] = {"jac": prob.jacobian_dense, "tr_solver": "exact"}
-    else:
-        how = {"jac": prob.jacobian, "tr_solver": "lsmr", "tr_options": _LSMR}
+    how: dict[str, object] = {"jac": prob.jacobian_dense, "tr_solver": "exact"}
     if opt.linear_start:  # least squares first: a robust loss ignores what starts far off
         v0 = least_squares(prob.residuals, v0, method="trf", x_scale="jac", max_nfev=50,
                            xtol=1e-8, ftol=1e-8, **how).x
@@ -295,16 +274,17 @@ def _trust_region(prob: _Problem, v0: F64, opt: GraphOptions) -> Any:
 
 def solve(x0: F64, odo: Odometry, matches: MatchConstraints, opt: GraphOptions,
           method: str | None = None) -> Solution:
-    """Optimise the anchors (and the calibration) from ``x0``. ``method``
-    (default :data:`SOLVER`): ``"sparse"``, Levenberg-Marquardt steps on the sparse Jacobian
-    (:mod:`pipeline.refine.sparse_lm`); ``"trust-region"``, scipy's least_squares: small
-    graphs take exact trust-region steps (the sparse iterative solver stops early on them:
-    FHW's walk row, ATE 1.73 m against 0.70 m exact), large ones sparse iterative steps
-    (:data:`DENSE_MAX_VARIABLES`)."""
+    """Optimise the anchors (and the calibration) from ``x0``: by ``method``
+    ``"trust-region"`` (scipy's least_squares, exact steps on the dense Jacobian) or
+    ``"sparse"`` (Levenberg-Marquardt on the sparse Jacobian,
+    :mod:`pipeline.refine.sparse_lm`); by default the first up to
+    :data:`DENSE_MAX_VARIABLES` variables, the second beyond."""
     prob = _Problem(x0, odo, matches, opt)
     v0 = np.concatenate([x0.ravel(), [opt.scale_centre, 0.0] if opt.calibrate else []])
     cost0 = robust_cost(prob.residuals(v0), opt.robust_scale)
-    if (method or SOLVER) == "sparse":
+    if method is None:
+        method = "trust-region" if prob.n_var <= DENSE_MAX_VARIABLES else "sparse"
+    if method == "sparse":
         from pipeline.refine.sparse_lm import minimise
 
         if opt.linear_start:  # least squares first: a robust loss ignores what starts far off
