@@ -262,14 +262,20 @@ def trace_readings(
     return lost
 
 
+def cell_lists(cells: B) -> tuple[I32, I32]:
+    """The cells of a mask listed row by row (compressed rows): ``(index, cols)``, the
+    cells of row ``r`` in columns ``c0 ≤ c ≤ c1`` are ``cols[index[r, c0]:index[r, c1 + 1]]``,
+    in column order."""
+    index = np.zeros((cells.shape[0], cells.shape[1] + 1), dtype=np.int32)
+    np.cumsum(cells, axis=1, out=index[:, 1:])
+    index += np.concatenate(([0], np.cumsum(index[:-1, -1]))).astype(np.int32)[:, None]
+    cols: I32 = np.nonzero(cells)[1].astype(np.int32)
+    return index, cols
+
+
 def silent_candidates(surfaces: B, consistency: F32) -> tuple[I32, I32]:
     """The surface cells that may be silent to some ray, listed for
     :func:`trace_readings`: ``(occ_index, occ_cols)``. A cell is silent to a ray when
     ``q·(1 − visible) > ½``, which needs ``q > ½``: cells with ``q ≤ ½`` never stop a ray."""
-    cand = surfaces & (consistency > 0.5)
-    index = np.zeros((cand.shape[0], cand.shape[1] + 1), dtype=np.int32)
-    np.cumsum(cand, axis=1, out=index[:, 1:])
-    index += np.concatenate(([0], np.cumsum(index[:-1, -1]))).astype(np.int32)[:, None]
-    cols: I32 = np.nonzero(cand)[1].astype(np.int32)
-    return index, cols
+    return cell_lists(surfaces & (consistency > 0.5))
 
