@@ -42,7 +42,7 @@ from pipeline.mapper.kernels.specular import cell_lists
 from pipeline.mapper.reading_features import distance_sigma
 from pipeline.mapper.scan_group import ScanGroup
 from pipeline.mapper.specular import SpecularMapper, visibility_table
-from pipeline.mapper.types import F64, I32, B, GridSpec
+from pipeline.mapper.types import F64, B, GridSpec
 from pipeline.stages import reading_quality as rq
 
 INCIDENCE_BINS = 9  # equal bins of the detection curve over [0, 90°]
