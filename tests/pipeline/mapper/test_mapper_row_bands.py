@@ -1,5 +1,6 @@
-"""The specular method's speed-ups keep its bytes: the row-band split between two threads
-(any split row, one thread or two), and the list of surfaces that may be silent."""
+"""The specular and default methods' speed-ups keep their bytes: the row-band split between two
+threads (any split row, one thread or two), the E-step's two halves of the readings, and the
+list of surfaces that may be silent."""
 
 from __future__ import annotations
 
@@ -67,7 +68,7 @@ def _specular_grids(threads: int) -> dict[str, np.ndarray]:
     for index in range(m.passes):
         m.begin_pass(index)
         m.integrate_many(scans)
-    out = {k: getattr(m, k).copy() for k in ("free2", "arcs2", "hits2", "hits", "free")}
+    out = {k: getattr(m, k).copy() for k in ("free2", "arcs2", "hits2", "hits", "free", "stats")}
     out["occupied"] = m.snapshot().occupied
     return out
 
@@ -77,6 +78,7 @@ def test_the_specular_maps_do_not_depend_on_threads_or_the_split(
 ) -> None:
     one = _specular_grids(1)
     assert one["occupied"].sum() > 100 and one["free2"].max() > 1.0
+    assert one["stats"].sum() > 100  # the E-step's counts (its readings split in two halves)
     for split in (None, 0, 37, 10**6):
         if split is not None:
             monkeypatch.setattr(specular, "balanced_split", lambda *a, s=split: min(s, a[-1]))
