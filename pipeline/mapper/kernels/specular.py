@@ -28,6 +28,7 @@ from numba import njit
 
 from pipeline.mapper.kernels.attribution import reach_cells, span_buffers, spread_echo
 from pipeline.mapper.kernels.cone import (
+    wrap_angle,
     cone_row_span,
     cone_rows,
     edge_sector_spans,
@@ -102,9 +103,19 @@ def shadow_profiles(
         s1, c1, s2, c2 = cones[i, 3], cones[i, 4], cones[i, 5], cones[i, 6]
         # edge_sector_spans' spans, on the rows that hold a surface that may be silent
         r0, r1 = cone_rows(oy, r_out, s1, s2, up_down[i, 0], up_down[i, 1], gy, res, height)
+        # The cone's columns, with a cell of margin: the edges' tips and the origin, and
+        # r_out where the wedge holds the +x or -x direction.
+        lo_x = min(0.0, min(r_out * c1, r_out * c2))
+        hi_x = max(0.0, max(r_out * c1, r_out * c2))
+        if abs(wrap_angle(-alpha[i])) <= half_fov[i]:
+            hi_x = r_out
+        if abs(wrap_angle(math.pi - alpha[i])) <= half_fov[i]:
+            lo_x = -r_out
+        b0 = min(max(math.floor(((ox + lo_x) - gx) / res - 0.5) - 1, 0), width - 1)
+        b1 = min(max(math.ceil(((ox + hi_x) - gx) / res - 0.5) + 1, 0), width - 1)
         n = 0
         for row in range(r0, r1 + 1):
-            if occ_index[row, width] == occ_index[row, 0]:
+            if occ_index[row, b1 + 1] == occ_index[row, b0]:
                 continue
             c_lo, c_hi = cone_row_span(ox, oy, r_out, s1, c1, s2, c2, row, gx, gy, res, width)
             if c_lo <= c_hi:
