@@ -38,7 +38,7 @@ from formats.ros.source import (
     messages_lost,
     normalize_msgtype,
 )
-from formats.ros.sqlite_salvage import Salvage
+from formats.ros.sqlite_salvage import DAMAGE_ERRORS, ROW_ERRORS, Salvage
 from formats.storage.location import Location, Url, as_location
 from formats.text_file import read_text
 
@@ -116,7 +116,7 @@ class Sqlite3File(SourceAccessors):
         try:
             self._load()
         # A corrupt database can also hold values of the wrong type (int('') fails).
-        except (sqlite3.Error, TypeError, ValueError, OverflowError) as err:
+        except ROW_ERRORS as err:
             self._db.close()
             raise FormatError(
                 f"not a readable rosbag2 sqlite3 database: {err}", self._name
@@ -142,14 +142,14 @@ class Sqlite3File(SourceAccessors):
                 ):
                     if typ and enc in ("ros2msg", "ros2idl"):
                         defs[str(typ)] = (str(text), str(enc))
-            except sqlite3.Error as err:  # the built-in definitions of known types remain
+            except DAMAGE_ERRORS as err:  # the built-in definitions of known types remain
                 defs.clear()
                 self._warnings.append(f"message definitions unreadable ({_reason(err)});"
                                       " they are not used")
         try:
             counts = dict(db.execute("SELECT topic_id, COUNT(*) FROM messages GROUP BY topic_id"))
             t0, t1 = db.execute("SELECT MIN(timestamp), MAX(timestamp) FROM messages").fetchone()
-        except sqlite3.Error as err:  # damaged pages: the rows sqlite can still read
+        except DAMAGE_ERRORS as err:  # damaged pages: the rows sqlite can still read
             counts, t0, t1 = self._count_by_rows(err)
         self._start = None if t0 is None else int(t0)
         self._end = None if t1 is None else int(t1)
@@ -168,7 +168,7 @@ class Sqlite3File(SourceAccessors):
                 count=int(counts.get(tid, 0)),
             )
 
-    def _count_by_rows(self, err: sqlite3.Error) -> tuple[dict[int, int], int | None,
+    def _count_by_rows(self, err: Exception) -> tuple[dict[int, int], int | None,
                                                           int | None]:
         """Per-topic counts and the time span from the rows sqlite can still read
         (:class:`~formats.ros.sqlite_salvage.Salvage`); the error again when it cannot."""
@@ -209,7 +209,7 @@ class Sqlite3File(SourceAccessors):
                 " ORDER BY timestamp, id",
                 ids,
             )
-        except sqlite3.Error as err:
+        except DAMAGE_ERRORS as err:
             yield from self._salvaged(ids, f"cannot read messages ({_reason(err)})", None)
             return
         while True:
@@ -218,9 +218,9 @@ class Sqlite3File(SourceAccessors):
                 if not rows:
                     return
                 batches = list(self._batches(rows, ids))
-            # sqlite3.Error: corrupt pages; TypeError/ValueError: a corrupt row whose
+            # corrupt pages (DAMAGE_ERRORS); TypeError/ValueError: a corrupt row whose
             # columns hold values of the wrong type (text data, NULL, ...).
-            except (sqlite3.Error, TypeError, ValueError, OverflowError) as err:
+            except ROW_ERRORS as err:
                 why = f"database is corrupt after {done} messages ({_reason(err)})"
                 yield from self._salvaged(ids, why, last)
                 return

@@ -14,10 +14,14 @@ import sqlite3
 from collections.abc import Iterator, Sequence
 from typing import Any
 
-__all__ = ["RANGE_IDS", "Salvage"]
+__all__ = ["DAMAGE_ERRORS", "RANGE_IDS", "ROW_ERRORS", "Salvage"]
 
 RANGE_IDS = 4096  # ids per query (as many rows at most)
-_ROW_ERRORS = (sqlite3.Error, TypeError, ValueError, OverflowError)
+# What sqlite raises on a damaged database. A record whose header declares an absurd size
+# makes sqlite report SQLITE_NOMEM without allocating it, which Python raises as MemoryError.
+DAMAGE_ERRORS = (sqlite3.Error, MemoryError)
+# ... and what a damaged row's values raise (text or NULL where a number belongs).
+ROW_ERRORS = (*DAMAGE_ERRORS, TypeError, ValueError, OverflowError)
 
 
 class Salvage:
@@ -34,7 +38,7 @@ class Salvage:
         try:
             lo, hi = self.db.execute("SELECT MIN(id), MAX(id) FROM messages").fetchone()
             return None if lo is None or hi is None else (int(lo), int(hi) + 1)
-        except _ROW_ERRORS:
+        except ROW_ERRORS:
             return None
 
     def rows(self, columns: str, where: str, args: Sequence[Any]) -> Iterator[list[Any]]:
@@ -51,7 +55,7 @@ class Salvage:
                 a, b = pending.pop()
                 try:
                     rows = self.db.execute(sql, (*args, a, b)).fetchall()
-                except _ROW_ERRORS:
+                except ROW_ERRORS:
                     if b - a == 1:
                         self.rows_lost += 1
                     else:
