@@ -432,7 +432,7 @@ def _pass_progress(progress: Progress | None, index: int, passes: int) -> Progre
     return scaled
 
 
-def _integrate(mappers: dict[str, Mapper], scans: list[Scan]) -> None:
+def _integrate(mappers: dict[str, Mapper], scans: Sequence[Scan]) -> None:
     # The mappers are independent: each takes the whole list (batched stateless work).
     for m in mappers.values():
         m.integrate_many(scans)

@@ -16,12 +16,11 @@ one batch (a copy, writable as built scans are) and gives the pages behind it ba
 
 from __future__ import annotations
 
-import itertools
 from collections.abc import Iterator, Sequence
 
 import numpy as np
 
-from pipeline.mapper.types import SCAN_FIELDS, Scan
+from pipeline.mapper.types import SCAN_FIELDS, Scan, ScanBatch
 from pipeline.streaming.spilled_columns import ColumnSpill, MappedColumns
 
 # Scan's columns and their dtypes (the pipeline's: pose sync builds them so).
@@ -69,9 +68,10 @@ class SpilledScans:
         """Scans spilled."""
         return len(self._scans)
 
-    def batches(self) -> Iterator[tuple[list[Scan], int]]:
-        """Each batch's scans (copies: writable, as built ones) and the readings streamed
-        up to it; the pages of the batches handed out are given back as the walk goes."""
+    def batches(self) -> Iterator[tuple[ScanBatch, int]]:
+        """Each batch's scans (a copy: writable, as built scans are) and the readings
+        streamed up to it; the pages of the batches handed out are given back as the walk
+        goes."""
         (sizes,) = self._scans.columns
         counts, seen = self._batches.columns
         cols = self._readings.columns
@@ -79,13 +79,12 @@ class SpilledScans:
         try:
             for k in range(len(self._batches)):
                 n_scans = int(counts[k])
-                lengths = sizes[scan:scan + n_scans].tolist()
-                n = sum(lengths)
+                bounds = np.zeros(n_scans + 1, dtype=np.int64)
+                np.cumsum(sizes[scan:scan + n_scans], out=bounds[1:])
+                n = int(bounds[-1])
                 self._readings.release_before(start)
-                part = [np.array(c[start:start + n]) for c in cols]
-                bounds = np.cumsum([0, *lengths]).tolist()
-                yield [Scan(*[c[a:b] for c in part])
-                       for a, b in itertools.pairwise(bounds)], int(seen[k])
+                cat = Scan(*[np.array(c[start:start + n]) for c in cols])
+                yield ScanBatch(cat, bounds.tolist()), int(seen[k])
                 scan += n_scans
                 start += n
         finally:

@@ -28,10 +28,10 @@ from numba import njit
 
 from pipeline.mapper.kernels.attribution import reach_cells, span_buffers, spread_echo
 from pipeline.mapper.kernels.cone import (
-    wrap_angle,
     cone_row_span,
     cone_rows,
     edge_sector_spans,
+    wrap_angle,
 )
 from pipeline.mapper.types import F32, F64, I32, I64, B
 

@@ -1,6 +1,6 @@
 """The specular and default methods' speed-ups keep their bytes: the row-band split between two
 threads (any split row, one thread or two), the E-step's two halves of the readings, and the
-list of surfaces that may be silent."""
+list of surfaces that may be silent, the later passes' group size."""
 
 from __future__ import annotations
 
@@ -85,6 +85,16 @@ def test_the_specular_maps_do_not_depend_on_threads_or_the_split(
         two = _specular_grids(2)
         for name, grid in one.items():
             assert np.array_equal(grid, two[name]), (split, name)
+
+
+def test_the_later_passes_do_not_depend_on_their_groups(monkeypatch: pytest.MonkeyPatch) -> None:
+    # Passes 2 and up (no paper's mapper) take larger groups of scans: any size, the bytes.
+    want = _specular_grids(2)
+    for size in (1, 7):
+        monkeypatch.setattr(specular, "LATE_GROUP", size)
+        got = _specular_grids(2)
+        for name, grid in want.items():
+            assert np.array_equal(grid, got[name]), (size, name)
 
 
 def test_silent_candidates_list_the_consistent_surfaces_row_by_row() -> None:

@@ -5,6 +5,7 @@ of a run that builds its scans again in every pass (one thread or two)."""
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +14,7 @@ import pytest
 import pipeline.run as run_module
 from formats import open_log
 from pipeline.config import Config, config_from_dict
+from pipeline.mapper.scan_group import concat_scans
 from pipeline.mapper.types import SCAN_FIELDS, Scan
 from pipeline.run import prepare, run, stream_scans
 from pipeline.streaming.scan_spill import ScanSpill
@@ -31,8 +33,8 @@ def _scan(n: int, seed: int) -> Scan:
     )
 
 
-def _assert_same_batches(got: list[tuple[list[Scan], int]],
-                         want: list[tuple[list[Scan], int]]) -> None:
+def _assert_same_batches(got: Sequence[tuple[Sequence[Scan], int]],
+                         want: Sequence[tuple[Sequence[Scan], int]]) -> None:
     assert [(len(s), seen) for s, seen in got] == [(len(s), seen) for s, seen in want]
     for (g_scans, _), (w_scans, _) in zip(got, want, strict=True):
         for g, w in zip(g_scans, w_scans, strict=True):
@@ -55,6 +57,12 @@ def test_spilled_batches_come_back_as_added_empty_ones_included() -> None:
     _assert_same_batches(list(spilled.batches()), batches)  # every pass walks it again
     scan = first[0][0][1]
     scan.range_m[0] = -1.0  # copies, writable as built scans are; the spill is unchanged
+    # A batch's groups are its readings joined already: slices of one copy.
+    group = first[3][0][0:2]
+    cat, bounds = concat_scans(group)
+    assert bounds.tolist() == [0, 0, 7]
+    np.testing.assert_array_equal(cat.alpha, batches[3][0][1].alpha)
+    assert np.shares_memory(cat.alpha, first[3][0].cat.alpha)
     assert next(iter(spilled.batches()))[0][1].range_m[0] == batches[0][0][1].range_m[0]
 
 
@@ -63,7 +71,7 @@ def test_an_empty_spill_streams_its_empty_batches() -> None:
     spill.add([], 0)
     spilled = spill.finish()
     assert len(spilled) == 0
-    assert [(s, seen) for s, seen in spilled.batches()] == [([], 0)]
+    assert [(list(s), seen) for s, seen in spilled.batches()] == [([], 0)]
     ScanSpill().close()  # a pass that failed: the files go
 
 
