@@ -65,7 +65,7 @@ METHODS: tuple[tuple[str, Method, bool], ...] = (
     ("classic", Method.CLASSIC, True),
 )
 LABELS = {
-    "default": "sonarmap default (§11: specular echo attribution, v̄ measured)",
+    "default": "sonarmap default (§11: specular echo attribution, detection measured)",
     "specular": "specular echo attribution (§10)",
     "attribution": "echo attribution (§9)",
     "with_correction": "Andersone, with feature correction",

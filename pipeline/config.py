@@ -49,9 +49,8 @@ class MapperConfig:
     """Parameters of the mapping method (ALGORITHM.md), with its documented defaults."""
 
     method: Method = doc_field(  # noqa: RUF009 - doc_field is dataclasses.field with a doc
-        "mapping method: 'forward' (echo attribution with specular surfaces and the "
-        "detection rate of surfaces of unknown orientation measured on the log, §11; the "
-        "default), 'specular' (echo attribution with specular surfaces, §10), 'attribution' "
+        "mapping method: 'forward' (echo attribution with specular surfaces, the sonar's "
+        "detection by incidence measured on the log, §11; the default), 'specular' (echo attribution with specular surfaces, §10), 'attribution' "
         "(echo attribution, §9), 'andersone' (the paper's, §1-5) or 'classic' (log-odds "
         "baseline, §8)",
         default=Method.FORWARD,
@@ -140,12 +139,14 @@ class MapperConfig:
         default=0.35,
     )
     spec_critical_angle_deg: float = doc_field(
-        "specular (§10): median critical angle of a surface, deg: a ray that meets a smooth "
-        "surface farther than this from its normal is reflected away and returns no echo",
+        "specular (§10 only; §11 measures the detection by incidence on the log): median "
+        "critical angle of a surface, deg: a ray that meets a smooth surface farther than "
+        "this from its normal is reflected away and returns no echo",
         default=25.0,
     )
     spec_critical_spread: float = doc_field(
-        "specular (§10): spread of the critical angle across surfaces (σ of its logarithm), 1",
+        "specular (§10 only): spread of the critical angle across surfaces (σ of its "
+        "logarithm), 1",
         default=0.35,
     )
     spec_normal_radius_m: float = doc_field(

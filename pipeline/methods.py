@@ -11,7 +11,7 @@ class Method(StrEnum):
     ``metrics.json`` (``run.method``) use."""
 
     SPECULAR = "specular"  # echo attribution with specular surfaces, §10
-    FORWARD = "forward"  # §10 with v̄ measured on the log, §11 (the default)
+    FORWARD = "forward"  # §10 with the detection by incidence measured on the log, §11 (the default)
     ATTRIBUTION = "attribution"  # echo attribution, ALGORITHM.md §9
     ANDERSONE = "andersone"  # the paper's method as published, §1-5
     CLASSIC = "classic"  # log-odds occupancy grid with an inverse sensor model, §8

@@ -1,30 +1,31 @@
-"""§10 with the detection rate of surfaces of unknown orientation measured on the log
-(ALGORITHM.md §11).
+"""§10 with the sensor's detection model measured on the log (ALGORITHM.md §11).
 
 §10 weighs a ray's free evidence at a cell by the chance that a surface there would have
-answered: ``visible(θ)`` where the cell's orientation is known (consistency q), and
-``v̄`` where it is not, ``q·visible(θ) + (1 − q)·v̄``. §10 takes ``v̄`` as the mean of its
-critical-angle family over incidences (0.29). What surfaces of unknown orientation (posts,
-corners, clutter) do is a property of the building and the sonar, so this method measures
-it with one E-step of a forward sensor model (Thrun 2003) against §10's first map:
+answered: ``visible(θ)`` where the cell's orientation is known (consistency q), ``v̄``
+where it is not, ``q·visible(θ) + (1 − q)·v̄``, and stops a ray at a surface when
+``q·(1 − visible(θ)) > ½``. §10 takes both from a fixed critical-angle family (median 25°).
+This method measures them with one E-step of a forward sensor model (Thrun 2003) against
+§10's first map:
 
 0. §9's evidence (free and arc counts, the paper's features).
 1. §9's attribution → the first map; the arcs' bearings give each cell a normal line and a
    consistency q (§10).
 2. Every reading traced through the first map: along each ray the first surface either
-   answers or reflects the pulse away (nothing behind it is reached). Once per reading and
-   incidence bin (:data:`INCIDENCE_BINS` over [0, 90°], one more for surfaces of unknown
-   orientation, q < ½): did it answer from a reached surface there, did it pass one
-   (:func:`pipeline.mapper.kernels.forward.detection_counts`).
-3. and 4. §10's passes 2 and 3 with ``v̄`` = the unknown-orientation bin's answered share,
-   the coincidences taken out (:func:`unknown_rate`): the rate ``f`` at which an echo from
-   elsewhere lands on a surface, from the detection model fitted to the oriented bins
-   (:func:`fit_detection`: share(θ) = f + (1 − f)·p0·P(θc > θ), θc log-normal).
+   answers or reflects the pulse away (nothing behind it is reached)
+   (:func:`pipeline.mapper.kernels.forward.detection_counts`). Per incidence bin
+   (:data:`INCIDENCE_BINS` over [0, 90°]): the reached surface cells of known orientation
+   on the echo's arc and short of it give ``p(θ)``, the chance a surface met at θ answers
+   (:func:`reach_detection`); per reading, the answered and passed bins give ``v̄``.
+3. and 4. §10's passes 2 and 3 with ``visible(θ)`` = the evidence one pass at θ carries
+   against a surface, relative to a head-on pass (:func:`pass_evidence`: the log-likelihood
+   ratio ``ln(1 − p(θ)) / ln(1 − p(0))``), and ``v̄`` = the unknown-orientation bin's
+   answered share with the coincidences taken out (:func:`unknown_rate`; the rate ``f``
+   of an echo from elsewhere landing on a surface, from :func:`fit_detection`).
 
-The oriented bins' fitted curve is measured and reported (§11), not used for ``visible``:
-with it in place of §10's family the maps lost on 3 of 8 ideal-sonar logs and on the
-12° cut-off emulation (out-of-cone echoes inflate the oblique bins). No configuration key
-of its own. Memory: §10's grids; the counts are 20 numbers.
+Where the sonar hears surfaces at every incidence, ``p(θ) = p(0)``, every pass counts 1 and
+no ray stops: §9's evidence (with max-range readings' free cones). No configuration key of
+its own (the bins' smoothing is the uniform prior). Memory: §10's grids; the counts are 38
+numbers.
 """
 
 from __future__ import annotations
@@ -41,7 +42,7 @@ from pipeline.mapper.kernels.forward import detection_counts
 from pipeline.mapper.kernels.specular import cell_lists
 from pipeline.mapper.reading_features import distance_sigma
 from pipeline.mapper.scan_group import ScanGroup
-from pipeline.mapper.specular import SpecularMapper, visibility_table
+from pipeline.mapper.specular import TABLE_STEP, SpecularMapper, cos_table, visibility_table
 from pipeline.mapper.types import F64, B, GridSpec
 from pipeline.stages import reading_quality as rq
 
@@ -90,22 +91,62 @@ def unknown_rate(p_d: F64, floor: float) -> float:
     return max(0.0, float(p_d[INCIDENCE_BINS]) - floor) / (1.0 - floor)
 
 
+def reach_detection(reaches: F64) -> F64:
+    """``p(θ)`` per oriented bin from the reached surface cells ``(on the arc, passed)``:
+    each bin's share under the uniform prior (Laplace), then the closest curve that does not
+    rise with incidence (a surface's backscatter falls off its normal), weighted by the
+    bins' counts (pool adjacent violators; a bin with few reaches takes its neighbours')."""
+    weight = reaches[0] + reaches[1] + 2.0
+    share = (reaches[0] + 1.0) / weight
+    blocks: list[list[float]] = []  # [mean, weight, bins]
+    for v, w in zip(share.tolist(), weight.tolist(), strict=True):
+        blocks.append([v, w, 1.0])
+        while len(blocks) > 1 and blocks[-2][0] < blocks[-1][0]:
+            v2, w2, n2 = blocks.pop()
+            v1, w1, n1 = blocks.pop()
+            blocks.append([(v1 * w1 + v2 * w2) / (w1 + w2), w1 + w2, n1 + n2])
+    out: F64 = np.repeat([b[0] for b in blocks], [int(b[2]) for b in blocks])
+    return out
+
+
+def pass_evidence(p_d: F64) -> F64:
+    """The evidence a ray passing a surface at each bin's incidence carries against it,
+    relative to a head-on pass: the log-likelihood ratio ``ln(1 − p(θ))`` over the first
+    bin's, in [0, 1] (1 where the surface answers as often as head-on, 0 where it never
+    answers)."""
+    out: F64 = np.clip(np.log1p(-p_d) / math.log1p(-float(p_d[0])), 0.0, 1.0)
+    return out
+
+
+def evidence_table(weights: F64) -> F64:
+    """``weights`` (one per bin, at the bins' centres) on §10's θ grid (0, TABLE_STEP, …
+    just past π/2), linear between the centres and constant beyond the first and last."""
+    theta = np.arange(0.0, 0.5 * math.pi + 2 * TABLE_STEP, TABLE_STEP)
+    centres = (np.arange(len(weights)) + 0.5) * (0.5 * math.pi / len(weights))
+    out: F64 = np.interp(theta, centres, weights)
+    return out
+
+
 def detection_table(p0: float, median_deg: float, spread: float) -> F64:
     """The fitted specular curve ``p0·P(θc > θ)`` on §10's θ grid (0, TABLE_STEP, … just
-    past π/2): reported (ALGORITHM.md §11), not used by the map (module doc)."""
+    past π/2): the parametric fit, reported (ALGORITHM.md §11); the map uses
+    :func:`pass_evidence`."""
     out: F64 = p0 * visibility_table(median_deg, spread)
     return out
 
 
 class ForwardMapper(SpecularMapper):
-    """§10 with ``v̄`` measured on the first map (module doc); five passes."""
+    """§10 with ``visible(θ)`` and ``v̄`` measured on the first map (module doc); five
+    passes."""
 
     passes = 5
 
     def __init__(self, config: MapperConfig, grid: GridSpec) -> None:
         super().__init__(config, grid)
         self.stats: F64 = np.zeros((2, INCIDENCE_BINS + 1))
+        self.reaches: F64 = np.zeros((2, INCIDENCE_BINS))
         self.p_d: F64 = fitted_detection(self.stats)
+        self.p_reach: F64 = reach_detection(self.reaches)
         self.model = (1.0, config.spec_critical_angle_deg, config.spec_critical_spread, 0.0)
         self.surfaces: B = np.zeros(grid.shape, dtype=bool)  # the first map
         self.surface_index, self.surface_cols = cell_lists(self.surfaces)
@@ -123,6 +164,7 @@ class ForwardMapper(SpecularMapper):
             self.surfaces = AttributionMapper.occupied(self)
             self.surface_index, self.surface_cols = cell_lists(self.surfaces)
             self.stats[:] = 0.0
+            self.reaches[:] = 0.0
             self.pass_index = 2
             self._group_index = 0
         else:
@@ -130,6 +172,9 @@ class ForwardMapper(SpecularMapper):
                 self.p_d = fitted_detection(self.stats)
                 self.model = fit_detection(self.stats)
                 self.v_unknown = unknown_rate(self.p_d, self.model[3])
+                self.p_reach = reach_detection(self.reaches)
+                self.table = evidence_table(pass_evidence(self.p_reach))
+                self.cos_table = cos_table(self.table)
             super().begin_pass(index - 1)
 
     def _integrate_group(self, group: ScanGroup) -> None:
@@ -147,21 +192,21 @@ class ForwardMapper(SpecularMapper):
         r_inner = np.where(d > 0.0, np.maximum(d - band, 0.0), np.inf)[rows]
         half = np.minimum(0.5 * cat.fov[rows], 0.5 * math.pi - 1e-9)
         r_free, alpha = free_r[rows], cat.alpha[rows]
-
-        parts: list[tuple[int, F64]] = []
+        parts: list[tuple[int, F64, F64]] = []
 
         def count(lo: int, hi: int) -> int:
-            # Each half of the readings counts into its own table (integer counts: their
-            # sum does not depend on the split).
-            part = np.zeros_like(self.stats)
+            # Each half of the readings counts into its own tables (integer counts: their
+            # sums do not depend on the split).
+            stats, reaches = np.zeros_like(self.stats), np.zeros_like(self.reaches)
             detection_counts(
                 cones[lo:hi], up_down[lo:hi], r_inner[lo:hi], r_free[lo:hi], alpha[lo:hi],
                 half[lo:hi], g.origin_x, g.origin_y, g.resolution, self.surface_index,
-                self.surface_cols, self.nx, self.ny, self.consistency, part,
+                self.surface_cols, self.nx, self.ny, self.consistency, stats, reaches,
             )
-            parts.append((lo, part))
+            parts.append((lo, stats, reaches))
             return 0
 
         self._bands.run(count, len(rows) // 2, len(rows))
-        for _, part in sorted(parts, key=lambda p: p[0]):
-            self.stats += part
+        for _, stats, reaches in sorted(parts, key=lambda p: p[0]):
+            self.stats += stats
+            self.reaches += reaches

@@ -1,22 +1,26 @@
-"""Compiled E-step of the fitted detection curve (ALGORITHM.md §11): one pass over the readings.
+"""Compiled E-step of the detection model (ALGORITHM.md §11): one pass over the readings.
 
 A reading's cone out to ``cones[i, 2]`` (the far edge of its echo's arc, or ``r_max`` for a
 reading with no echo) is visited cell by cell (:mod:`pipeline.mapper.kernels.cone`). Every
-surface of the map ``occ`` stops the rays that meet it: it either answers or reflects the
+surface of the map (listed row by row) stops the rays that meet it: it either answers or reflects the
 pulse away, so nothing behind it (within its angular width, bins uniform in the tangent of
 the bearing off the axis, as :mod:`pipeline.mapper.kernels.specular`) is reached by this
 reading. A reached surface is met at incidence θ against its normal ``(nx, ny)``; it falls
 in incidence bin ``b`` (``bins`` equal bins over [0, 90°]) when its normal's consistency
-``q ≥ ½``, else in the last bin (orientation unknown). Counted once per reading:
+``q ≥ ½``, else in the last bin (orientation unknown). Two tallies:
 
-* *answered* (``stats[0, b] += 1``): of the reached surfaces on the echo's arc
-  (``r_inner ≤ dist``), the one met closest to its normal produced the echo (bin ``b``;
-  the others on the arc are neither answered nor passed);
-* *passed* (``stats[1, b] += 1`` once for each bin ``b`` with one): a reached surface
-  closer than ``r_free`` and short of the arc (or the reading has no echo) did not answer.
+* per reading (``stats``, ``(2, bins + 1)``): *answered* (``stats[0, b] += 1``): of the
+  reached surfaces on the echo's arc (``r_inner ≤ dist``), the one met closest to its
+  normal produced the echo (bin ``b``; the others on the arc are neither answered nor
+  passed); *passed* (``stats[1, b] += 1`` once for each bin ``b`` with one): a reached
+  surface closer than ``r_free`` and short of the arc (or the reading has no echo);
+* per reached surface cell of known orientation (``reaches``, ``(2, bins)``): on the echo's
+  arc (``reaches[0, b] += 1``: it may have answered) or short of it, closer than
+  ``r_free`` (``reaches[1, b] += 1``: it did not).
 
-``stats[0] / (stats[0] + stats[1])`` is then the share of readings that reached a surface
-at that incidence and were answered by it: the log's own detection curve. Deterministic.
+``stats[0] / (stats[0] + stats[1])`` is the share of readings that reached a surface at that
+incidence and were answered by it; ``reaches[0] / reaches.sum(0)`` the chance that a
+surface cell met at that incidence answers. Deterministic.
 """
 
 from __future__ import annotations
@@ -44,10 +48,11 @@ def incidence_bin(dx: float, dy: float, dist: float, nx: float, ny: float, bins:
 def detection_counts(
     cones: F64, up_down: B, r_inner: F64, r_free: F64, alpha: F64, half_fov: F64,
     gx: float, gy: float, res: float, occ_index: I32, occ_cols: I32, nx: F32, ny: F32,
-    cons: F32, stats: F64,
+    cons: F32, stats: F64, reaches: F64,
 ) -> None:
-    """Add each reading's answered and passed surfaces to ``stats`` ``(2, bins + 1)``
-    (module doc); the surfaces are listed row by row (``occ_index, occ_cols`` as
+    """Add each reading's answered and passed surfaces to ``stats`` ``(2, bins + 1)`` and
+    its reached surface cells of known orientation to ``reaches`` ``(2, bins)`` (module
+    doc); the surfaces are listed row by row (``occ_index, occ_cols`` as
     :func:`~pipeline.mapper.kernels.specular.cell_lists`), so a span costs its surfaces,
     not its cells."""
     height, width = cons.shape
@@ -106,8 +111,12 @@ def detection_counts(
                 b = incidence_bin(dx, dy, dist, nx[r, c], ny[r, c], bins)
             if dist >= r_inner[i]:
                 best = min(best, b)
+                if b < bins:
+                    reaches[0, b] += 1.0
             elif dist < r_free[i]:
                 passed[b] = True
+                if b < bins:
+                    reaches[1, b] += 1.0
         if best <= bins:
             stats[0, best] += 1.0
         for b in range(bins + 1):

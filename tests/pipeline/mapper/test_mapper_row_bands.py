@@ -68,7 +68,7 @@ def _specular_grids(threads: int) -> dict[str, np.ndarray]:
     for index in range(m.passes):
         m.begin_pass(index)
         m.integrate_many(scans)
-    out = {k: getattr(m, k).copy() for k in ("free2", "arcs2", "hits2", "hits", "free", "stats")}
+    out = {k: getattr(m, k).copy() for k in ("free2", "arcs2", "hits2", "hits", "free", "stats", "reaches")}
     out["occupied"] = m.snapshot().occupied
     return out
 
