@@ -41,7 +41,6 @@ from pipeline.methods import Method
 
 # The pose refinement's choices its modules take as they are spelled here (one place).
 TiltMode: TypeAlias = Literal["off", "fallback", "always"]  # the surfaces' patch models (calibration.py)
-HeldOut: TypeAlias = Literal["off", "measure", "gate"]  # the local corrections' held-out test (stretches.py)
 
 
 @dataclass(frozen=True)
@@ -223,136 +222,50 @@ class PoseRefinementConfig:
     enabled: bool = doc_field("refine the poses before mapping (also: run --refine-poses)",
                          default=False)
     model: str = doc_field(
-        "'graph': graph SLAM on the echoes (submaps, scan-to-map matching, loop closures, a "
-        "pose graph with the odometry's scale and heading bias; pipeline/refine/slam.py); "
-        "'chain': the calibration search, compass and local corrections", default="chain")
-    local_corrections: bool = doc_field(
-        "after the calibration, correct the track where the surface patches its visits "
-        "share say so: a rigid correction at a knot every stretch of travel from the first "
-        "pose (held), blended between knots (pipeline/refine/stretches.py)", default=True)
-    local_stretch_m: float = doc_field("... a stretch: this much travel, m", default=20.0)
-    local_noise_estimated: bool = doc_field(
-        "... the odometry's random walk (its σ per √m between knots) found from the data, "
-        "starting from odometry_sigma_xy / odometry_sigma_yaw_deg; false: those σ as given "
-        "(measured: drift_variety mean 0.9092 -> 0.9208, held_out 30 -> 31 of 36)",
-        default=True)
-    local_iterations: int = doc_field("... solves, each after associating again", default=4)
-    local_min_gain: float = doc_field(
-        "... applied when the first solve lowers the patches' robust loss by this much per "
-        "correction parameter", default=0.5)
-    local_min_consistency_gain: float = doc_field(
-        "... and the corrected poses make the echoes more consistent by this fraction",
-        default=0.01)
-    local_strong_gain: float = doc_field(
-        "... or, where the patches' loss falls by at least this much per parameter, the "
-        "echoes become no less consistent", default=4.0)
-    local_held_out: HeldOut = doc_field(  # noqa: RUF009 - doc_field is dataclasses.field with a doc
-        "... and, 'gate', corrections fitted again to the even echoes alone leave the odd "
-        "ones no less consistent (cross-validation; measured: the held_out benchmark's atrium "
-        "with yaw noise 0.90 -> 0.96 of true-pose F1, every correction applied elsewhere kept); "
-        "'measure': that gain reported in metrics.json, not judged; 'off': not fitted",
-        default="gate")
-    compass: bool = doc_field(
-        "after the calibration, take out the heading bias left where the walls' directions "
-        "drift along the run (a building whose walls run along two perpendicular "
-        "directions; pipeline/refine/compass.py), overrule a bias whose track turns the "
-        "walls off their lattice (an alias: the walls' spectrum over twice "
-        "calibration_max_bias_deg_per_m), and find the scale again under the walls' heading",
-        default=True)
-    compass_window_m: float = doc_field("... the walls' directions measured per this much "
-                                        "travel, m", default=20.0)
-    compass_max_bias_deg_per_m: float = doc_field(
-        "... a drift searched in ± this, deg/m (the calibration's misses measured: 0.07-0.09)",
-        default=0.15)
-    compass_min_z: float = doc_field(
-        "... applied when the drift stands this many standard errors from 0 (as unlikely: "
-        "Student's t over the windows fitted)", default=4.0)
-    submap_travel_m: float = doc_field("echoes are pooled into a submap per this much travel, m",
-                                  default=8.0)
-    submap_min_echoes: int = doc_field("a shorter stretch joins the next submap", default=60)
-    submap_max_points: int = doc_field("points kept per submap (evenly thinned)", default=400)
-    max_echo_range_m: float = doc_field("echoes farther than this are not matched, m", default=3.0)
-    arc_fraction: float = doc_field("an echo is placed along ± this fraction of its half beam "
-                               "(sharpness and matching; the consistency score uses the "
-                               "whole beam)", default=0.8)
-    local_map_submaps: int = doc_field("a submap is matched against this many previous ones",
-                                  default=3)
-    field_resolution_m: float = doc_field("cell of the matching likelihood field, m", default=0.05)
-    field_sigma_m: float = doc_field("σ of the likelihood field around each point, m", default=0.1)
-    search_xy_m: float = doc_field("consecutive matches: search ± this around odometry, m",
-                              default=0.5)
-    search_yaw_deg: float = doc_field("consecutive matches: search ± this yaw, degrees", default=8.0)
-    min_score: float = doc_field("a match is kept when its echoes' mean field value (the "
-                            "fraction of them the reference explains, 0-1) reaches this",
-                            default=0.7)
-    max_ambiguity: float = doc_field("loop closures: a distinct pose this likely relative to the "
-                                "best (likelihood ratio, 0-1) rejects the match", default=0.99)
-    loop_radius_m: float = doc_field("loop closure candidates: anchors this close (estimate), m",
-                                default=8.0)
-    loop_min_path_m: float = doc_field("... and at least this much travel apart, m", default=16.0)
-    loop_search_xy_m: float = doc_field("loop closures: search ± this, m", default=6.0)
-    loop_search_yaw_deg: float = doc_field("loop closures: search ± this yaw, degrees", default=40.0)
-    loop_max_per_submap: int = doc_field("loop closures tried per submap (nearest first)", default=1)
-    odometry_sigma_xy: float = doc_field("odometry translation σ, m per √m", default=0.02)
-    odometry_sigma_yaw_deg: float = doc_field("odometry rotation σ, degrees per √m", default=0.5)
-    calibration_search: bool = doc_field("search the odometry calibration that makes the echoes "
-                                    "sharpest before matching", default=True)
+        "'graph': the one model (calibration, then the pose graph with the scale and heading "
+        "bias as variables; pipeline/refine/refine.py); 'chain': the calibration, the walls' "
+        "compass and local stretch corrections it replaces (pipeline/refine/chain.py, kept "
+        "for comparison)", default="graph")
+    max_echo_range_m: float = doc_field(
+        "echoes farther than this are not matched (a sonar's range is reliable to a few "
+        "metres), m", default=3.0)
+    submap_travel_m: float = doc_field(
+        "echoes are pooled into a submap per this much travel (odometry's drift over it "
+        "stays below the field's σ), m", default=8.0)
+    field_sigma_m: float = doc_field(
+        "σ of the evidence field around each echo (the sonar's range and arc uncertainty; "
+        "its cells are half of it), m", default=0.1)
+    search_xy_m: float = doc_field(
+        "consecutive submaps: matched within ± this of the odometry (its drift over a "
+        "submap), m", default=0.5)
+    search_yaw_deg: float = doc_field("consecutive submaps: matched within ± this yaw, degrees",
+                                      default=8.0)
+    loop_radius_m: float = doc_field(
+        "loop closures: earlier submaps whose estimate lies within this distance are "
+        "candidates (at least twice this travel back), m", default=8.0)
+    loop_search_xy_m: float = doc_field(
+        "loop closures: matched within ± this of the estimate (the drift left at a "
+        "revisit), m", default=6.0)
+    loop_search_yaw_deg: float = doc_field("loop closures: matched within ± this yaw, degrees",
+                                           default=40.0)
+    odometry_sigma_xy: float = doc_field("odometry translation noise σ, m per √m travelled",
+                                         default=0.02)
+    odometry_sigma_yaw_deg: float = doc_field("odometry heading noise σ, degrees per √m "
+                                              "travelled", default=0.5)
     calibration_max_scale: float = doc_field(
-        "... scale error searched in ± this (0: the heading bias only)",
+        "the odometry's scale error is searched within ± this (fraction; 0: not searched)",
         default=0.05)
-    calibration_scale_score: str = doc_field(
-        "... the scale's estimator: 'surfaces' (ranges along surface normals, "
-        "pipeline/refine/surfaces.py) or 'consistency' (echo consistency)", default="surfaces")
-    calibration_max_slope: float = doc_field(
-        "... 'surfaces': a scale whose fixed-point slope reaches this is not applied (the "
-        "answer follows the association, not the data)", default=0.75)
-    calibration_scale_min_z: float = doc_field(
-        "... 'surfaces': a scale is applied only when it lies this many errors from 0 (its "
-        "standard error and the systematic part in quadrature)", default=3.0)
-    calibration_scale_systematic: float = doc_field(
-        "... 'surfaces': the estimator's systematic error for an estimate above 0 (fraction; "
-        "its lean on true poses, -0.1 to +0.7 % measured on dense logs, up to +1.7 %)",
-        default=0.005)
-    calibration_scale_systematic_negative: float = doc_field(
-        "... 'surfaces': the same for an estimate below 0 (the lean is mostly upward: "
-        "-0.71 ± 0.08 % at most measured below 0, on 1 Hz poses)", default=0.003)
-    calibration_scale_window_m: float = doc_field(
-        "... 'surfaces': a surface patch links echoes within one stretch of this much travel "
-        "(0: the whole run; longer links carry the odometry's random error)", default=30.0)
-    calibration_scale_tilt: TiltMode = doc_field(  # noqa: RUF009 - doc_field is dataclasses.field with a doc
-        "... 'surfaces': patches with their orientation fitted to their hits beside their "
-        "offset (immune to the error of the normals taken from the echo density; patches of "
-        "4 echoes). 'fallback': their scale is applied where the offset-only patches "
-        "establish none and the two estimates agree within 2 errors (measured: Orebro "
-        "drifted 0.42 -> 0.97 of true-pose F1, drift_variety 44 -> 46 of 55 rows at 0.9x, "
-        "0 cost on true poses); 'always': that model alone (FHW drifted 0.99 -> 0.88, a "
-        "corridor seen by 8 front sonars costs its true poses 0.14 F1); 'off': the "
-        "offset-only patches alone", default="fallback")
-    calibration_scale_recentre: bool = doc_field(
-        "... 'surfaces': the fixed point of the scale the gates judge is not extrapolated: "
-        "where it lies beyond the k0 of its line (-4 ... +4 %), their window moves 2 % towards "
-        "it (to +-4 % at most) and the line is fitted again (measured: -4 % on the Intel lab "
-        "found at -4.0 % instead of -4.7 %, 0.89 -> 0.99 of true-pose F1; Freiburg 101 0.85 "
-        "-> 0.96; drift_variety 45 -> 47 of 59, held_out 31 -> 30 of 36; scales within +-4 % "
-        "found as before)", default=True)
+    calibration_max_bias_deg_per_m: float = doc_field(
+        "the odometry's heading bias is searched within ± this, deg per m travelled",
+        default=3.0)
     calibration_far_range_m: float = doc_field(
-        "... 'surfaces': echoes out to this range (m) also estimate the scale, and replace the "
-        "near ones (max_echo_range_m) where they pass a specification test against them "
-        "(pipeline/refine/calibration.py _far_agrees; 0: the near echoes only)", default=5.0)
-    calibration_max_bias_deg_per_m: float = doc_field("... heading bias searched in ± this, deg/m",
-                                                 default=3.0)
-    calibration_min_gain: float = doc_field(
-        "... a heading bias is applied only when it makes the echoes sharper and more "
-        "consistent by at least this fraction (true poses: <= 0.002 sharper but for a "
-        "lattice's aliases, never more consistent; 0.8 deg/m of bias: >= 0.07)", default=0.01)
-    calibration_strong_gain: float = doc_field(
-        "... or, where sharpness and consistency disagree, the one in its favour gains at "
-        "least this fraction: sharper by it and less consistent by under calibration_min_gain "
-        "(aliases: <= 0.037 sharper; 0.8 deg/m of bias: 0.07-0.77; Belgioioso: 0.19 and "
-        "level), or, found by the consistency scan, more consistent by it and less sharp "
-        "(lattices: 0.17-0.23; yaw noise's aliases: 0.035-0.057); 1e9: neither", default=0.10)
-    prior_scale: float = doc_field("σ of the odometry's scale error (prior, fraction)", default=0.01)
-    prior_bias_deg_per_m: float = doc_field("σ of the heading bias's prior, deg/m", default=2.0)
+        "echoes out to this range also estimate the scale where they agree with the near "
+        "ones (a specification test), m; 0: the near echoes only", default=5.0)
+
+    @property
+    def field_resolution_m(self) -> float:
+        """The evidence field's cell, m: half its σ (the blur spans two cells)."""
+        return self.field_sigma_m / 2
 
     @property
     def echo_reach_m(self) -> float:
@@ -567,29 +480,15 @@ RANGES: dict[str, Range] = {
     "sensors.mounts.max_range": dataclasses.replace(LIMIT_M, zero="from the log"),
     # [pose_refinement]: generous outer limits (its own rules follow in _check_ranges).
     **{f"pose_refinement.{k}": r for k, r in {
-        "local_stretch_m": above(0, 1e5, "m"), "local_iterations": Range(1, 1000),
-        "local_min_gain": Range(0, 1e9), "local_min_consistency_gain": open_range(-1, 1),
-        "local_strong_gain": Range(0, 1e9), "compass_window_m": above(0, 1e5, "m"),
-        "compass_max_bias_deg_per_m": above(0, 5, "deg/m"), "compass_min_z": Range(0, 1e3),
-        "submap_travel_m": above(0, 1e4, "m"), "submap_min_echoes": Range(1, 10_000_000),
-        "submap_max_points": Range(1, 10_000_000), "max_echo_range_m": above(0, 1000, "m"),
-        "arc_fraction": Range(0, 1), "local_map_submaps": Range(1, 1000),
-        "field_resolution_m": Range(1e-3, 10, "m"), "field_sigma_m": above(0, 100, "m"),
+        "submap_travel_m": above(0, 1e4, "m"), "max_echo_range_m": above(0, 1000, "m"),
+        "field_sigma_m": Range(2e-3, 100, "m"),
         "search_xy_m": above(0, 100, "m"), "search_yaw_deg": above(0, 180, "deg"),
-        "min_score": _PROB, "max_ambiguity": above(0, 1), "loop_radius_m": above(0, 1e4, "m"),
-        "loop_min_path_m": Range(0, 1e6, "m"), "loop_search_xy_m": above(0, 100, "m"),
-        "loop_search_yaw_deg": above(0, 180, "deg"), "loop_max_per_submap": Range(0, 1000),
+        "loop_radius_m": above(0, 1e4, "m"),
+        "loop_search_xy_m": above(0, 100, "m"), "loop_search_yaw_deg": above(0, 180, "deg"),
         "odometry_sigma_xy": above(0, 10, "m/√m"), "odometry_sigma_yaw_deg": above(0, 90),
         "calibration_max_scale": Range(0, 0.5, hi_open=True),
-        "calibration_max_slope": above(0, 1), "calibration_scale_min_z": Range(0, 1e3),
-        "calibration_scale_systematic": Range(0, 1),
-        "calibration_scale_systematic_negative": Range(0, 1),
-        "calibration_scale_window_m": Range(0, 1e6, "m", zero="the whole run"),
         "calibration_far_range_m": Range(0, 1000, "m", zero="off"),
         "calibration_max_bias_deg_per_m": above(0, 45, "deg/m"),
-        "calibration_min_gain": Range(0, 1, hi_open=True),
-        "calibration_strong_gain": Range(0, 1e9), "prior_scale": above(0, 10),
-        "prior_bias_deg_per_m": above(0, 90, "deg/m"),
     }.items()},
 }
 
@@ -630,65 +529,21 @@ def _check_ranges(cfg: Config) -> None:
         x0, y0, x1, y1 = g.extent
         need(x0 < x1 and y0 < y1, "grid.extent", "must have xmin < xmax and ymin < ymax", g.extent)
     pr = cfg.pose_refinement
-    for key in ("submap_travel_m", "max_echo_range_m", "field_resolution_m", "field_sigma_m",
+    for key in ("submap_travel_m", "max_echo_range_m", "field_sigma_m",
                 "search_xy_m", "search_yaw_deg", "loop_radius_m", "loop_search_xy_m",
-                "loop_search_yaw_deg", "odometry_sigma_xy", "odometry_sigma_yaw_deg",
-                "prior_scale", "prior_bias_deg_per_m",
-                "local_stretch_m"):
+                "loop_search_yaw_deg", "odometry_sigma_xy", "odometry_sigma_yaw_deg"):
         v = getattr(pr, key)
         need(math.isfinite(v) and v > 0, f"pose_refinement.{key}", "must be > 0", v)
-    for key in ("submap_min_echoes", "submap_max_points", "local_map_submaps",
-                "local_iterations"):
-        v = getattr(pr, key)
-        need(v >= 1, f"pose_refinement.{key}", "must be >= 1", v)
     need(0 <= pr.calibration_max_scale < 0.5, "pose_refinement.calibration_max_scale",
          "must be in [0, 0.5)", pr.calibration_max_scale)
-    need(0 < pr.calibration_max_slope <= 1, "pose_refinement.calibration_max_slope",
-         "must be in (0, 1]", pr.calibration_max_slope)
-    need(math.isfinite(pr.compass_window_m) and pr.compass_window_m > 0,
-         "pose_refinement.compass_window_m", "must be > 0", pr.compass_window_m)
-    need(0 < pr.compass_max_bias_deg_per_m <= 5, "pose_refinement.compass_max_bias_deg_per_m",
-         "must be in (0, 5]", pr.compass_max_bias_deg_per_m)
-    need(pr.compass_min_z >= 0, "pose_refinement.compass_min_z", "must be >= 0",
-         pr.compass_min_z)
-    need(pr.calibration_scale_min_z >= 0, "pose_refinement.calibration_scale_min_z",
-         "must be >= 0", pr.calibration_scale_min_z)
-    for key in ("calibration_scale_systematic", "calibration_scale_systematic_negative"):
-        need(getattr(pr, key) >= 0, f"pose_refinement.{key}", "must be >= 0", getattr(pr, key))
-    need(pr.calibration_scale_window_m >= 0, "pose_refinement.calibration_scale_window_m",
-         "must be >= 0 (0 = the whole run)", pr.calibration_scale_window_m)
-    need(math.isfinite(pr.local_min_gain) and pr.local_min_gain >= 0,
-         "pose_refinement.local_min_gain", "must be >= 0", pr.local_min_gain)
-    need(pr.local_strong_gain >= 0,
-         "pose_refinement.local_strong_gain", "must be >= 0 (1e9: never)", pr.local_strong_gain)
-    need(math.isfinite(pr.local_min_consistency_gain) and -1 < pr.local_min_consistency_gain < 1,
-         "pose_refinement.local_min_consistency_gain", "must be in (-1, 1)",
-         pr.local_min_consistency_gain)
     need(math.isfinite(pr.calibration_far_range_m) and pr.calibration_far_range_m >= 0,
          "pose_refinement.calibration_far_range_m", "must be >= 0 (0 = off)",
          pr.calibration_far_range_m)
-    need(pr.model in ("graph", "chain"), "pose_refinement.model", "must be 'graph' or 'chain'",
-         pr.model)
-    need(pr.calibration_scale_score in ("consistency", "surfaces"),
-         "pose_refinement.calibration_scale_score", "must be 'consistency' or 'surfaces'",
-         pr.calibration_scale_score)
-    need(math.isfinite(pr.calibration_min_gain) and 0 <= pr.calibration_min_gain < 1,
-         "pose_refinement.calibration_min_gain", "must be in [0, 1)", pr.calibration_min_gain)
-    need(pr.calibration_strong_gain >= pr.calibration_min_gain,
-         "pose_refinement.calibration_strong_gain", "must be >= calibration_min_gain (1e9: never)",
-         pr.calibration_strong_gain)
     need(0 < pr.calibration_max_bias_deg_per_m <= 45,
          "pose_refinement.calibration_max_bias_deg_per_m", "must be in (0, 45]",
          pr.calibration_max_bias_deg_per_m)
-    need(pr.loop_min_path_m >= 0, "pose_refinement.loop_min_path_m", "must be >= 0",
-         pr.loop_min_path_m)
-    need(pr.loop_max_per_submap >= 0, "pose_refinement.loop_max_per_submap", "must be >= 0",
-         pr.loop_max_per_submap)
-    need(0 <= pr.arc_fraction <= 1, "pose_refinement.arc_fraction", "must be in [0, 1]",
-         pr.arc_fraction)
-    need(0 < pr.min_score < 1, "pose_refinement.min_score", "must be in (0, 1)", pr.min_score)
-    need(0 < pr.max_ambiguity <= 1, "pose_refinement.max_ambiguity", "must be in (0, 1]",
-         pr.max_ambiguity)
+    need(pr.model in ("graph", "chain"), "pose_refinement.model", "must be 'graph' or 'chain'",
+         pr.model)
     sc = cfg.sensors
     _check_limits("sensors", sc.min_range, sc.max_range)
     for i, mt in enumerate(sc.mounts):

@@ -234,7 +234,6 @@ def _refine_poses(
         sv.ordered_ranges(reader), sv.track, sensors,
         eps_max=config.mapper.eps_max,
         max_echo_range_m=config.pose_refinement.echo_reach_m,
-        arc_fraction=config.pose_refinement.arc_fraction,
         time_offset_ns=round(config.pose_sync.time_offset_s * 1e9),
         max_gap_ns=round(pose_gap_limit_s(config.pose_sync.max_pose_gap_s,
                                           sv.track.median_interval_s()) * 1e9),

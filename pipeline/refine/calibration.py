@@ -46,6 +46,13 @@ FAR_TEST_Z = 2.0  # _far_agrees: the far echoes' scale within 2 errors of the di
 MODELS_TEST_Z = 2.0  # _patch_models_agree: the two patch models' scales within 2 errors
 SCALE_STEP = 0.01  # coarse step of the scale search (fraction)
 CONSISTENT_SPAN = 8  # the bias's value by consistency within ± this many coarse steps
+# The calibration's acceptance, as refinement runs it (docs/POSE_REFINEMENT.md "calibration.py"
+# has the measurements behind each; not yet replaced by the graph's likelihood):
+MIN_GAIN = 0.01  # a heading bias must make the echoes sharper and more consistent by this
+STRONG_GAIN = 0.10  # ... or, where the two scores disagree, the one in its favour by this
+MAX_SLOPE = 0.75  # a surfaces' scale whose fixed-point slope reaches this is not applied
+MIN_Z = 3.0  # ... nor one within this many standard errors of 0 (Lean in quadrature)
+WINDOW_M = 30.0  # a surface patch links echoes within this much travel
 
 
 @dataclass(frozen=True)

@@ -24,6 +24,7 @@ from pipeline.stages.sensors import SensorTable
 from pipeline.streaming.reorder_window import RangeChunk
 
 ARC_SAMPLES = 7
+ARC_FRACTION = 0.8  # an echo is placed along ± this fraction of its half beam (sharpness, matching)
 
 
 @dataclass(frozen=True)
@@ -85,7 +86,7 @@ def collect_echoes(
     *,
     eps_max: float,
     max_echo_range_m: float,
-    arc_fraction: float,
+    arc_fraction: float = ARC_FRACTION,
     time_offset_ns: int,
     max_gap_ns: int,
 ) -> Echoes:

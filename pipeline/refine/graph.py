@@ -13,8 +13,9 @@ remove most of its drift. Residuals, each whitened by its square-root informatio
   ``σ_θ·√L_i + 0.1° + 1 % of the turn``;
 * **match** (consecutive submaps and loop closures): ``X_i⁻¹X_j ⊖ z`` whitened by the
   match's information (its posterior covariance, :mod:`pipeline.refine.correlative`);
-* **priors**: anchor 0 stays where it is (σ 1 mm, 0.01°); ``k`` and ``b`` are pulled to 0
-  with the configured standard deviations.
+* **priors**: anchor 0 stays where it is (σ 1 mm, 0.01°); ``k`` is pulled to
+  ``scale_centre`` (the echoes' own measurement of it, else 0) and ``b`` to 0 with the
+  given standard deviations.
 
 ``⊖`` subtracts poses component-wise with the angle wrapped. A robust loss (Cauchy,
 scale ``robust_scale``) bounds the pull of a wrong match. The Jacobian's sparsity pattern
@@ -69,6 +70,7 @@ class GraphOptions:
     prior_bias: float  # σ of b, rad/m
     robust_scale: float
     linear_start: bool = False  # solve without the robust loss first (from far-off estimates)
+    scale_centre: float = 0.0  # the scale's prior mean (a measurement of it, e.g. the surfaces')
 
 
 @dataclass(frozen=True)
@@ -131,7 +133,8 @@ class _Problem:
             e = np.column_stack([rel[:, :2] - m.z[:, :2], wrap_angle(rel[:, 2] - m.z[:, 2])])
             parts.append(np.einsum("mab,mb->ma", m.u, e).ravel())
         if self.opt.calibrate:
-            parts.append(np.array([k / self.opt.prior_scale, b / self.opt.prior_bias]))
+            parts.append(np.array([(k - self.opt.scale_centre) / self.opt.prior_scale,
+                                   b / self.opt.prior_bias]))
         return np.concatenate(parts)
 
     def jacobian(self, v: F64) -> object:
@@ -264,7 +267,7 @@ def solve(x0: F64, odo: Odometry, matches: MatchConstraints, opt: GraphOptions) 
         how: dict[str, object] = {"jac": jac, "tr_solver": "exact"}
     else:
         how = {"jac": prob.jacobian, "tr_solver": "lsmr", "tr_options": _LSMR}
-    v0 = np.concatenate([x0.ravel(), [0.0, 0.0] if opt.calibrate else []])
+    v0 = np.concatenate([x0.ravel(), [opt.scale_centre, 0.0] if opt.calibrate else []])
     cost0 = robust_cost(prob.residuals(v0), opt.robust_scale)
     if opt.linear_start:  # least squares first: a robust loss ignores what starts far off
         v0 = least_squares(prob.residuals, v0, method="trf", x_scale="jac", max_nfev=50,

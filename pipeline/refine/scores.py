@@ -292,3 +292,11 @@ def density_sharpness(x: F64, y: F64, res: float, sigma: float) -> float:
     dens = gaussian_blur(hist, sigma / res)
     total = float(dens.sum())
     return float((dens * dens).sum() / (total * total)) if total > 0 else 0.0
+
+
+def track_consistency(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes, res: float,
+                      sigma: float) -> float:
+    """The consistency of ``echoes`` (:class:`Consistency`) placed on the track
+    ``(x, y, yaw)`` (stamps ``t_ns``)."""
+    return Consistency(t_ns, x, y, yaw, echoes.on_track(t_ns, x, y, yaw), res=2 * res,
+                       sigma=sigma)(0.0, 0.0)

@@ -7,10 +7,10 @@
    (:mod:`~pipeline.refine.correlative`) against the previous ``local_map_submaps``
    submaps placed by their estimates, around the odometry's prediction (± ``search_xy_m``,
    ``search_yaw_deg``); the match's posterior mean and covariance become a constraint.
-3. **Loop closures**: earlier submaps (``loop_min_path_m`` of travel back) whose estimate
-   lies within ``loop_radius_m`` are correlated over ± ``loop_search_xy_m``,
-   ``loop_search_yaw_deg``; kept when the score reaches ``min_score`` and the best
-   distinct pose's likelihood ratio stays below ``max_ambiguity``. Each kept closure
+3. **Loop closures**: earlier submaps (twice ``loop_radius_m`` of travel back) whose
+   estimate lies within ``loop_radius_m`` are correlated over ± ``loop_search_xy_m``,
+   ``loop_search_yaw_deg``; kept when the score reaches :data:`MIN_SCORE` and the best
+   distinct pose's likelihood ratio stays below :data:`MAX_AMBIGUITY`. Each kept closure
    re-solves the graph, so the next search starts from the corrected estimate.
 4. **Pose graph** (:mod:`~pipeline.refine.graph`): odometry (σ ``odometry_sigma_xy`` m/√m,
    ``odometry_sigma_yaw_deg`` °/√m), matches and closures under a Cauchy loss, the
@@ -35,6 +35,7 @@ scipy's ``least_squares`` with a sparse Jacobian pattern solves the graph (deter
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -56,8 +57,7 @@ from pipeline.refine.graph import (
     solve,
     sqrt_information,
 )
-from pipeline.refine.scores import MAX_ECHOES_CONSISTENCY, thin
-from pipeline.refine.stretches import track_consistency_gain
+from pipeline.refine.scores import MAX_ECHOES_CONSISTENCY, thin, track_consistency
 from pipeline.refine.submaps import Submap, build_submaps, path_length_at
 from pipeline.se2 import between, compose, inverse, transform_points
 from pipeline.stages.pose_sync import POSE_OK, PoseTrack, interpolate_poses
@@ -65,6 +65,15 @@ from pipeline.stages.pose_sync import POSE_OK, PoseTrack, interpolate_poses
 ARC_STRIDE = 1  # the query scores every point of an echo's arc
 CHI2_OUTLIER = 16.27  # χ² with 3 degrees of freedom at 99.9 %: a constraint the solution rejects
 Z99 = 2.326  # the standard normal's 99 % quantile (χ²(dof) ≈ dof + z·√(2·dof))
+SUBMAP_MIN_ECHOES = 60  # a shorter stretch joins the next submap (too few echoes to match)
+SUBMAP_MAX_POINTS = 400  # echoes kept per submap (evenly thinned)
+LOCAL_MAP_SUBMAPS = 3  # a submap is matched against this many previous ones
+MIN_SCORE = 0.7  # a match is kept when the reference explains this share of its echoes
+MAX_AMBIGUITY = 0.99  # a closure whose distinct second pose is this likely is ambiguous
+# Priors on the odometry's systematic error (σ): a few percent of scale and a fraction of a
+# degree per metre are typical of uncalibrated wheel odometry (docs/POSE_REFINEMENT.md).
+PRIOR_SCALE = 0.01
+PRIOR_BIAS_DEG_PER_M = 2.0
 
 
 @dataclass
@@ -182,15 +191,17 @@ def _match(g: _Graph, refs: list[int], j: int, prediction: F64, window: Window,
                      res=cfg.field_resolution_m, sigma=cfg.field_sigma_m)
 
 
-def slam_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig
+def slam_track(tt: np.ndarray, tx: F64, ty: F64, tyaw: F64, echoes: Echoes,
+               cfg: PoseRefinementConfig, scale: float = 0.0
                ) -> tuple[F64, F64, F64, dict[str, Any]]:
-    """The refined poses of ``track`` (same stamps) and what the graph did."""
-    tt = np.asarray(track.t_ns)
-    tx, ty, tyaw = np.asarray(track.x), np.asarray(track.y), np.asarray(track.yaw)
+    """The refined poses of the odometry ``(tt, tx, ty, tyaw)`` (same stamps; ``echoes``
+    placed on it) and what the graph did. ``scale``: the odometry's scale error as the
+    echoes' surfaces measured it (the scale's prior mean in the final solve: loop closures
+    do not observe the scale)."""
     echoes = echoes.within(cfg.max_echo_range_m)
     path = path_length_at(tt, tx, ty, echoes.t_ns) if len(echoes) else np.empty(0)
     submaps = build_submaps(echoes, path, travel_m=cfg.submap_travel_m,
-                            min_echoes=cfg.submap_min_echoes, max_points=cfg.submap_max_points)
+                            min_echoes=SUBMAP_MIN_ECHOES, max_points=SUBMAP_MAX_POINTS)
     metrics: dict[str, Any] = {"model": "graph", "echoes": len(echoes), "submaps": len(submaps)}
     zero = {"matches_accepted": 0, "matches_rejected": 0, "loop_closures_accepted": 0,
             "loop_closures_rejected": 0, "accepted": False}
@@ -201,7 +212,7 @@ def slam_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig
     odo_anchor = np.array([s.anchor for s in submaps])
     anchor_path = np.array([s.path_m for s in submaps])
     opt = GraphOptions(cfg.odometry_sigma_xy, math.radians(cfg.odometry_sigma_yaw_deg), True,
-                       cfg.prior_scale, math.radians(cfg.prior_bias_deg_per_m), 1.0, True)
+                       PRIOR_SCALE, math.radians(PRIOR_BIAS_DEG_PER_M), 1.0, True)
     odo = Odometry(between(odo_anchor[:-1], odo_anchor[1:]), np.diff(anchor_path))
     g = _Graph(submaps, odo, opt, odo_anchor.copy())
     seq = _window(cfg.search_xy_m, cfg.search_yaw_deg, cfg.field_resolution_m)
@@ -210,9 +221,9 @@ def slam_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig
     for j in range(1, len(submaps)):
         pred = compose(g.est[j - 1], calibrated(odo.delta[j - 1:j], odo.length[j - 1:j],
                                                 g.scale, g.bias)[0])
-        refs = list(range(max(0, j - cfg.local_map_submaps), j))
+        refs = list(range(max(0, j - LOCAL_MAP_SUBMAPS), j))
         m = _match(g, refs, j, pred, seq, cfg)
-        if m is not None and m.score >= cfg.min_score:
+        if m is not None and m.score >= MIN_SCORE:
             g.add(j - 1, j, m.pose, m.cov, loop=False)
             g.est[j] = m.pose
             seq_ok += 1
@@ -220,15 +231,15 @@ def slam_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig
             g.est[j] = pred
             seq_bad += 1
         d = np.hypot(g.est[:j, 0] - g.est[j, 0], g.est[:j, 1] - g.est[j, 1])
-        far = anchor_path[j] - anchor_path[:j] >= cfg.loop_min_path_m
+        far = anchor_path[j] - anchor_path[:j] >= 2 * cfg.loop_radius_m
         cand = np.flatnonzero((d <= cfg.loop_radius_m) & far)
-        cand = cand[np.argsort(d[cand], kind="stable")][: cfg.loop_max_per_submap]
+        cand = cand[np.argsort(d[cand], kind="stable")][:1]
         closed = False
         for i in cand.tolist():
             loop_tried += 1
             refs = [r for r in (i - 1, i, i + 1) if 0 <= r < j]
             m = _match(g, refs, j, g.est[j], wide, cfg)
-            if m is None or m.score < cfg.min_score or m.ambiguity > cfg.max_ambiguity:
+            if m is None or m.score < MIN_SCORE or m.ambiguity > MAX_AMBIGUITY:
                 loop_gated += 1
                 continue
             g.add(i, j, m.pose, m.cov, loop=True)
@@ -238,6 +249,7 @@ def slam_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig
             if not keep.all():  # a new closure the graph so far cannot explain goes
                 loop_inconsistent += int((~keep).sum())
                 g.drop(keep)
+    g.opt = opt = dataclasses.replace(opt, scale_centre=scale)
     keep = _consistent(g, len(submaps) - 1, np.ones(len(g.i), bool))
     chi2 = g.solve_upto(len(submaps) - 1, keep)
     loop = np.array(g.loop, bool)
@@ -268,9 +280,10 @@ def slam_track(track: PoseTrack, echoes: Echoes, cfg: PoseRefinementConfig
         metrics["note"] = "the graph does not explain the echoes better than the odometry"
         return tx.copy(), ty.copy(), tyaw.copy(), metrics
     rx, ry, ryaw = _onto_poses(tt, tx, ty, tyaw, submaps, g)
-    gain = track_consistency_gain(tt, (tx, ty, tyaw), (rx, ry, ryaw),
-                                   echoes.take(thin(len(echoes), MAX_ECHOES_CONSISTENCY)),
-                                   cfg.field_resolution_m, cfg.field_sigma_m)
+    scored = echoes.take(thin(len(echoes), MAX_ECHOES_CONSISTENCY))
+    gain = (track_consistency(tt, rx, ry, ryaw, scored, cfg.field_resolution_m, cfg.field_sigma_m)
+            / track_consistency(tt, tx, ty, tyaw, scored, cfg.field_resolution_m,
+                                cfg.field_sigma_m) - 1.0)
     metrics["consistency_gain"] = gain
     if not gain > 0:
         metrics["accepted"] = False

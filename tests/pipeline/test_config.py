@@ -64,12 +64,12 @@ def test_method_is_the_one_typed_choice():
         ({"sensors": {"preset": "roomba"}}, r"'sensors.preset' must be one of"),
         ({"sensors": {"mounts": [{"name": "a"}, {"name": "a"}]}}, r"duplicate names"),
         ({"scans": {"policy": "never"}}, r"'scans.policy' must be one of"),
-        ({"pose_refinement": {"compass_window_m": 0}},
-         r"'pose_refinement.compass_window_m' must be > 0"),
-        ({"pose_refinement": {"compass_max_bias_deg_per_m": 6}},
-         r"'pose_refinement.compass_max_bias_deg_per_m' must be in \(0, 5\]"),
-        ({"pose_refinement": {"calibration_strong_gain": 0.005}},
-         r"'pose_refinement.calibration_strong_gain' must be >= calibration_min_gain"),
+        ({"pose_refinement": {"field_sigma_m": 0}},
+         r"'pose_refinement.field_sigma_m' must be"),
+        ({"pose_refinement": {"calibration_max_bias_deg_per_m": 46}},
+         r"'pose_refinement.calibration_max_bias_deg_per_m' must be"),
+        ({"pose_refinement": {"local_stretch_m": 20}},
+         r"unknown key 'pose_refinement.local_stretch_m'"),
     ],
 )
 def test_bad_values_are_refused_with_the_key(data, message):

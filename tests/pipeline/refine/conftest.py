@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import contextlib
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -42,3 +44,17 @@ def sample_echoes() -> Callable[[str, float], tuple[tuple[np.ndarray, ...], Echo
         return cache[(name, max_range_m)]
 
     return load
+
+
+@contextlib.contextmanager
+def gates_replaced(**gates: Any) -> Iterator[None]:
+    """Refinement's calibration run with ``gates`` in place of some of
+    :func:`pipeline.refine.refine.calibration_gates` (e.g. ``tilt="off"``)."""
+    import pipeline.refine.refine as rf
+
+    kept = rf.calibration_gates
+    rf.calibration_gates = lambda: {**kept(), **gates}  # type: ignore[assignment]
+    try:
+        yield
+    finally:
+        rf.calibration_gates = kept  # type: ignore[assignment]

@@ -18,6 +18,7 @@ from formats import open_log
 from formats.presets import PRESETS
 from pipeline.config import Config
 from pipeline.refine import Echoes, collect_echoes
+from pipeline.refine.calibration import MIN_GAIN, STRONG_GAIN
 from pipeline.refine.scores import Consistency, Sharpness
 from pipeline.refine.surfaces import FixedPoint, SurfaceScale
 from pipeline.tools.simulate import SimOptions, simulate, write_simulation
@@ -145,9 +146,8 @@ def test_a_bias_is_applied_when_both_gain_or_the_sharpness_gains_strongly_and_ho
         sharper: float, more_consistent: float, accepted: bool) -> None:
     from pipeline.refine.calibration import bias_accepted
 
-    pr = Config().pose_refinement
-    assert bias_accepted(sharper, more_consistent, pr.calibration_min_gain,
-                         pr.calibration_strong_gain) is accepted
+    assert bias_accepted(sharper, more_consistent, MIN_GAIN,
+                         STRONG_GAIN) is accepted
     # with no strong gain (inf) only the first test remains
     assert bias_accepted(sharper, more_consistent, 0.01, math.inf) is (
         sharper >= 0.01 and more_consistent >= 0.01)
@@ -165,9 +165,8 @@ def test_a_bias_by_consistency_the_sharpness_contradicts_must_be_strongly_more_c
         sharper: float, more_consistent: float, accepted: bool) -> None:
     from pipeline.refine.calibration import consistent_bias_accepted
 
-    pr = Config().pose_refinement
-    assert consistent_bias_accepted(sharper, more_consistent, pr.calibration_min_gain,
-                                    pr.calibration_strong_gain) is accepted
+    assert consistent_bias_accepted(sharper, more_consistent, MIN_GAIN,
+                                    STRONG_GAIN) is accepted
 
 
 def test_a_lattice_whose_right_bias_is_less_sharp_is_calibrated_by_consistency(
@@ -184,7 +183,7 @@ def test_a_lattice_whose_right_bias_is_less_sharp_is_calibrated_by_consistency(
             consistent = Consistency(t, x, y, yaw, echoes, res=0.1, sigma=0.1)
             assert sharp(0.0, math.radians(want)) < sharp(0.0, 0.0)
             assert consistent(0.0, math.radians(want)) > 1.1 * consistent(0.0, 0.0)
-        strong = Config().pose_refinement.calibration_strong_gain
+        strong = STRONG_GAIN
         cal = calibrate(t, x, y, yaw, echoes, max_scale=0.0, max_bias=math.radians(3.0),
                         res=0.05, sigma=0.1, min_gain=0.01, strong_gain=strong)
         assert math.degrees(cal.heading_bias) == pytest.approx(want, abs=0.05)
@@ -205,7 +204,7 @@ def test_an_alias_sharpness_accepts_loses_to_the_more_consistent_bias_elsewhere(
     t, x, y, yaw = (np.asarray(getattr(track, a)) for a in ("t_ns", "x", "y", "yaw"))
     consistent = Consistency(t, x, y, yaw, echoes, res=0.1, sigma=0.1)
     assert consistent(0.0, math.radians(0.8)) > consistent(0.0, math.radians(-2.06))
-    for strong in (math.inf, Config().pose_refinement.calibration_strong_gain):
+    for strong in (math.inf, STRONG_GAIN):
         cal = calibrate(t, x, y, yaw, echoes, max_scale=0.0, max_bias=math.radians(3.0),
                         res=0.05, sigma=0.1, min_gain=0.01, strong_gain=strong)
         assert math.degrees(cal.heading_bias) == pytest.approx(0.8, abs=0.05)
@@ -268,8 +267,7 @@ def test_the_lean_is_one_sided() -> None:
         return FixedPoint(value, 0.5, (), error)
 
     lean = Lean()  # the configuration's default
-    assert (lean.up, lean.down) == (Config().pose_refinement.calibration_scale_systematic,
-                                    Config().pose_refinement.calibration_scale_systematic_negative)
+    assert (lean.up, lean.down) == (0.005, 0.003)
     noisy = fp(-0.014, 0.002)
     assert scale_z(noisy, lean) == pytest.approx(0.014 / math.hypot(0.002, 0.003))
     assert _established(noisy, noisy.value, lean, 3.0, 0.75)
@@ -349,7 +347,7 @@ def test_a_lattice_that_sharpens_under_a_wrong_bias_keeps_its_true_heading(
     consistent = Consistency(t, x, y, yaw, echoes, res=0.1, sigma=0.1)
     assert sharp(0.0, alias) > 1.01 * sharp(0.0, 0.0)  # measured +3.5 %
     assert consistent(0.0, alias) < consistent(0.0, 0.0)  # measured 0.98 of none
-    strong = Config().pose_refinement.calibration_strong_gain
+    strong = STRONG_GAIN
     for max_scale in (0.0, 0.05):
         cal = calibrate(t, x, y, yaw, echoes, max_scale=max_scale, max_bias=math.radians(3.0),
                         res=0.05, sigma=0.1, min_gain=0.01, strong_gain=strong)
@@ -382,12 +380,11 @@ def test_a_strongly_sharper_bias_is_applied_where_the_consistency_stays_level(
     cal = configured_calibration(*track, echoes, pr)
     assert math.degrees(cal.heading_bias) == pytest.approx(0.8, abs=0.01)
     assert cal.scale_error == pytest.approx(0.03, abs=0.005)
-    never = configured_calibration(*track, echoes,
-                                   dataclasses.replace(pr, calibration_strong_gain=1e9))
+    never = configured_calibration(*track, echoes, pr, strong_gain=1e9)
     assert never.heading_bias == 0.0 and never.bias_rejected is not None
     rejected = never.bias_rejected
-    assert rejected.sharper > pr.calibration_strong_gain  # measured +19.4 %
-    assert -pr.calibration_min_gain < rejected.more_consistent < pr.calibration_min_gain
+    assert rejected.sharper > STRONG_GAIN  # measured +19.4 %
+    assert -MIN_GAIN < rejected.more_consistent < MIN_GAIN
 
 
 @pytest.mark.parametrize("building", ["belgioioso", "fhw"])
@@ -425,6 +422,7 @@ def _scripted_refinement(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
     and the heading bias (°/m per reported metre) each estimate was asked under. The
     offset-only patch model alone (``calibration_scale_tilt = "off"``): these are its rules."""
     import pipeline.refine.calibration as calibration
+    import pipeline.refine.refine as rf
     import pipeline.refine.surfaces as surfaces
     from pipeline.drift import DriftModel
     from pipeline.run import run
@@ -454,8 +452,9 @@ def _scripted_refinement(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
     log = tmp_path / "orebro.mcap"
     run_emulation(src, log, "mcap", options=EmulateOptions(sonar_model="ideal", drift=DriftModel(0.03, 0.8)))
     cfg = Config()
-    refine = Config(pose_refinement=dataclasses.replace(cfg.pose_refinement, enabled=True,
-                                                        calibration_scale_tilt="off"))
+    gates = rf.calibration_gates()
+    monkeypatch.setattr(rf, "calibration_gates", lambda: {**gates, "tilt": "off"})
+    refine = Config(pose_refinement=dataclasses.replace(cfg.pose_refinement, enabled=True))
     found = run(log, tmp_path / "out", refine, force=True).metrics.pose_refinement
     assert found is not None
     return found, asked
@@ -525,7 +524,7 @@ def test_the_configured_calibration_takes_the_near_and_far_echoes_the_config_nam
 
     from pipeline.config import Config
     from pipeline.refine.calibration import calibrate
-    from pipeline.refine.refine import configured_calibration
+    from pipeline.refine.refine import calibration_gates, configured_calibration
 
     cfg = Config().pose_refinement
     track, echoes = sample_echoes("office", 5.0)
@@ -534,8 +533,7 @@ def test_the_configured_calibration_takes_the_near_and_far_echoes_the_config_nam
     kwargs = dict(max_scale=cfg.calibration_max_scale,
                   max_bias=math.radians(cfg.calibration_max_bias_deg_per_m),
                   res=cfg.field_resolution_m, sigma=cfg.field_sigma_m,
-                  min_gain=cfg.calibration_min_gain, window_m=cfg.calibration_scale_window_m,
-                  tilt=cfg.calibration_scale_tilt)
+                  **calibration_gates())
     assert len(near) < len(far) < len(echoes) + 1
     assert configured_calibration(*track, echoes, cfg) == calibrate(*track, near, far_echoes=far,
                                                                     **kwargs)

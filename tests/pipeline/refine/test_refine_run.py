@@ -65,6 +65,21 @@ def test_refined_run_corrects_the_drift_and_is_deterministic(drifted_log: Path,
         assert key in doc["pose_refinement"]
 
 
+def test_the_chain_it_replaces_still_runs_on_request(drifted_log: Path, tmp_path: Path) -> None:
+    # model = "chain": the calibration, the walls' compass, local corrections (chain.py)
+    from pipeline.run import run
+
+    cfg = Config(pose_refinement=PoseRefinementConfig(enabled=True, model="chain"))
+    res = run(drifted_log, tmp_path / "c", cfg)
+    truth = drifted_log.with_name("room.truth.csv")
+    assert ate(tmp_path / "c" / "trajectory.csv", truth) < ate(
+        tmp_path / "c" / "odometry.csv", truth) / 2
+    pr = res.metrics.pose_refinement
+    assert pr is not None and pr["model"] == "chain"
+    assert "compass" in pr and "local" in pr and "submaps" not in pr
+    assert "chain: compass" in pr["summary"]
+
+
 def mcap_paths(run_dir: Path) -> dict[str, list[tuple[float, float]]]:
     """map.mcap's nav_msgs/Path topics, read back with the mcap library and rosbags."""
     from mcap.reader import make_reader
@@ -173,31 +188,15 @@ def test_summary_says_what_was_applied_and_why_a_scale_was_not() -> None:
     undetermined = {"search_scale_error": 0.0, "scale_fixed_point_slope": 1.2,
                     "search_heading_bias_deg_per_m": 0.0, **moved}
     assert "scale error undetermined (fixed-point slope 1.20)" in summary(undetermined, cfg)
-    local = {**applied, "local": {"stretches": 25, "iterations": 4, "gain_per_parameter": 3.63,
-                                  "consistency_gain": 0.186, "applied": True}}
-    assert "heading bias +0.80°/m; local corrections over 25 stretches (3.63 per parameter);" \
-        in summary(local, cfg)
-    inconsistent = {**applied, "local": {"stretches": 7, "iterations": 4, "applied": False,
-                                         "gain_per_parameter": 1.2, "consistency_gain": -0.0068}}
-    assert ("; no local corrections (1.20 per parameter, but the echoes 0.7% less consistent, "
-            "< 1.0%);") in summary(inconsistent, cfg)
-    # a gain just under the gate, in the decimals that tell the two apart
-    close = {**applied, "local": {**inconsistent["local"], "consistency_gain": 0.00996}}
-    assert ("; no local corrections (1.20 per parameter, but the echoes 0.996% more "
-            "consistent, < 1.000%);") in summary(close, cfg)
-    closer = {**applied, "local": {**inconsistent["local"], "consistency_gain": 0.0096}}
-    assert "the echoes 0.96% more consistent, < 1.00%);" in summary(closer, cfg)
-    strong = {**applied, "local": {**inconsistent["local"], "gain_per_parameter": 6.4}}
-    assert ("; no local corrections (6.40 per parameter, but the echoes 0.7% less consistent, "
-            "< 0.0%);") in summary(strong, cfg)
-    # past both tests, refused by the echoes the corrections were not fitted to
-    held_out = {**applied, "local": {**inconsistent["local"], "gain_per_parameter": 5.87,
-                                     "consistency_gain": 0.0011,
-                                     "held_out_consistency_gain": -0.0003}}
-    assert ("; no local corrections (5.87 per parameter, but fitted to half the echoes they "
-            "leave the other half 0.03% less consistent);") in summary(held_out, cfg)
-    gated = {**applied, "local": {"stretches": 2, "iterations": 0, "gain_per_parameter": 0.35}}
-    assert "; no local corrections (0.35 < 0.5 per parameter);" in summary(gated, cfg)
+    graph = {**applied, "submaps": 40, "matches_accepted": 3, "loop_closures_accepted": 9,
+             "loop_closures_rejected": 31, "accepted": True, "start": "odometry",
+             "scale_error": 0.001, "heading_bias_deg_per_m": -0.44}
+    assert ("heading bias +0.80°/m; graph from the odometry: 40 submaps, 3 matches, 9 loop "
+            "closures (31 rejected), scale error +0.1% and heading bias -0.44°/m more, applied; "
+            "poses moved") in summary(graph, cfg)
+    declined = {**graph, "accepted": False, "note": "the echoes are less consistent"}
+    assert "(31 rejected), not applied: the echoes are less consistent; poses" \
+        in summary(declined, cfg)
     unsharp = {**steep, "heading_bias_rejected": {"candidate_deg_per_m": -0.081,
                                                   "sharper": 0.0061}}
     assert "; no heading bias (the sharpest, -0.08°/m, makes the echoes 0.6% sharper, < 1%);" \
@@ -212,21 +211,6 @@ def test_summary_says_what_was_applied_and_why_a_scale_was_not() -> None:
             "2.4% less consistent, < 1%);") in summary(weak, cfg)
     assert summary({"echoes": 12, **moved}, cfg).startswith(
         "pose refinement: no calibration (12 echoes); poses moved")
-    compassed = {**applied, "compass": {"windows": 18, "bias_left_deg_per_m": -0.0739,
-                                        "bias_left_standard_error": 0.0031, "z": 23.6,
-                                        "applied": True}}
-    assert ("heading bias +0.80°/m; heading drift against the walls -0.074°/m (z 23.6) "
-            "taken out; poses moved") in summary(compassed, cfg)
-    kept_out = {**applied, "compass": {**compassed["compass"], "z": 1.2, "applied": False}}
-    assert "walls" not in summary(kept_out, cfg)
-    overruled = {**applied, "wall_spectrum": {"bias_deg_per_m": 3.623, "strength": 0.926,
-                                              "strength_at_zero": 0.041, "applied": True,
-                                              "overruled_deg_per_m": -2.812}}
-    assert ("heading bias +0.80°/m; the walls overruled a heading bias of -2.81°/m (their "
-            "lattice 0.04 → 0.93 turned by +3.62°/m), calibrated again there; poses moved"
-            ) in summary(overruled, cfg)
-    level = {**applied, "wall_spectrum": {**overruled["wall_spectrum"], "applied": False}}
-    assert "walls" not in summary(level, cfg)
 
 
 def test_the_grid_is_sized_from_the_refined_poses(drifted_log: Path, tmp_path: Path) -> None:
@@ -284,131 +268,12 @@ def test_a_robot_that_does_not_travel_keeps_its_poses(motion: str, tmp_path: Pat
     assert pr["moved_max_m"] == 0.0
     assert pr["summary"] == (
         "pose refinement: scale error undetermined (no surface seen from two places), not "
-        "applied; no heading bias; poses moved 0.00 m mean, 0.00 m max")
+        "applied; no heading bias; graph from the calibration: 1 submaps, 0 matches, 0 loop "
+        "closures (0 rejected), not applied: fewer than 2 submaps: the odometry; poses moved "
+        "0.00 m mean, 0.00 m max")
     assert "scale_estimate" not in pr
     refined = read_trajectory(tmp_path / "run" / "trajectory.csv")
     odometry = read_trajectory(tmp_path / "run" / "odometry.csv")
     np.testing.assert_array_equal(refined.x, odometry.x)
     np.testing.assert_array_equal(refined.yaw, odometry.yaw)
     assert len(refined) == len(poses)
-
-
-@pytest.fixture(scope="module")
-def intel_drifted() -> tuple[object, object, tuple[np.ndarray, ...]]:
-    """The Intel lab's sample log turned by 0.8°/m (no scale error): its odometry track,
-    echoes on it, and the true poses."""
-    from pipeline.drift import DriftModel, apply_drift
-    from pipeline.stages.pose_sync import PoseTrack
-    from tests.pipeline.refine.conftest import log_echoes
-
-    log = Path(__file__).resolve().parents[3] / "sample_logs" / "intel-lab" / "intel.mcap"
-    (t, x, y, yaw), echoes = log_echoes(log, PoseRefinementConfig().echo_reach_m)
-    dx, dy, dyaw = apply_drift(x, y, yaw, DriftModel(heading_bias_deg_per_m=0.8))
-    return PoseTrack(t, dx, dy, dyaw, "odom", "base_link"), echoes.on_track(t, dx, dy, dyaw), (
-        x, y)
-
-
-def _first_calibration_replaced(monkeypatch: pytest.MonkeyPatch, bias_deg_per_m: float,
-                                refused: bool = False) -> list[tuple[float, float | None]]:
-    """The refinement's first calibration replaced by one with the heading bias given (no
-    scale); later ones (near the walls' bias) as configured, or with ``refused`` the second
-    one by a calibration whose search passed no bias. Returns each call's (bias centre °/m,
-    search half-width rad/m or None: the configured)."""
-    import pipeline.refine.refine as refine
-    from pipeline.refine.calibration import Calibration
-
-    real = refine.configured_calibration
-    calls: list[tuple[float, float | None]] = []
-
-    def replaced(*args: object, bias_centre: float = 0.0, max_bias: float | None = None
-                 ) -> Calibration:
-        calls.append((math.degrees(bias_centre), max_bias))
-        if len(calls) == 1:
-            return Calibration(0.0, math.radians(bias_deg_per_m))
-        if refused and len(calls) == 2:
-            return Calibration(0.0, 0.0)
-        return real(*args, bias_centre=bias_centre, max_bias=max_bias)  # type: ignore[arg-type]
-
-    monkeypatch.setattr(refine, "configured_calibration", replaced)
-    return calls
-
-
-def test_the_walls_overrule_an_alias_of_the_heading_bias(intel_drifted, monkeypatch) -> None:
-    """A first calibration that took an alias (−2°/m for 0.8, as the drifted Infinite
-    Corridor's −2.81°/m) is overruled by the walls' spectrum: calibrated again within the
-    compass's reach of the walls' bias, the run gets its heading back."""
-    from pipeline.refine.refine import refine_track
-
-    track, echoes, (x, y) = intel_drifted
-    calls = _first_calibration_replaced(monkeypatch, -2.0)
-    r = refine_track(track, echoes, PoseRefinementConfig(enabled=True))  # type: ignore[arg-type]
-    spectrum = r.metrics["wall_spectrum"]
-    assert spectrum["applied"] is True and spectrum["overruled_deg_per_m"] == pytest.approx(-2.0)
-    assert spectrum["bias_deg_per_m"] == pytest.approx(2.8, abs=0.03)
-    assert len(calls) >= 2 and calls[1][0] == pytest.approx(0.8, abs=0.03)
-    assert calls[1][1] == pytest.approx(math.radians(0.15))  # searched within the windows' reach
-    assert r.metrics["search_heading_bias_deg_per_m"] == pytest.approx(0.8, abs=0.03)
-    assert float(np.sqrt(np.mean((r.x - x) ** 2 + (r.y - y) ** 2))) < 0.2
-    assert "the walls overruled a heading bias of -2.00°/m (their lattice" in r.metrics["summary"]
-
-
-def test_the_scale_is_found_again_under_the_heading_the_walls_establish(
-        intel_drifted, monkeypatch) -> None:
-    """A first calibration 0.03°/m short of the bias: the compass takes the rest out, and
-    the calibration runs again with the heading bias given as the walls' (the scale found
-    under a heading the walls contradict leans: Acapulco's +3.7 % for 3 %, +3.1 % again)."""
-    from pipeline.refine.refine import refine_track
-
-    track, echoes, (x, y) = intel_drifted
-    calls = _first_calibration_replaced(monkeypatch, 0.77)
-    r = refine_track(track, echoes, PoseRefinementConfig(enabled=True))  # type: ignore[arg-type]
-    assert r.metrics["wall_spectrum"]["applied"] is False  # within the windows' reach
-    assert r.metrics["compass"]["applied"] is True
-    assert r.metrics["compass"]["bias_left_deg_per_m"] == pytest.approx(0.03, abs=0.005)
-    assert len(calls) == 2 and calls[1] == (pytest.approx(0.8, abs=0.005), 0.0)
-    assert r.metrics["search_heading_bias_deg_per_m"] == pytest.approx(0.8, abs=0.005)
-    assert float(np.sqrt(np.mean((r.x - x) ** 2 + (r.y - y) ** 2))) < 0.2
-
-
-def test_the_first_calibration_stands_where_the_echoes_refuse_the_walls_bias(
-        intel_drifted, monkeypatch) -> None:
-    """The walls propose, the echoes accept: where no bias near the walls' passes the echo
-    scores' gates (a round hall straightened is also a lattice), the first calibration
-    stands, and metrics.json says why."""
-    from pipeline.refine.refine import refine_track
-
-    track, echoes, _ = intel_drifted
-    calls = _first_calibration_replaced(monkeypatch, -2.0, refused=True)
-    r = refine_track(track, echoes, PoseRefinementConfig(enabled=True))  # type: ignore[arg-type]
-    spectrum = r.metrics["wall_spectrum"]
-    assert spectrum["applied"] is False and "overruled_deg_per_m" not in spectrum
-    assert spectrum["note"] == ("not applied: no heading bias within the windows' reach of the "
-                                "walls' passes the calibration's gates")
-    assert len(calls) == 2 and calls[1][1] == pytest.approx(math.radians(0.15))
-    assert r.metrics["search_heading_bias_deg_per_m"] == pytest.approx(-2.0)
-    assert "walls" not in r.metrics["summary"]
-
-
-@pytest.mark.parametrize("estimated", [True, False])
-def test_the_local_corrections_find_the_walks_sigma_as_configured(intel_drifted, monkeypatch,
-                                                                  estimated: bool) -> None:
-    """``[pose_refinement] local_noise_estimated`` reaches the local corrections, and
-    metrics.json's ``local`` reports the walk's σ the data gave only where it was asked."""
-    import pipeline.refine.refine as refine
-
-    real, asked = refine.correct_stretches, []
-
-    def spied(*args: object, **kwargs: object) -> object:
-        asked.append(kwargs["noise_estimated"])
-        return real(*args, **kwargs)  # type: ignore[arg-type]
-
-    monkeypatch.setattr(refine, "correct_stretches", spied)
-    track, echoes, _ = intel_drifted
-    r = refine.refine_track(track, echoes,  # type: ignore[arg-type]
-                            PoseRefinementConfig(enabled=True, local_noise_estimated=estimated))
-    local = r.metrics["local"]
-    assert asked == [estimated] and local["stretches"] >= 2
-    assert ("noise_yaw_deg_per_sqrt_m" in local) is estimated
-    if estimated:  # at least the floor: 1 % of the configured 0.02 m and 0.5° per √m
-        assert local["noise_xy_m_per_sqrt_m"] >= 0.01 * 0.02
-        assert local["noise_yaw_deg_per_sqrt_m"] >= 0.01 * 0.5 * (1 - 1e-12)

@@ -21,6 +21,7 @@ from pipeline.refine import collect_echoes, refine_track
 from pipeline.tools.simulate import SimOptions, simulate, write_simulation
 from pipeline.tools.simulate.world import world_from_dict
 from pipeline.tools.trajectory_error import trajectory_error
+from tests.pipeline.refine.conftest import gates_replaced
 
 WORLD = {
     "polygon": [{"points": [[0, 0], [10, 0], [10, 6], [0, 6]]}],
@@ -68,8 +69,9 @@ def refined_errors(run: tuple[Any, Any, Trajectory], max_scale: float = 0.05,
                    score: str = "surfaces") -> tuple[float, float, dict[str, Any]]:
     """ATE (m) of the odometry and of the refined track, and refinement's metrics."""
     track, echoes, truth = run
-    ref = refine_track(track, echoes, PoseRefinementConfig(
-        enabled=True, calibration_max_scale=max_scale, calibration_scale_score=score))
+    with gates_replaced(scale_score=score):
+        ref = refine_track(track, echoes, PoseRefinementConfig(
+            enabled=True, calibration_max_scale=max_scale))
     t = np.asarray(track.t_ns)
 
     def ate(x: np.ndarray, y: np.ndarray, yaw: np.ndarray) -> float:
@@ -119,12 +121,13 @@ def test_refinement_finds_the_drift_with_each_sensor_layout(layout: str, tmp_pat
 
 
 def test_the_offset_only_patches_leave_the_one_lap_sweeps_scale_out(tmp_path: Path) -> None:
-    # calibration_scale_tilt = "off": the offset-only model's estimate on the one-lap sweep
+    # tilt = "off": the offset-only model's estimate on the one-lap sweep
     # (0.025) stands under 3 errors from 0 (z 2.8), so only the heading bias is applied
     # (ATE 3.4x down).
     track, echoes, truth = drifted_run("sweep3", tmp_path)
-    ref = refine_track(track, echoes, PoseRefinementConfig(
-        enabled=True, calibration_max_scale=0.05, calibration_scale_tilt="off"))
+    with gates_replaced(tilt="off"):
+        ref = refine_track(track, echoes, PoseRefinementConfig(
+            enabled=True, calibration_max_scale=0.05))
     assert 2 < ref.metrics["scale_z"] < 3
     assert ref.metrics["scale_estimate"] == pytest.approx(0.025, abs=0.005)
     assert ref.metrics["search_scale_error"] == 0.0

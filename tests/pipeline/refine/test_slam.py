@@ -1,4 +1,4 @@
-"""The graph model (``[pose_refinement] model = "graph"``): correlative matching, the
+"""The pose graph (:mod:`pipeline.refine.slam`): correlative matching, the
 pose graph's analytic Jacobian, and a drifted loop refined end to end."""
 
 from __future__ import annotations
@@ -18,10 +18,8 @@ from pipeline.tools.simulate import SimOptions
 from pipeline.tools.trajectory_error import trajectory_error
 
 GRAPH = dataclasses.replace(
-    PoseRefinementConfig(), enabled=True, model="graph", submap_travel_m=3.0,
-    submap_min_echoes=20, search_xy_m=0.5, search_yaw_deg=8.0, loop_radius_m=3.0,
-    loop_min_path_m=10.0, loop_search_xy_m=1.5, loop_search_yaw_deg=20.0,
-    loop_max_per_submap=1, min_score=0.7, max_ambiguity=0.99)
+    PoseRefinementConfig(), enabled=True, submap_travel_m=3.0, search_xy_m=0.5,
+    search_yaw_deg=8.0, loop_radius_m=3.0, loop_search_xy_m=1.5, loop_search_yaw_deg=20.0)
 
 LOOP = Path(__file__).resolve().parents[3] / "sample_logs" / "worlds" / "loop.toml"
 

@@ -184,12 +184,6 @@ def test_a_scale_within_min_z_errors_of_zero_is_not_applied(
 
 
 @pytest.mark.parametrize(("key", "value", "message"), [
-    ("calibration_scale_score", "sharpness", "must be 'consistency' or 'surfaces'"),
-    ("calibration_max_slope", 0.0, "must be in (0, 1]"),
-    ("calibration_scale_min_z", -1.0, "must be >= 0"),
-    ("calibration_scale_systematic", -0.01, "must be >= 0"),
-    ("calibration_scale_systematic_negative", -0.01, "must be >= 0"),
-    ("calibration_scale_window_m", -1.0, "must be >= 0"),
     ("calibration_far_range_m", -1.0, "must be >= 0 (0 = off)"),
     ("calibration_far_range_m", float("nan"), "must be a finite number"),
 ])
@@ -290,9 +284,9 @@ def test_the_window_moves_at_most_two_steps_either_way() -> None:
 def test_the_recentred_window_reaches_the_scale_the_gates_judge(
         runs: dict[str, tuple[Any, Any, Any]], monkeypatch: pytest.MonkeyPatch) -> None:
     import pipeline.refine.calibration as calibration
-    from pipeline.config import PoseRefinementConfig
+    from pipeline.refine.refine import calibration_gates
 
-    assert PoseRefinementConfig().calibration_scale_recentre is True
+    assert calibration_gates()["recentre"] is True
     made: list[bool] = []
 
     class Recorded(SurfaceScale):
