@@ -103,7 +103,7 @@ def mapper_rows(smoke: bool, quick: bool, verbose: bool) -> list[Row]:
     rows: list[Row] = []
     for name, label in (
         ("forward (default, §11)",
-         "default method (specular echo attribution, v̄ measured, 5 passes)"),
+         "default method (specular echo attribution, detection measured, 5 passes)"),
         ("specular (§10)", "specular echo attribution (§10, 4 passes)"),
         ("attribution", "echo attribution (§9, 2 passes)"),
         ("andersone+correction", "paper's method (correction on)"),

@@ -62,6 +62,7 @@ from pipeline.stages.run_warnings import run_warnings
 from pipeline.stages.scans import ScanBuilder, ScanKeys
 from pipeline.stages.sensors import SensorTable, beam_problem, resolve_sensors
 from pipeline.streaming.run_input import input_section, log_label, log_paths, losses_named
+from pipeline.streaming.scan_spill import ScanSpill, SpilledScans
 
 log = logging.getLogger("sonarmap")
 
@@ -158,22 +159,33 @@ def run(
                 off = dataclasses.replace(config.mapper, feature_correction=False)
                 mappers["no_correction"] = make_mapper(off, grid)
             passes = max(m.passes for m in mappers.values())
+            # The first pass builds the scans from the readings pass 1 spilled (in time
+            # order) and spills them; the later passes stream them back.
+            spill = ScanSpill() if passes > 1 else None
+            spilled: SpilledScans | None = None
             try:
                 for index in range(passes):
-                    # Every pass streams the readings pass 1 spilled, in time order.
                     active = {k: m for k, m in mappers.items() if index < m.passes}
                     for m in active.values():
                         m.begin_pass(index)
-                    if index:
-                        sv.track.release_before(None)  # the pose walk starts again
-                    state = _map_stream(
-                        reader, sv, sensors, grid, active, config, timer,
-                        _pass_progress(progress, index, passes),
-                    )
+                    each = _pass_progress(progress, index, passes)
+                    if spilled is None:
+                        if index:
+                            sv.track.release_before(None)  # the pose walk starts again
+                        state = _map_stream(reader, sv, sensors, grid, active, config, timer,
+                                            each, spill)
+                        spilled = spill.finish() if spill is not None else None
+                        spill = None
+                    else:
+                        _map_spilled(spilled, active, timer, each, sv.ranges.count)
             except InputError as err:
                 if err.path is not None:
                     raise
                 raise InputError(err.reason, label) from err
+            finally:
+                if spill is not None:
+                    spill.close()
+            del spilled  # its files go with it
         # trajectory.csv needs only the poses: written while the paper's thread (the
         # default method's features) finishes its last groups, before the snapshot waits.
         t_trajectory = time.perf_counter()
@@ -327,14 +339,26 @@ def _map_stream(
     config: Config,
     timer: StageTimer,
     progress: Progress | None,
+    spill: ScanSpill | None = None,
 ) -> StreamState:
-    """Stages 2-4 over the time-ordered reading stream, into ``mappers``."""
+    """Stages 2-4 over the time-ordered reading stream, into ``mappers`` (and ``spill``)."""
 
     def integrate(scans: list[Scan]) -> None:
         with timer.stage("mapping"):
             _integrate(mappers, scans)
 
-    return stream_scans(reader, sv, sensors, grid, config, integrate, timer, progress)
+    return stream_scans(reader, sv, sensors, grid, config, integrate, timer, progress, spill)
+
+
+def _map_spilled(spilled: SpilledScans, mappers: dict[str, Mapper], timer: StageTimer,
+                 progress: Progress | None, total: int) -> None:
+    """A later pass: the first pass's scans, batch by batch as it built them, into
+    ``mappers``."""
+    for scans, seen in spilled.batches():
+        with timer.stage("mapping"):
+            _integrate(mappers, scans)
+        if progress is not None:
+            progress("mapping", seen, total)
 
 
 def stream_scans(
@@ -346,10 +370,12 @@ def stream_scans(
     consume: Callable[[list[Scan]], None],
     timer: StageTimer | None = None,
     progress: Progress | None = None,
+    spill: ScanSpill | None = None,
 ) -> StreamState:
     """Pose sync and scan building over the log's time-ordered readings: ``consume`` gets
-    the scans in order, chunk by chunk (any mapper, or a baseline such as OctoMap);
-    readings placed outside ``grid`` are dropped (``outside_grid``)."""
+    the scans in order, chunk by chunk (any mapper, or a baseline such as OctoMap), and
+    ``spill`` records each chunk's scans; readings placed outside ``grid`` are dropped
+    (``outside_grid``)."""
     timer = timer if timer is not None else StageTimer()
     track = sv.track
     offset_ns = round(config.pose_sync.time_offset_s * 1e9)
@@ -378,9 +404,14 @@ def stream_scans(
         # Later readings are newer than this chunk: the poses before it are done with.
         track.release_before(int(batch.t_ns[0]) + offset_ns)
         consume(scans)
+        if spill is not None:
+            spill.add(scans, state.readings_seen)
         if progress is not None:
             progress("mapping", state.readings_seen, total)
-    consume(list(builder.flush()))
+    last = list(builder.flush())
+    consume(last)
+    if spill is not None:
+        spill.add(last, state.readings_seen)
     state.scans = builder.count
     return state
 
@@ -400,7 +431,7 @@ def _pass_progress(progress: Progress | None, index: int, passes: int) -> Progre
     return scaled
 
 
-def _integrate(mappers: dict[str, Mapper], scans: list[Scan]) -> None:
+def _integrate(mappers: dict[str, Mapper], scans: Sequence[Scan]) -> None:
     # The mappers are independent: each takes the whole list (batched stateless work).
     for m in mappers.values():
         m.integrate_many(scans)

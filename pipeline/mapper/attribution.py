@@ -51,7 +51,7 @@ from pipeline.mapper.kernels.attribution import (
 from pipeline.mapper.occupancy import logit
 from pipeline.mapper.paper_thread import PaperThread
 from pipeline.mapper.reading_features import distance_sigma
-from pipeline.mapper.scan_group import ScanGroup, scan_groups
+from pipeline.mapper.scan_group import GROUP, ScanGroup, scan_groups
 from pipeline.mapper.types import (
     F32,
     F64,
@@ -110,9 +110,14 @@ class AttributionMapper:
 
     def integrate_many(self, scans: Sequence[Scan]) -> None:
         """Add scans in order to the current pass."""
-        for group in scan_groups(scans, self.config):
+        for group in scan_groups(scans, self.config, self._group_size()):
             self._integrate_group(group)
             self._group_index += 1
+
+    def _group_size(self) -> int:
+        """Scans per group in the current pass (both passes feed the paper's mapper, which
+        takes the groups by index: the same groups in both)."""
+        return GROUP
 
     def _integrate_group(self, group: ScanGroup) -> None:
         g, cfg = self.grid, self.config

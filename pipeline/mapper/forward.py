@@ -39,10 +39,11 @@ from pipeline.config import MapperConfig
 from pipeline.mapper.attribution import AttributionMapper
 from pipeline.mapper.free_space import cone_table
 from pipeline.mapper.kernels.forward import detection_counts
+from pipeline.mapper.kernels.specular import cell_lists
 from pipeline.mapper.reading_features import distance_sigma
 from pipeline.mapper.scan_group import ScanGroup
 from pipeline.mapper.specular import TABLE_STEP, SpecularMapper, cos_table, visibility_table
-from pipeline.mapper.types import F64, I32, B, GridSpec
+from pipeline.mapper.types import F64, B, GridSpec
 from pipeline.stages import reading_quality as rq
 
 INCIDENCE_BINS = 9  # equal bins of the detection curve over [0, 90°]
@@ -148,7 +149,7 @@ class ForwardMapper(SpecularMapper):
         self.p_reach: F64 = reach_detection(self.reaches)
         self.model = (1.0, config.spec_critical_angle_deg, config.spec_critical_spread, 0.0)
         self.surfaces: B = np.zeros(grid.shape, dtype=bool)  # the first map
-        self.surface_rows: I32 = np.zeros((grid.shape[0], grid.shape[1] + 1), dtype=np.int32)
+        self.surface_index, self.surface_cols = cell_lists(self.surfaces)
         self._measuring = False
 
     def begin_pass(self, index: int) -> None:
@@ -161,7 +162,7 @@ class ForwardMapper(SpecularMapper):
         elif index == 2:
             self._find_surfaces()
             self.surfaces = AttributionMapper.occupied(self)
-            np.cumsum(self.surfaces, axis=1, out=self.surface_rows[:, 1:])
+            self.surface_index, self.surface_cols = cell_lists(self.surfaces)
             self.stats[:] = 0.0
             self.reaches[:] = 0.0
             self.pass_index = 2
@@ -190,8 +191,22 @@ class ForwardMapper(SpecularMapper):
         rows, cones, up_down = cone_table(cat, outer)
         r_inner = np.where(d > 0.0, np.maximum(d - band, 0.0), np.inf)[rows]
         half = np.minimum(0.5 * cat.fov[rows], 0.5 * math.pi - 1e-9)
-        detection_counts(
-            cones, up_down, r_inner, free_r[rows], cat.alpha[rows], half, g.origin_x,
-            g.origin_y, g.resolution, self.surfaces, self.surface_rows, self.nx, self.ny,
-            self.consistency, self.stats, self.reaches,
-        )
+        r_free, alpha = free_r[rows], cat.alpha[rows]
+        parts: list[tuple[int, F64, F64]] = []
+
+        def count(lo: int, hi: int) -> int:
+            # Each half of the readings counts into its own tables (integer counts: their
+            # sums do not depend on the split).
+            stats, reaches = np.zeros_like(self.stats), np.zeros_like(self.reaches)
+            detection_counts(
+                cones[lo:hi], up_down[lo:hi], r_inner[lo:hi], r_free[lo:hi], alpha[lo:hi],
+                half[lo:hi], g.origin_x, g.origin_y, g.resolution, self.surface_index,
+                self.surface_cols, self.nx, self.ny, self.consistency, stats, reaches,
+            )
+            parts.append((lo, stats, reaches))
+            return 0
+
+        self._bands.run(count, len(rows) // 2, len(rows))
+        for _, stats, reaches in sorted(parts, key=lambda p: p[0]):
+            self.stats += stats
+            self.reaches += reaches

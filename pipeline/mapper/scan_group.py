@@ -17,7 +17,7 @@ import numpy.typing as npt
 from pipeline.config import MapperConfig
 from pipeline.mapper.free_space import cone_table, free_radius
 from pipeline.mapper.reading_features import classify_scan, count_readings
-from pipeline.mapper.types import F64, I64, SCAN_FIELDS, B, MapperCounters, Scan
+from pipeline.mapper.types import F64, I64, SCAN_FIELDS, B, MapperCounters, Scan, ScanBatch
 
 # Scans prepared in one vectorised pass: enough to amortise the numpy call overhead, small
 # enough to keep the pass's temporaries small (measured: 64 is as fast as 256, whose
@@ -26,7 +26,10 @@ GROUP = 64
 
 
 def concat_scans(scans: Sequence[Scan]) -> tuple[Scan, I64]:
-    """The scans' readings as one Scan, and the row bounds: scan k is ``b[k]:b[k + 1]``."""
+    """The scans' readings as one Scan, and the row bounds: scan k is ``b[k]:b[k + 1]``
+    (a :class:`~pipeline.mapper.types.ScanBatch` is joined already: no copy)."""
+    if isinstance(scans, ScanBatch):
+        return scans.cat, np.array(scans.bounds, dtype=np.int64)
     sizes = [len(s) for s in scans]
     bounds = np.zeros(len(scans) + 1, dtype=np.int64)
     np.cumsum(sizes, out=bounds[1:])
@@ -67,9 +70,10 @@ class ScanGroup:
         return cone_table(self.cat, self.free_radius)
 
 
-def scan_groups(scans: Sequence[Scan], config: MapperConfig) -> Iterator[ScanGroup]:
-    """The scans in order, :data:`GROUP` at a time."""
-    for g in range(0, len(scans), GROUP):
-        group = scans[g : g + GROUP]
+def scan_groups(scans: Sequence[Scan], config: MapperConfig,
+                size: int = GROUP) -> Iterator[ScanGroup]:
+    """The scans in order, ``size`` (:data:`GROUP`) at a time."""
+    for g in range(0, len(scans), size):
+        group = scans[g : g + size]
         if group:
             yield ScanGroup(group, config)

@@ -44,12 +44,14 @@ from pipeline.mapper.kernels.specular import (
 )
 from pipeline.mapper.reading_features import distance_sigma
 from pipeline.mapper.row_bands import RowBands, balanced_split
-from pipeline.mapper.scan_group import ScanGroup
+from pipeline.mapper.scan_group import GROUP, ScanGroup
 from pipeline.mapper.types import F32, F64, B, GridSpec, MapperCounters, MapSnapshot
 from pipeline.stages import reading_quality as rq
 
 TABLE_STEP = math.radians(0.25)  # sampling of the visibility table, rad
 COS_SAMPLES = 4097  # samples of the kernel's visibility table, uniform in cos θ
+# Scans per group in passes 2 and 3 (the groups of passes 0 and 1 are the paper's mapper's).
+LATE_GROUP = 4 * GROUP
 
 
 def visibility_table(median_deg: float, spread: float) -> F64:
@@ -127,6 +129,11 @@ class SpecularMapper(AttributionMapper):
             self._find_surfaces()
         self.pass_index = index
         self._group_index = 0
+
+    def _group_size(self) -> int:
+        """Passes 2 and 3 feed no paper's mapper and add reading by reading, so their
+        results do not depend on the groups: larger ones spend less per group."""
+        return LATE_GROUP if self.pass_index >= 2 else GROUP
 
     def _find_surfaces(self) -> None:
         """The first map's occupied cells, their normal lines and consistency."""

@@ -7,7 +7,9 @@ The grid geometry and the feature table are shared by every layer and defined in
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field, fields
+from typing import overload
 
 from formats.arrays import F32, F64, I32, I64, B
 from formats.map_types import FeatureTable, GridSpec
@@ -25,6 +27,7 @@ __all__ = [
     "MapSnapshot",
     "MapperCounters",
     "Scan",
+    "ScanBatch",
 ]
 
 
@@ -58,6 +61,37 @@ class Scan:
 
 # Scan's columns in order (``dataclasses.fields`` costs microseconds a call; scans are many).
 SCAN_FIELDS: tuple[str, ...] = tuple(f.name for f in fields(Scan))
+
+
+class ScanBatch(Sequence[Scan]):
+    """Consecutive scans stored as one: ``cat`` holds their readings in order, scan ``k`` is
+    rows ``bounds[k]:bounds[k + 1]``. A sequence of scans (views of ``cat``) whose slices
+    are batches again, so a group of them is joined without copying
+    (:func:`~pipeline.mapper.scan_group.concat_scans`)."""
+
+    def __init__(self, cat: Scan, bounds: Sequence[int]) -> None:
+        self.cat = cat
+        self.bounds = list(bounds)
+
+    def __len__(self) -> int:
+        return len(self.bounds) - 1
+
+    @overload
+    def __getitem__(self, index: int) -> Scan: ...
+
+    @overload
+    def __getitem__(self, index: slice) -> ScanBatch: ...
+
+    def __getitem__(self, index: int | slice) -> Scan | ScanBatch:
+        if isinstance(index, slice):
+            lo, hi, step = index.indices(len(self))
+            if step != 1:
+                raise ValueError("a batch of scans slices with step 1 only")
+            hi = max(hi, lo)
+            a, b = self.bounds[lo], self.bounds[hi]
+            return ScanBatch(self.cat.take(slice(a, b)), [x - a for x in self.bounds[lo:hi + 1]])
+        k = range(len(self))[index]
+        return self.cat.take(slice(self.bounds[k], self.bounds[k + 1]))
 
 
 @dataclass

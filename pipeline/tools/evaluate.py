@@ -36,8 +36,7 @@ beside every simulated log), and scores the run's map on the truth grid:
 * **Features.** Mean (and median) distance, m, from each feature mean to the nearest true
   occupied cell centre, and the paper's mean feature variance (m²) from ``metrics.json``.
 
-Values that cannot be computed are ``None``, never NaN, so results compare equal and
-serialise to JSON exactly. Everything is deterministic.
+Values that cannot be computed are ``None``, never NaN; everything is deterministic.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 A reading's cone out to ``cones[i, 2]`` (the far edge of its echo's arc, or ``r_max`` for a
 reading with no echo) is visited cell by cell (:mod:`pipeline.mapper.kernels.cone`). Every
-surface of the map ``occ`` stops the rays that meet it: it either answers or reflects the
+surface of the map (listed row by row) stops the rays that meet it: it either answers or reflects the
 pulse away, so nothing behind it (within its angular width, bins uniform in the tangent of
 the bearing off the axis, as :mod:`pipeline.mapper.kernels.specular`) is reached by this
 reading. A reached surface is met at incidence θ against its normal ``(nx, ny)``; it falls
@@ -30,7 +30,7 @@ import math
 import numpy as np
 from numba import njit
 
-from pipeline.mapper.kernels.attribution import span_buffers
+from pipeline.mapper.kernels.attribution import reach_cells, span_buffers
 from pipeline.mapper.kernels.cone import edge_sector_spans
 from pipeline.mapper.kernels.specular import MAX_BINS, shade, shadow_bins
 from pipeline.mapper.types import F32, F64, I32, B
@@ -44,19 +44,25 @@ def incidence_bin(dx: float, dy: float, dist: float, nx: float, ny: float, bins:
     return min(int(math.acos(c) / (0.5 * math.pi) * bins), bins - 1)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def detection_counts(
     cones: F64, up_down: B, r_inner: F64, r_free: F64, alpha: F64, half_fov: F64,
-    gx: float, gy: float, res: float, occ: B, occ_rows: I32, nx: F32, ny: F32, cons: F32,
-    stats: F64, reaches: F64,
+    gx: float, gy: float, res: float, occ_index: I32, occ_cols: I32, nx: F32, ny: F32,
+    cons: F32, stats: F64, reaches: F64,
 ) -> None:
     """Add each reading's answered and passed surfaces to ``stats`` ``(2, bins + 1)`` and
     its reached surface cells of known orientation to ``reaches`` ``(2, bins)`` (module
-    doc); ``occ_rows`` is the running count of ``occ`` along each row (one leading zero
-    column), so rows of a span without a surface are skipped."""
-    height, width = occ.shape
+    doc); the surfaces are listed row by row (``occ_index, occ_cols`` as
+    :func:`~pipeline.mapper.kernels.specular.cell_lists`), so a span costs its surfaces,
+    not its cells."""
+    height, width = cons.shape
     bins = stats.shape[1] - 1
     rows, c0s, c1s = span_buffers(cones, res)
+    size = reach_cells(cones, res) ** 2
+    cell_r = np.empty(size, dtype=np.int64)  # the reading's surfaces ahead of the sonar
+    cell_c = np.empty(size, dtype=np.int64)
+    cell_d = np.empty(size, dtype=np.float64)
+    cell_t = np.empty(size, dtype=np.float64)
     stop = np.empty(MAX_BINS, dtype=np.float64)
     passed = np.zeros(bins + 1, dtype=np.bool_)
     for i in range(cones.shape[0]):
@@ -70,40 +76,47 @@ def detection_counts(
         nb = shadow_bins(hb, r_out, res)
         bin_w = 2.0 * t_edge / nb
         stop[:nb] = np.inf
+        # The surfaces stop the rays (their shadows); listed for the second sweep.
+        m = 0
+        for k in range(n):
+            r = rows[k]
+            dy = gy + (r + 0.5) * res - oy
+            for j in range(occ_index[r, c0s[k]], occ_index[r, c1s[k] + 1]):
+                c = occ_cols[j]
+                dx = gx + (c + 0.5) * res - ox
+                along = dx * ca + dy * sa
+                if along <= 0.0:
+                    continue
+                dist = math.sqrt(dx * dx + dy * dy)
+                t = (dy * ca - dx * sa) / along
+                shade(stop, nb, dist, t, t_edge, res, bin_w)
+                cell_r[m] = r
+                cell_c[m] = c
+                cell_d[m] = dist
+                cell_t[m] = t
+                m += 1
+        # The reached ones count.
         passed[:] = False
         best = bins + 1  # the answering surface's bin (none yet)
-        for sweep in range(2):  # 0: the surfaces stop the rays; 1: the reached ones count
-            for k in range(n):
-                r = rows[k]
-                if occ_rows[r, c1s[k] + 1] == occ_rows[r, c0s[k]]:
-                    continue
-                for c in range(c0s[k], c1s[k] + 1):
-                    if not occ[r, c]:
-                        continue
-                    dx = gx + (c + 0.5) * res - ox
-                    dy = gy + (r + 0.5) * res - oy
-                    along = dx * ca + dy * sa
-                    if along <= 0.0:
-                        continue
-                    dist = math.sqrt(dx * dx + dy * dy)
-                    t = (dy * ca - dx * sa) / along
-                    if sweep == 0:
-                        shade(stop, nb, dist, t, t_edge, res, bin_w)
-                        continue
-                    kb = math.floor((t + t_edge) / bin_w)
-                    if dist > stop[min(max(kb, 0), nb - 1)]:
-                        continue
-                    b = bins
-                    if cons[r, c] >= 0.5:
-                        b = incidence_bin(dx, dy, dist, nx[r, c], ny[r, c], bins)
-                    if dist >= r_inner[i]:
-                        best = min(best, b)
-                        if b < bins:
-                            reaches[0, b] += 1.0
-                    elif dist < r_free[i]:
-                        passed[b] = True
-                        if b < bins:
-                            reaches[1, b] += 1.0
+        for j in range(m):
+            dist, t = cell_d[j], cell_t[j]
+            kb = math.floor((t + t_edge) / bin_w)
+            if dist > stop[min(max(kb, 0), nb - 1)]:
+                continue
+            r, c = cell_r[j], cell_c[j]
+            b = bins
+            if cons[r, c] >= 0.5:
+                dx = gx + (c + 0.5) * res - ox
+                dy = gy + (r + 0.5) * res - oy
+                b = incidence_bin(dx, dy, dist, nx[r, c], ny[r, c], bins)
+            if dist >= r_inner[i]:
+                best = min(best, b)
+                if b < bins:
+                    reaches[0, b] += 1.0
+            elif dist < r_free[i]:
+                passed[b] = True
+                if b < bins:
+                    reaches[1, b] += 1.0
         if best <= bins:
             stats[0, best] += 1.0
         for b in range(bins + 1):

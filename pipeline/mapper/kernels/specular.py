@@ -31,6 +31,7 @@ from pipeline.mapper.kernels.cone import (
     cone_row_span,
     cone_rows,
     edge_sector_spans,
+    wrap_angle,
 )
 from pipeline.mapper.types import F32, F64, I32, I64, B
 
@@ -102,9 +103,19 @@ def shadow_profiles(
         s1, c1, s2, c2 = cones[i, 3], cones[i, 4], cones[i, 5], cones[i, 6]
         # edge_sector_spans' spans, on the rows that hold a surface that may be silent
         r0, r1 = cone_rows(oy, r_out, s1, s2, up_down[i, 0], up_down[i, 1], gy, res, height)
+        # The cone's columns, with a cell of margin: the edges' tips and the origin, and
+        # r_out where the wedge holds the +x or -x direction.
+        lo_x = min(0.0, min(r_out * c1, r_out * c2))
+        hi_x = max(0.0, max(r_out * c1, r_out * c2))
+        if abs(wrap_angle(-alpha[i])) <= half_fov[i]:
+            hi_x = r_out
+        if abs(wrap_angle(math.pi - alpha[i])) <= half_fov[i]:
+            lo_x = -r_out
+        b0 = min(max(math.floor(((ox + lo_x) - gx) / res - 0.5) - 1, 0), width - 1)
+        b1 = min(max(math.ceil(((ox + hi_x) - gx) / res - 0.5) + 1, 0), width - 1)
         n = 0
         for row in range(r0, r1 + 1):
-            if occ_index[row, width] == occ_index[row, 0]:
+            if occ_index[row, b1 + 1] == occ_index[row, b0]:
                 continue
             c_lo, c_hi = cone_row_span(ox, oy, r_out, s1, c1, s2, c2, row, gx, gy, res, width)
             if c_lo <= c_hi:
@@ -140,6 +151,88 @@ def shadow_profiles(
     return count
 
 
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _count_spans(
+    rows: I64, c0s: I64, c1s: I64, n: int, row_lo: int, row_hi: int, gx: float, gy: float,
+    res: float, ox: float, oy: float, rf: float, ri: float, stopped: bool, ca: float,
+    sa: float, t_edge: float, bin_w: float, nb: int, stop: F64, nx: F32, ny: F32, cons: F32,
+    table: F64, v_unknown: float, free_out: F32, arcs_out: F32, dbuf: F64, kbuf: I64,
+    xbuf: F64,
+) -> None:
+    """:func:`trace_readings` without ``attribute``: one reading's free and arc counts on
+    its spans ``rows, c0s, c1s`` (the rows ``row_lo ≤ r < row_hi``). A span's distances,
+    incidences and shadow bins first, in loops without branches (vectorised: the same IEEE
+    operations, so the same bits), then its cells."""
+    tmax = float(table.shape[0] - 1)
+    ntab = table.shape[0] - 2
+    for k in range(n):
+        r = rows[k]
+        if r < row_lo or r >= row_hi:
+            continue
+        c0 = c0s[k]
+        w = c1s[k] + 1 - c0
+        dy = gy + (r + 0.5) * res - oy
+        nxr, nyr = nx[r, c0:c0 + w], ny[r, c0:c0 + w]
+        for j in range(w):
+            dxv = gx + ((c0 + j) + 0.5) * res - ox
+            dv = math.sqrt(dxv * dxv + dy * dy)
+            dbuf[j] = dv
+            xbuf[j] = abs(dxv * nxr[j] + dy * nyr[j]) / max(dv, 1e-12) * tmax
+        if stopped:
+            for j in range(w):
+                dxv = gx + ((c0 + j) + 0.5) * res - ox
+                along = max(dxv * ca + dy * sa, 1e-12)
+                kb = math.floor(((dy * ca - dxv * sa) / along + t_edge) / bin_w)
+                kbuf[j] = min(max(kb, 0), nb - 1)
+        for c in range(c0, c0 + w):
+            dist = dbuf[c - c0]
+            if stopped and dist > stop[kbuf[c - c0]]:
+                continue
+            if dist < rf:
+                q = cons[r, c]
+                x = xbuf[c - c0]
+                kt = min(int(x), ntab)
+                f = x - kt
+                free_out[r, c] += (q * (table[kt] * (1.0 - f) + table[kt + 1] * f)
+                                   + (1.0 - q) * v_unknown)
+            if dist >= ri:
+                arcs_out[r, c] += 1.0
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _arc_candidates(
+    rows: I64, c0s: I64, c1s: I64, n: int, gx: float, gy: float, res: float, ox: float,
+    oy: float, ri: float, stopped: bool, ca: float, sa: float, t_edge: float, bin_w: float,
+    nb: int, stop: F64, bearings: bool, arc_c: F32, arc_s: F32, free_in: F32,
+    arcs_in: F32, ratio: float, cand_r: I64, cand_c: I64,
+) -> int:
+    """:func:`trace_readings` with ``attribute``: one reading's arc cells on its spans (the
+    annulus'), their bearings with ``bearings``, and its candidates (returns how many)."""
+    m = 0
+    for k in range(n):
+        r = rows[k]
+        dy = gy + (r + 0.5) * res - oy
+        for c in range(c0s[k], c1s[k] + 1):
+            dx = gx + (c + 0.5) * res - ox
+            d2 = dx * dx + dy * dy
+            dist = math.sqrt(d2)
+            if stopped:
+                along = max(dx * ca + dy * sa, 1e-12)
+                kb = math.floor(((dy * ca - dx * sa) / along + t_edge) / bin_w)
+                if dist > stop[min(max(kb, 0), nb - 1)]:
+                    continue
+            if dist >= ri:
+                if bearings:
+                    inv = 1.0 / max(d2, 1e-24)
+                    arc_c[r, c] += (dx * dx - dy * dy) * inv  # cos 2φ
+                    arc_s[r, c] += 2.0 * dx * dy * inv  # sin 2φ
+                if free_in[r, c] <= ratio * arcs_in[r, c]:
+                    cand_r[m] = r
+                    cand_c[m] = c
+                    m += 1
+    return m
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def trace_readings(
     cones: F64, up_down: B, r_inner: F64, r_free: F64, alpha: F64, half_fov: F64,
@@ -156,10 +249,10 @@ def trace_readings(
     stopped_in``). With ``bearings`` (and ``attribute``) the arc cells add their bearings
     to ``arc_c, arc_s``.
 
-    Speed, not results: a span's distances, incidences and shadow bins are first computed
-    in loops without branches (the compiler vectorises them: the same IEEE operations, so
-    the same bits; divisors are never zero, so numpy's error model only drops the checks),
-    then the cells are visited."""
+    Speed, not results: the two modes' cell loops are functions of their own
+    (:func:`_count_spans`, :func:`_arc_candidates`: the compiler optimises each without the
+    other's branches); divisors are never zero, so numpy's error model only drops the
+    checks."""
     height, width = free_out.shape
     reach = reach_cells(cones, res)
     rows, c0s, c1s = span_buffers(cones, res)
@@ -168,8 +261,6 @@ def trace_readings(
     dbuf = np.empty(width + 1, dtype=np.float64)
     kbuf = np.empty(width + 1, dtype=np.int64)
     xbuf = np.empty(width + 1, dtype=np.float64)
-    tmax = float(table.shape[0] - 1)
-    ntab = table.shape[0] - 2
     lost = 0
     for i in range(cones.shape[0]):
         ox, oy, r_out = cones[i, 0], cones[i, 1], cones[i, 2]
@@ -185,7 +276,6 @@ def trace_readings(
         ca, sa = math.cos(a), math.sin(a)
         t_edge = math.tan(hb)  # bins uniform in tan(bearing − α) across the cone
         bin_w = 2.0 * t_edge / nb
-        m = 0
         if attribute:  # only the arc's cells matter: the annulus' spans
             n = edge_sector_spans(ox, oy, s1, c1, s2, c2, up_down[i, 0], up_down[i, 1], ri,
                                   r_out, gx, gy, res, width, height, rows, c0s, c1s)
@@ -201,60 +291,14 @@ def trace_readings(
                     c0s[n] = c_lo
                     c1s[n] = c_hi
                     n += 1
-        for k in range(n):
-            r = rows[k]
-            if r < row_lo or r >= row_hi:
-                continue
-            c0 = c0s[k]
-            w = c1s[k] + 1 - c0
-            dy = gy + (r + 0.5) * res - oy
-            if not attribute:
-                nxr, nyr = nx[r, c0:c0 + w], ny[r, c0:c0 + w]
-                for j in range(w):
-                    dxv = gx + ((c0 + j) + 0.5) * res - ox
-                    dv = math.sqrt(dxv * dxv + dy * dy)
-                    dbuf[j] = dv
-                    xbuf[j] = abs(dxv * nxr[j] + dy * nyr[j]) / max(dv, 1e-12) * tmax
-                if stopped:
-                    for j in range(w):
-                        dxv = gx + ((c0 + j) + 0.5) * res - ox
-                        along = max(dxv * ca + dy * sa, 1e-12)
-                        kb = math.floor(((dy * ca - dxv * sa) / along + t_edge) / bin_w)
-                        kbuf[j] = min(max(kb, 0), nb - 1)
-            for c in range(c0, c0 + w):
-                dx = gx + (c + 0.5) * res - ox
-                d2 = dx * dx + dy * dy
-                dist = dbuf[c - c0] if not attribute else math.sqrt(d2)
-                if stopped:
-                    if attribute:
-                        along = max(dx * ca + dy * sa, 1e-12)
-                        kb = math.floor(((dy * ca - dx * sa) / along + t_edge) / bin_w)
-                        kb = min(max(kb, 0), nb - 1)
-                    else:
-                        kb = kbuf[c - c0]
-                    if dist > stop[kb]:
-                        continue
-                if dist < rf and not attribute:
-                    q = cons[r, c]
-                    x = xbuf[c - c0]
-                    kt = min(int(x), ntab)
-                    f = x - kt
-                    free_out[r, c] += (q * (table[kt] * (1.0 - f) + table[kt + 1] * f)
-                                       + (1.0 - q) * v_unknown)
-                if dist >= ri:
-                    if not attribute:
-                        arcs_out[r, c] += 1.0
-                        continue
-                    if bearings:
-                        inv = 1.0 / max(d2, 1e-24)
-                        arc_c[r, c] += (dx * dx - dy * dy) * inv  # cos 2φ
-                        arc_s[r, c] += 2.0 * dx * dy * inv  # sin 2φ
-                    if free_in[r, c] <= ratio * arcs_in[r, c]:
-                        cand_r[m] = r
-                        cand_c[m] = c
-                        m += 1
         if not attribute:
+            _count_spans(rows, c0s, c1s, n, row_lo, row_hi, gx, gy, res, ox, oy, rf, ri,
+                         stopped, ca, sa, t_edge, bin_w, nb, stop, nx, ny, cons, table,
+                         v_unknown, free_out, arcs_out, dbuf, kbuf, xbuf)
             continue
+        m = _arc_candidates(rows, c0s, c1s, n, gx, gy, res, ox, oy, ri, stopped, ca, sa,
+                            t_edge, bin_w, nb, stop, bearings, arc_c, arc_s, free_in,
+                            arcs_in, ratio, cand_r, cand_c)
         if m == 0:
             lost += 1
             continue
@@ -262,14 +306,20 @@ def trace_readings(
     return lost
 
 
+def cell_lists(cells: B) -> tuple[I32, I32]:
+    """The cells of a mask listed row by row (compressed rows): ``(index, cols)``, the
+    cells of row ``r`` in columns ``c0 ≤ c ≤ c1`` are ``cols[index[r, c0]:index[r, c1 + 1]]``,
+    in column order."""
+    index = np.zeros((cells.shape[0], cells.shape[1] + 1), dtype=np.int32)
+    np.cumsum(cells, axis=1, out=index[:, 1:])
+    index += np.concatenate(([0], np.cumsum(index[:-1, -1]))).astype(np.int32)[:, None]
+    cols: I32 = np.nonzero(cells)[1].astype(np.int32)
+    return index, cols
+
+
 def silent_candidates(surfaces: B, consistency: F32) -> tuple[I32, I32]:
     """The surface cells that may be silent to some ray, listed for
     :func:`trace_readings`: ``(occ_index, occ_cols)``. A cell is silent to a ray when
     ``q·(1 − visible) > ½``, which needs ``q > ½``: cells with ``q ≤ ½`` never stop a ray."""
-    cand = surfaces & (consistency > 0.5)
-    index = np.zeros((cand.shape[0], cand.shape[1] + 1), dtype=np.int32)
-    np.cumsum(cand, axis=1, out=index[:, 1:])
-    index += np.concatenate(([0], np.cumsum(index[:-1, -1]))).astype(np.int32)[:, None]
-    cols: I32 = np.nonzero(cand)[1].astype(np.int32)
-    return index, cols
+    return cell_lists(surfaces & (consistency > 0.5))
 

@@ -24,6 +24,7 @@ from pipeline.mapper.forward import (
 )
 from pipeline.mapper.free_space import cone_table
 from pipeline.mapper.kernels.forward import detection_counts
+from pipeline.mapper.kernels.specular import cell_lists
 from pipeline.mapper.specular import TABLE_STEP
 from pipeline.mapper.synthetic import room_grid
 from pipeline.methods import Method
@@ -47,14 +48,13 @@ def _tallies(occ: np.ndarray, normal_deg: float,
     rows, cones, up_down = cone_table(scan, outer)
     r_inner = np.where(echo, d - band, np.inf)[rows]
     shape = occ.shape
-    occ_rows = np.zeros((shape[0], shape[1] + 1), np.int32)
-    np.cumsum(occ, axis=1, out=occ_rows[:, 1:])
+    occ_index, occ_cols = cell_lists(occ)
     nx = np.full(shape, math.cos(math.radians(normal_deg)), np.float32)
     ny = np.full(shape, math.sin(math.radians(normal_deg)), np.float32)
     stats = np.zeros((2, INCIDENCE_BINS + 1))
     reaches = np.zeros((2, INCIDENCE_BINS))
     detection_counts(cones, up_down, r_inner, free_r[rows], scan.alpha[rows],
-                     0.5 * scan.fov[rows], 0.0, 0.0, RES, occ, occ_rows, nx, ny,
+                     0.5 * scan.fov[rows], 0.0, 0.0, RES, occ_index, occ_cols, nx, ny,
                      np.ones(shape, np.float32), stats, reaches)
     return stats, reaches
 

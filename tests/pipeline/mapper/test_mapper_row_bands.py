@@ -1,5 +1,6 @@
-"""The specular method's speed-ups keep its bytes: the row-band split between two threads
-(any split row, one thread or two), and the list of surfaces that may be silent."""
+"""The specular and default methods' speed-ups keep their bytes: the row-band split between two
+threads (any split row, one thread or two), the E-step's two halves of the readings, and the
+list of surfaces that may be silent, the later passes' group size."""
 
 from __future__ import annotations
 
@@ -67,7 +68,7 @@ def _specular_grids(threads: int) -> dict[str, np.ndarray]:
     for index in range(m.passes):
         m.begin_pass(index)
         m.integrate_many(scans)
-    out = {k: getattr(m, k).copy() for k in ("free2", "arcs2", "hits2", "hits", "free")}
+    out = {k: getattr(m, k).copy() for k in ("free2", "arcs2", "hits2", "hits", "free", "stats", "reaches")}
     out["occupied"] = m.snapshot().occupied
     return out
 
@@ -77,12 +78,23 @@ def test_the_specular_maps_do_not_depend_on_threads_or_the_split(
 ) -> None:
     one = _specular_grids(1)
     assert one["occupied"].sum() > 100 and one["free2"].max() > 1.0
+    assert one["stats"].sum() > 100  # the E-step's counts (its readings split in two halves)
     for split in (None, 0, 37, 10**6):
         if split is not None:
             monkeypatch.setattr(specular, "balanced_split", lambda *a, s=split: min(s, a[-1]))
         two = _specular_grids(2)
         for name, grid in one.items():
             assert np.array_equal(grid, two[name]), (split, name)
+
+
+def test_the_later_passes_do_not_depend_on_their_groups(monkeypatch: pytest.MonkeyPatch) -> None:
+    # Passes 2 and up (no paper's mapper) take larger groups of scans: any size, the bytes.
+    want = _specular_grids(2)
+    for size in (1, 7):
+        monkeypatch.setattr(specular, "LATE_GROUP", size)
+        got = _specular_grids(2)
+        for name, grid in want.items():
+            assert np.array_equal(grid, got[name]), (size, name)
 
 
 def test_silent_candidates_list_the_consistent_surfaces_row_by_row() -> None:
