@@ -34,6 +34,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -116,25 +117,26 @@ def stamp_ns(stop: int, direction: int) -> int:
     return START_NS + stop * STOP_PERIOD_NS + direction * FIRE_STEP_NS
 
 
-def _s(ns: int) -> str:
-    return f"{ns // 1_000_000_000}.{ns % 1_000_000_000:09d}"
-
-
 def convert(stops: Sequence[Stop], out: Path) -> Path:
-    """Write ``stops`` as a CSV set (ranges.csv, poses.csv, sensors.csv) into ``out``."""
-    out.mkdir(parents=True, exist_ok=True)
-    sensors = ["sensor,x,y,yaw,fov,min_range,max_range"] + [
-        f"ev3_{i:02d},0,0,{sensor_yaw(i)!r},{FOV_RAD!r},{MIN_RANGE_M},{MAX_RANGE_M}"
-        for i in range(DIRECTIONS)]
-    poses, ranges = ["t,x,y,yaw"], ["t,sensor,range,scan"]
-    for k, s in enumerate(stops):
-        yaw = math.remainder(s.theta, math.tau)
-        for d in (0, DIRECTIONS - 1):
-            poses.append(f"{_s(stamp_ns(k, d))},{s.x!r},{s.y!r},{yaw!r}")
-        ranges += [f"{_s(stamp_ns(k, i))},ev3_{i:02d},{r!r},{k}" for i, r in enumerate(s.ranges)]
-    for name, rows in (("sensors.csv", sensors), ("poses.csv", poses), ("ranges.csv", ranges)):
-        (out / name).write_text("\n".join(rows) + "\n", encoding="utf-8")
-    return out
+    """Write ``stops`` as a sonarmap CSV set (ranges.csv, poses.csv, sensors.csv) at ``out``
+    (a new directory; formats.log_writers, the project's writer)."""
+    from formats.contract import PoseBatch, SensorMount, make_range_batch
+    from formats.log_writers import LogContent, write_log
+
+    k, i = np.divmod(np.arange(len(stops) * DIRECTIONS), DIRECTIONS)
+    ranges = make_range_batch(
+        [stamp_ns(int(a), int(b)) for a, b in zip(k, i, strict=True)], i,
+        [r for s in stops for r in s.ranges], FOV_RAD, MIN_RANGE_M, MAX_RANGE_M, scan_id=k)
+    ends = np.arange(2 * len(stops))  # each stop's first and last firing
+    at = ends // 2
+    pose = np.array([[s.x, s.y, math.remainder(s.theta, math.tau)] for s in stops])[at]
+    poses = PoseBatch(np.array([stamp_ns(int(a), (DIRECTIONS - 1) * int(e % 2))
+                                for a, e in zip(at, ends, strict=True)], dtype=np.int64),
+                      pose[:, 0].copy(), pose[:, 1].copy(), pose[:, 2].copy(),
+                      "odom", "base_link")
+    names = tuple(f"ev3_{d:02d}" for d in range(DIRECTIONS))
+    mounts = {n: SensorMount(0.0, 0.0, sensor_yaw(d)) for d, n in enumerate(names)}
+    return write_log(LogContent(ranges, names, poses, mounts), out, "csv-set")
 
 
 def laps(stops: Sequence[Stop]) -> npt.NDArray[np.int64]:
@@ -222,6 +224,8 @@ def path_length(stops: Sequence[Stop]) -> float:
 def measure(name: str, stops: Sequence[Stop], work: Path, config: Path
             ) -> tuple[Row, F64, F64, npt.NDArray[np.int64]]:
     """Convert, run unrefined and refined, score both; the echoes for the figure too."""
+    shutil.rmtree(work / name, ignore_errors=True)
+    (work / name).mkdir(parents=True)
     log = convert(stops, work / name / "log")
     run_sonarmap(log, work / name / "raw", config, refine=False)
     metrics = run_sonarmap(log, work / name / "refined", config, refine=True)
