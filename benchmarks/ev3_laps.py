@@ -142,7 +142,8 @@ def convert(stops: Sequence[Stop], out: Path) -> Path:
 def laps(stops: Sequence[Stop]) -> npt.NDArray[np.int64]:
     """Each stop's lap: whole turns of its logged (unwrapped) heading since the first stop."""
     theta = np.unwrap(np.array([s.theta for s in stops]))
-    return np.floor(np.abs(theta - theta[0]) / math.tau).astype(np.int64)
+    turns: npt.NDArray[np.int64] = np.floor(np.abs(theta - theta[0]) / math.tau).astype(np.int64)
+    return turns
 
 
 def echoes(stops: Sequence[Stop], poses: F64) -> tuple[F64, npt.NDArray[np.int64]]:
@@ -150,6 +151,7 @@ def echoes(stops: Sequence[Stop], poses: F64) -> tuple[F64, npt.NDArray[np.int64
     (len(stops), 13, 3)) and each echo's stop index; echoes beyond ECHO_RANGE_M dropped."""
     r = np.array([s.ranges for s in stops])
     keep = np.isfinite(r) & (r <= ECHO_RANGE_M)
+    r = np.where(keep, r, 0.0)
     bearing = poses[..., 2] + np.radians(FIRST_DEG + STEP_DEG * np.arange(DIRECTIONS))
     x = poses[..., 0] + r * np.cos(bearing)
     y = poses[..., 1] + r * np.sin(bearing)
@@ -255,34 +257,48 @@ def what_refinement_did(pr: dict[str, object]) -> str:
             f"moved {n('moved_max_m'):.2f} m max")
 
 
+def _spread(s: tuple[float, float]) -> str:
+    return "— (one lap)" if math.isnan(s[0]) else f"{s[0]:.3f} / {s[1]:.3f} m"
+
+
 def markdown(rows: Sequence[Row]) -> str:
     lines = ["| run (path, laps) | odometry: median / p90 | refined: median / p90 | refinement |",
              "|---|---|---|---|"]
-    lines += [f"| {r.name} ({r.path_m:.0f} m, {r.laps}) | {r.raw[0]:.3f} / {r.raw[1]:.3f} m | "
-              f"{r.refined[0]:.3f} / {r.refined[1]:.3f} m | {what_refinement_did(r.refinement)} |"
-              for r in rows]
+    lines += [f"| {r.name} ({r.path_m:.0f} m, {r.laps}) | {_spread(r.raw)} | {_spread(r.refined)} "
+              f"| {what_refinement_did(r.refinement)} |" for r in rows]
     return "\n".join(lines)
 
 
+LAP_RGB = ((31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
+           (140, 86, 75))
+PANEL_PX = 320
+
+
 def figure(panels: Sequence[tuple[Row, F64, F64, npt.NDArray[np.int64]]], path: Path) -> None:
-    """Echoes per lap (colour) under the odometry (left) and refined (right), a row per run."""
-    import matplotlib
+    """Each run's echoes coloured by lap, under the odometry (left) and refined (right), one
+    row per run, both panels of a row at the same scale."""
+    from PIL import Image, ImageDraw
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(len(panels), 2, figsize=(7.0, 3.2 * len(panels)), squeeze=False)
-    for (row, raw, ref, lap), ax_row in zip(panels, axes, strict=True):
-        for ax, pts, label, spread in ((ax_row[0], raw, "odometry", row.raw),
-                                       (ax_row[1], ref, "refined", row.refined)):
-            ax.scatter(pts[:, 0], pts[:, 1], c=lap, cmap="viridis", s=2, linewidths=0)
-            ax.set_aspect("equal")
-            ax.set_title(f"{row.name} {label}: lap spread {spread[0]:.3f} / {spread[1]:.3f} m",
-                         fontsize=8)
-            ax.tick_params(labelsize=6)
-    fig.tight_layout()
-    fig.savefig(path, dpi=80)
-    plt.close(fig)
+    rows = []
+    for row, raw, ref, lap in panels:
+        both = np.vstack([raw, ref])
+        lo, span = both.min(axis=0), float(np.ptp(both, axis=0).max()) or 1.0
+        canvas = Image.new("RGB", (2 * PANEL_PX, PANEL_PX + 16), "white")
+        draw = ImageDraw.Draw(canvas)
+        for col, (pts, label, spread) in enumerate(((raw, "odometry", row.raw),
+                                                    (ref, "refined", row.refined))):
+            draw.text((col * PANEL_PX + 4, 2), f"{row.name} {label}: lap spread "
+                      f"{spread[0]:.3f} / {spread[1]:.3f} m", fill="black")
+            px = (pts - lo) / span * (PANEL_PX - 12) + 6
+            for (x, y), k in zip(px, lap, strict=True):
+                u, v = col * PANEL_PX + x, 16 + PANEL_PX - y
+                draw.rectangle((u - 1, v - 1, u + 1, v + 1), fill=LAP_RGB[int(k) % len(LAP_RGB)])
+        draw.line((PANEL_PX, 0, PANEL_PX, PANEL_PX + 16), fill="grey")
+        rows.append(canvas)
+    full = Image.new("RGB", (2 * PANEL_PX, sum(r.height for r in rows)), "white")
+    for i, r in enumerate(rows):
+        full.paste(r, (0, i * (PANEL_PX + 16)))
+    full.quantize(colors=64, dither=Image.Dither.NONE).save(path, format="PNG", optimize=True)
 
 
 def log_dir(source: Path) -> Path:

@@ -11,13 +11,18 @@ import pytest
 
 from benchmarks.ev3_laps import (
     DIRECTIONS,
+    LAP_RGB,
+    PANEL_PX,
     Ev3FormatError,
+    Row,
     Stop,
     convert,
     echoes,
+    figure,
     lap_spread,
     laps,
     main,
+    markdown,
     odometry_poses,
     parse_line,
     read_log,
@@ -106,3 +111,27 @@ def test_without_the_logs_the_benchmark_says_where_to_get_them(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main([str(tmp_path)]) == 1
     assert "git clone https://github.com/sg2295/sparse-gslam" in capsys.readouterr().err
+
+
+def test_the_table_row_says_what_refinement_did() -> None:
+    pr = {"accepted": False, "submaps": 10, "matches_accepted": 1, "matches_rejected": 9,
+          "loop_closures_tried": 7, "loop_closures_accepted": 2, "moved_max_m": 0.0}
+    rows = [Row("ev3-69", 10.4, 3, (0.05, 0.164), (0.05, 0.164), pr),
+            Row("ev3-101", 14.6, 1, (math.nan, math.nan), (math.nan, math.nan), {})]
+    table = markdown(rows).splitlines()
+    assert table[2] == ("| ev3-69 (10 m, 3) | 0.050 / 0.164 m | 0.050 / 0.164 m | declined: 10 "
+                        "submaps, 1 of 10 matches, 2 of 7 closures; moved 0.00 m max |")
+    assert table[3] == "| ev3-101 (15 m, 1) | — (one lap) | — (one lap) | not run |"
+
+
+def test_the_figure_has_a_row_of_two_panels_per_run(tmp_path: Path) -> None:
+    from PIL import Image
+
+    pts = np.array([[0.0, 0.0], [1.0, 2.0]])
+    row = Row("a", 1.0, 2, (0.1, 0.2), (0.05, 0.1), {})
+    figure([(row, pts, pts + 0.1, np.array([0, 1]))] * 2, tmp_path / "f.png")
+    with Image.open(tmp_path / "f.png") as img:
+        assert img.size == (2 * PANEL_PX, 2 * (PANEL_PX + 16))
+        rgb = img.convert("RGB")
+        # the first echo (lap 0) at the lower left of the left panel, blue
+        assert rgb.getpixel((6, 16 + PANEL_PX - 6)) == LAP_RGB[0]
