@@ -242,7 +242,8 @@ def measure(name: str, stops: Sequence[Stop], work: Path, config: Path
 
 
 def what_refinement_did(pr: dict[str, object]) -> str:
-    """Applied or declined, and the graph's counts (metrics.json ``pose_refinement``)."""
+    """What the calibration applied, the graph's verdict and counts, how far the poses moved
+    (metrics.json ``pose_refinement``)."""
     if not pr:
         return "not run"
 
@@ -250,8 +251,11 @@ def what_refinement_did(pr: dict[str, object]) -> str:
         v = pr.get(key)
         return float(v) if isinstance(v, (int, float)) else 0.0
 
+    scale, bias = n("search_scale_error"), n("search_heading_bias_deg_per_m")
+    calibration = ", ".join([f"scale {100 * scale:+.1f} %"] * bool(scale)
+                            + [f"bias {bias:+.2f}°/m"] * bool(bias)) or "nothing"
     verdict = "applied" if pr.get("accepted") else "declined"
-    return (f"{verdict}: {n('submaps'):.0f} submaps, {n('matches_accepted'):.0f} of "
+    return (f"calibration: {calibration}; graph {verdict}: {n('submaps'):.0f} submaps, {n('matches_accepted'):.0f} of "
             f"{n('matches_accepted') + n('matches_rejected'):.0f} matches, "
             f"{n('loop_closures_accepted'):.0f} of {n('loop_closures_tried'):.0f} closures; "
             f"moved {n('moved_max_m'):.2f} m max")

@@ -115,12 +115,14 @@ def test_without_the_logs_the_benchmark_says_where_to_get_them(
 
 def test_the_table_row_says_what_refinement_did() -> None:
     pr = {"accepted": False, "submaps": 10, "matches_accepted": 1, "matches_rejected": 9,
-          "loop_closures_tried": 7, "loop_closures_accepted": 2, "moved_max_m": 0.0}
+          "loop_closures_tried": 7, "loop_closures_accepted": 2, "moved_max_m": 0.5,
+          "search_scale_error": 0.0, "search_heading_bias_deg_per_m": -2.8125}
     rows = [Row("ev3-69", 10.4, 3, (0.05, 0.164), (0.05, 0.164), pr),
             Row("ev3-101", 14.6, 1, (math.nan, math.nan), (math.nan, math.nan), {})]
     table = markdown(rows).splitlines()
-    assert table[2] == ("| ev3-69 (10 m, 3) | 0.050 / 0.164 m | 0.050 / 0.164 m | declined: 10 "
-                        "submaps, 1 of 10 matches, 2 of 7 closures; moved 0.00 m max |")
+    assert table[2] == ("| ev3-69 (10 m, 3) | 0.050 / 0.164 m | 0.050 / 0.164 m | calibration: bias "
+                        "-2.81°/m; graph declined: 10 submaps, 1 of 10 matches, 2 of 7 closures; "
+                        "moved 0.50 m max |")
     assert table[3] == "| ev3-101 (15 m, 1) | — (one lap) | — (one lap) | not run |"
 
 
