@@ -13,7 +13,8 @@ of a log is ``x y theta`` (cm, cm, rad, REP 103: x ahead, y left, theta counter-
 unwrapped) and then 13 blocks of ``k`` repeated readings in cm, one block per direction
 from −90° (right) up; ``k`` is 10 (ev3-69), 25 (ev3-101, ev3-222, ev3) or 1 (ev3-154,
 already averaged), so it is taken from the line's length (sparse-gslam's ``EV3DataProvider``
-reads the same layout). 255 cm is the sensor's "no echo".
+reads the same layout, but averages each block and applies a piecewise range calibration
+capped at 80 cm: neither is done here). 255 cm is the sensor's "no echo".
 
 **Conversion** (:func:`convert`) to a sonarmap CSV set: one virtual sensor per direction
 (``ev3_00`` … ``ev3_12`` at the rover's origin, yaw −90° + 15° i, 30° beam, 0.03-2.55 m:
@@ -26,7 +27,9 @@ rover stands while it sweeps).
 the odometry and with the refined trajectory; a stop's lap is the number of whole turns
 its logged heading has made since the start. For each echo, the distance to the nearest
 echo of another lap; the table gives the median and 90th percentile of those, unrefined
-and refined, and what refinement did (metrics.json).
+and refined, and what refinement did (metrics.json). Both ``sonarmap run`` calls take
+``CONFIG`` (the EV3's scale; or ``--config``). The spread shrinks with echo density (more
+laps, more neighbours), so compare a run's two columns, not runs.
 """
 
 from __future__ import annotations
@@ -292,7 +295,7 @@ def figure(panels: Sequence[tuple[Row, F64, F64, npt.NDArray[np.int64]]], path: 
         for col, (pts, label, spread) in enumerate(((raw, "odometry", row.raw),
                                                     (ref, "refined", row.refined))):
             draw.text((col * PANEL_PX + 4, 2), f"{row.name} {label}: lap spread "
-                      f"{spread[0]:.3f} / {spread[1]:.3f} m", fill="black")
+                      f"{_spread(spread)}", fill="black")
             px = (pts - lo) / span * (PANEL_PX - 12) + 6
             for (x, y), k in zip(px, lap, strict=True):
                 u, v = col * PANEL_PX + x, 16 + PANEL_PX - y
