@@ -295,7 +295,7 @@ def figure(panels: Sequence[tuple[Row, F64, F64, npt.NDArray[np.int64]]], path: 
         for col, (pts, label, spread) in enumerate(((raw, "odometry", row.raw),
                                                     (ref, "refined", row.refined))):
             draw.text((col * PANEL_PX + 4, 2), f"{row.name} {label}: lap spread "
-                      f"{_spread(spread)}", fill="black")
+                      f"{_spread(spread).replace('—', 'n/a')}", fill="black")
             px = (pts - lo) / span * (PANEL_PX - 12) + 6
             for (x, y), k in zip(px, lap, strict=True):
                 u, v = col * PANEL_PX + x, 16 + PANEL_PX - y
