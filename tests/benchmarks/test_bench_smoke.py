@@ -43,7 +43,7 @@ def test_runner_smoke_prints_every_section(tmp_path: Path) -> None:
     # Mapper: the four methods against OctoMap (when octomap-python is installed, an
     # optional benchmark extra), on the same 320 readings.
     has_octomap = importlib.util.find_spec("octomap") is not None
-    for label in ("default method (specular echo attribution, v̄ measured, 5 passes)",
+    for label in ("default method (specular echo attribution, detection measured, 5 passes)",
                   "specular echo attribution (§10, 4 passes)",
                   "echo attribution (§9, 2 passes)", "paper's method (correction on)",
                   "without correction", "classic log-odds baseline"):
