@@ -179,6 +179,10 @@ def e2e_rows(smoke: bool, quick: bool, verbose: bool) -> list[Row]:
                     one < target))
     for stage in (*bench_end_to_end.STAGES, "outputs+startup"):
         rows.append(Row("e2e", f"  share: {stage}", 100 * f[f"share {stage} 1x"], "% of wall"))
+    refined = f["refined wall 1x s"]
+    rows.append(Row("e2e", "sonarmap run --refine-poses, 1x log", refined, "s wall",
+                    f"{f['refined cpu 1x s']:.1f} s CPU, {f['refined cpu 1x s'] / f['cpu 1x s']:.2f}x "
+                    "the unrefined CPU", "< 30 s", refined < (30.0 if not smoke else float("inf"))))
     fit = _affine_fit(f, fracs)
     for frac in fracs:
         if frac == 1.0:

@@ -13,7 +13,8 @@ Each log is mapped by ``sonarmap run`` in a fresh process (the real command: imp
 passes, mapping, outputs), ``--repeat`` times; the table gives the median wall seconds,
 readings/s, the share of each stage (``metrics.json`` timing; "outputs+startup" = wall −
 the stages) and the peak RSS. Scaling: 1/4, 1/2, 1× of the log (wall time should grow
-linearly) and the peak RSS of a ``--rss-factor``× longer log (target ≤ 1.2× of 1×).
+linearly) and the peak RSS of a ``--rss-factor``× longer log (target ≤ 1.2× of 1×). The 1×
+log is mapped once more with ``--refine-poses`` (target < 30 s; issue 63).
 """
 
 from __future__ import annotations
@@ -241,6 +242,12 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
                 figures["linearity"] = growth
                 print(f"wall time growth {lo_frac:g}x -> 1x: {one.wall / lo.wall:.2f}x for "
                       f"{1 / lo_frac:g}x the log (ratio to linear {growth:.2f})")
+            log_1x = cached_log(dataclasses.replace(base, seconds=args.seconds), verbose=False)
+            refined = run_once(log_1x, Path(tmp) / "out_refined", ("--refine-poses",))
+            figures["refined wall 1x s"] = refined.wall
+            figures["refined cpu 1x s"] = refined.cpu
+            print(f"1x with --refine-poses: {refined.wall:.2f} s wall, {refined.cpu:.2f} s CPU "
+                  f"(target < 30 s; {refined.cpu / one.cpu:.2f}x the unrefined CPU)")
             if args.rss_factor > 1:
                 long_spec = dataclasses.replace(base, seconds=args.seconds * args.rss_factor)
                 long_log = cached_log(long_spec)
