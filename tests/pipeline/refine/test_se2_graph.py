@@ -37,11 +37,12 @@ def opts(calibrate: bool) -> GraphOptions:
     return GraphOptions(0.02, math.radians(0.5), calibrate, 0.1, math.radians(2.0), 3.0)
 
 
-def test_loop_closure_and_calibration_recover_a_biased_square() -> None:
+def biased_square() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The true square, and odometry 5 % long turning 1 degree per metre too far (the
+    graph's own model): (truth, odometry steps, their travelled lengths, dead reckoning)."""
     truth = square()
     rel = between(truth[:-1], truth[1:])
     length = np.hypot(rel[:, 0], rel[:, 1])
-    # Odometry 5 % long and turning 1 degree per metre too far (the graph's own model).
     b = math.radians(1.0)
     c, s = np.cos(b * length / 2), np.sin(b * length / 2)
     odo = np.column_stack([1.05 * (c * rel[:, 0] - s * rel[:, 1]),
@@ -49,13 +50,17 @@ def test_loop_closure_and_calibration_recover_a_biased_square() -> None:
     x0 = [truth[0]]
     for d in odo:
         x0.append(compose(x0[-1], d))
-    x0 = np.array(x0)
+    return truth, odo, 1.05 * length, np.array(x0)
+
+
+def test_loop_closure_and_calibration_recover_a_biased_square() -> None:
+    truth, odo, travelled, x0 = biased_square()
     # Exact matches between every consecutive pair and one loop closure (last -> first).
     i = np.r_[np.arange(15), 15]
     j = np.r_[np.arange(1, 16), 0]
     z = between(truth[i], truth[j])
     u = np.repeat(sqrt_information(np.diag([0.05**2, 0.05**2, math.radians(2) ** 2]))[None], 16, 0)
-    sol = solve(x0, Odometry(odo, 1.05 * length), MatchConstraints(i, j, z, u), opts(True))
+    sol = solve(x0, Odometry(odo, travelled), MatchConstraints(i, j, z, u), opts(True))
     assert sol.cost_final < sol.cost_initial
     np.testing.assert_allclose(sol.anchors[:, :2], truth[:, :2], atol=0.02)
     assert sol.scale_error == pytest.approx(0.05, abs=0.01)
@@ -99,21 +104,12 @@ def test_the_dense_jacobian_is_the_sparse_ones_entries() -> None:
 
 
 def test_the_sparse_steps_reach_the_trust_regions_solution() -> None:
-    truth = square()
-    rel = between(truth[:-1], truth[1:])
-    length = np.hypot(rel[:, 0], rel[:, 1])
-    b = math.radians(1.0)
-    c, s = np.cos(b * length / 2), np.sin(b * length / 2)
-    odo = np.column_stack([1.05 * (c * rel[:, 0] - s * rel[:, 1]),
-                           1.05 * (s * rel[:, 0] + c * rel[:, 1]), rel[:, 2] + b * length])
-    x0 = [truth[0]]
-    for d in odo:
-        x0.append(compose(x0[-1], d))
+    truth, odo, travelled, x0 = biased_square()
     i, j = np.r_[np.arange(15), 15, 2], np.r_[np.arange(1, 16), 0, 9]
     z = between(truth[i], truth[j])
     z[-1] += [1.0, -0.8, 0.3]  # one wrong closure: the Cauchy loss bounds it
     u = np.repeat(sqrt_information(np.diag([0.05**2, 0.05**2, math.radians(2) ** 2]))[None], 17, 0)
-    args = (np.array(x0), Odometry(odo, 1.05 * length), MatchConstraints(i, j, z, u))
+    args = (x0, Odometry(odo, travelled), MatchConstraints(i, j, z, u))
     opt = GraphOptions(0.02, math.radians(0.5), True, 0.1, math.radians(2.0), 1.0, True)
     sparse = solve(*args, opt, method="sparse")
     exact = solve(*args, opt, method="trust-region")
