@@ -42,7 +42,7 @@ from pipeline.mapper.kernels.forward import detection_counts
 from pipeline.mapper.kernels.specular import cell_lists
 from pipeline.mapper.reading_features import distance_sigma
 from pipeline.mapper.scan_group import ScanGroup
-from pipeline.mapper.specular import TABLE_STEP, SpecularMapper, cos_table, visibility_table
+from pipeline.mapper.specular import TABLE_STEP, SpecularMapper, cos_table
 from pipeline.mapper.types import F64, B, GridSpec
 from pipeline.stages import reading_quality as rq
 
@@ -127,14 +127,6 @@ def evidence_table(weights: F64) -> F64:
     return out
 
 
-def detection_table(p0: float, median_deg: float, spread: float) -> F64:
-    """The fitted specular curve ``p0·P(θc > θ)`` on §10's θ grid (0, TABLE_STEP, … just
-    past π/2): the parametric fit, reported (ALGORITHM.md §11); the map uses
-    :func:`pass_evidence`."""
-    out: F64 = p0 * visibility_table(median_deg, spread)
-    return out
-
-
 class ForwardMapper(SpecularMapper):
     """§10 with ``visible(θ)`` and ``v̄`` measured on the first map (module doc); five
     passes."""
@@ -147,7 +139,6 @@ class ForwardMapper(SpecularMapper):
         self.reaches: F64 = np.zeros((2, INCIDENCE_BINS))
         self.p_d: F64 = fitted_detection(self.stats)
         self.p_reach: F64 = reach_detection(self.reaches)
-        self.model = (1.0, config.spec_critical_angle_deg, config.spec_critical_spread, 0.0)
         self.surfaces: B = np.zeros(grid.shape, dtype=bool)  # the first map
         self.surface_index, self.surface_cols = cell_lists(self.surfaces)
         self._measuring = False
@@ -170,8 +161,8 @@ class ForwardMapper(SpecularMapper):
         else:
             if index == 3:
                 self.p_d = fitted_detection(self.stats)
-                self.model = fit_detection(self.stats)
-                self.v_unknown = unknown_rate(self.p_d, self.model[3])
+                floor = fit_detection(self.stats)[3]  # the coincidences' rate
+                self.v_unknown = unknown_rate(self.p_d, floor)
                 self.p_reach = reach_detection(self.reaches)
                 self.table = evidence_table(pass_evidence(self.p_reach))
                 self.cos_table = cos_table(self.table)

@@ -15,7 +15,6 @@ from pipeline.config import MapperConfig
 from pipeline.mapper import ForwardMapper, make_mapper
 from pipeline.mapper.forward import (
     INCIDENCE_BINS,
-    detection_table,
     evidence_table,
     fit_detection,
     fitted_detection,
@@ -25,7 +24,7 @@ from pipeline.mapper.forward import (
 from pipeline.mapper.free_space import cone_table
 from pipeline.mapper.kernels.forward import detection_counts
 from pipeline.mapper.kernels.specular import cell_lists
-from pipeline.mapper.specular import TABLE_STEP
+from pipeline.mapper.specular import TABLE_STEP, visibility_table
 from pipeline.mapper.synthetic import room_grid
 from pipeline.methods import Method
 
@@ -171,8 +170,8 @@ def test_the_fit_recovers_the_detection_model(p0: float, median: float, spread: 
                                               floor: float) -> None:
     # Exact expected counts of 10 000 reaches per bin drawn from the model.
     centres = (np.arange(INCIDENCE_BINS) + 0.5) * (90.0 / INCIDENCE_BINS)
-    vis = detection_table(1.0, median, spread)[np.round(np.radians(centres) / TABLE_STEP)
-                                                .astype(int)]
+    vis = visibility_table(median, spread)[np.round(np.radians(centres) / TABLE_STEP)
+                                           .astype(int)]
     share = floor + (1.0 - floor) * p0 * vis
     stats = np.zeros((2, INCIDENCE_BINS + 1))
     stats[0, :INCIDENCE_BINS] = 10_000 * share
@@ -182,7 +181,7 @@ def test_the_fit_recovers_the_detection_model(p0: float, median: float, spread: 
     # The curve §10's passes get: the specular part only, the coincidences left out; on the
     # bins it is the model's within a grid step (head-on rate and median trade off inside
     # the first bin).
-    table = detection_table(fp0, fmedian, fspread)
+    table = fp0 * visibility_table(fmedian, fspread)
     at = np.round(np.radians(centres) / TABLE_STEP).astype(int)
     assert np.abs(table[at] - p0 * vis).max() < 0.04
     assert table[0] == pytest.approx(fp0)
