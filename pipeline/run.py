@@ -169,9 +169,7 @@ def run(
                     for m in active.values():
                         m.begin_pass(index)
                     each = _pass_progress(progress, index, passes)
-                    if spilled is None:
-                        if index:
-                            sv.track.release_before(None)  # the pose walk starts again
+                    if spilled is None:  # the first pass (the only one without a spill)
                         state = _map_stream(reader, sv, sensors, grid, active, config, timer,
                                             each, spill)
                         spilled = spill.finish() if spill is not None else None
