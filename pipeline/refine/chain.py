@@ -13,7 +13,7 @@ from typing import Any
 
 from formats.arrays import F64, I64
 from pipeline.config import PoseRefinementConfig
-from pipeline.refine.calibration import Calibration, calibrate
+from pipeline.refine.calibration import Calibration
 from pipeline.refine.compass import (
     compass_correction,
     spectrum_turn,
@@ -37,17 +37,10 @@ def _calibration(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes,
                  cfg: PoseRefinementConfig, bias_centre: float = 0.0,
                  max_bias: float | None = None) -> Calibration:
     """The calibration refinement runs, its heading bias within ``bias_centre ± max_bias``."""
-    from pipeline.refine.refine import calibration_gates
+    from pipeline.refine.refine import configured_calibration
 
-    far = (echoes.within(cfg.calibration_far_range_m)
-           if cfg.calibration_far_range_m > cfg.max_echo_range_m else None)
-    return calibrate(
-        t_ns, x, y, yaw, echoes.within(cfg.max_echo_range_m),
-        max_scale=cfg.calibration_max_scale,
-        max_bias=(math.radians(cfg.calibration_max_bias_deg_per_m) if max_bias is None
-                  else max_bias),
-        bias_centre=bias_centre, res=cfg.field_resolution_m, sigma=cfg.field_sigma_m,
-        far_echoes=far, **calibration_gates())
+    return configured_calibration(t_ns, x, y, yaw, echoes, cfg, max_bias=max_bias,
+                                  bias_centre=bias_centre)
 
 
 def _turned(cal: Calibration, by: float) -> float:

@@ -68,18 +68,21 @@ def calibration_gates() -> dict[str, Any]:
 
 
 def configured_calibration(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes,
-                           cfg: PoseRefinementConfig, **gates: Any) -> Calibration:
+                           cfg: PoseRefinementConfig, max_bias: float | None = None,
+                           **gates: Any) -> Calibration:
     """The odometry calibration (:func:`pipeline.refine.calibration.calibrate`) from
     ``echoes`` out to ``max_echo_range_m``, and those out to ``calibration_far_range_m``
-    for the scale where it reaches further; the heading bias within
-    ±``calibration_max_bias_deg_per_m``, the scale within ±``calibration_max_scale``;
-    ``gates`` replace :func:`calibration_gates`'s."""
+    for the scale where it reaches further; the heading bias within ± ``max_bias`` (rad per
+    m; default ``calibration_max_bias_deg_per_m``), the scale within
+    ±``calibration_max_scale``; ``gates`` replace :func:`calibration_gates`'s or add to them
+    (``bias_centre``)."""
     far = (echoes.within(cfg.calibration_far_range_m)
            if cfg.calibration_far_range_m > cfg.max_echo_range_m else None)
     return calibrate(
         t_ns, x, y, yaw, echoes.within(cfg.max_echo_range_m),
         max_scale=cfg.calibration_max_scale,
-        max_bias=math.radians(cfg.calibration_max_bias_deg_per_m),
+        max_bias=(math.radians(cfg.calibration_max_bias_deg_per_m) if max_bias is None
+                  else max_bias),
         res=cfg.field_resolution_m, sigma=cfg.field_sigma_m, far_echoes=far,
         **{**calibration_gates(), **gates},
     )
