@@ -42,6 +42,9 @@ F32 = npt.NDArray[np.float32]
 
 OUTLIER = 0.05  # field value an echo gets where the reference saw nothing (a floor)
 UNSEEN = 0.5  # field value where the reference's beams never looked (the occupancy prior)
+# An edge pose this many times as likely as the best inside the window: the true pose may lie
+# outside (a flat direction, a corridor's, is as likely at the edge as inside: kept).
+EDGE_RATIO = 2.0
 
 
 @dataclass(frozen=True)
@@ -216,6 +219,28 @@ def _grid(half: float, step: float) -> F64:
     return np.arange(-n, n + 1, dtype=np.float64) * step
 
 
+def _moments(ll: F64, off: F64, dyaw: F64, cells: bool = True) -> tuple[F64, F64]:
+    """Mean and covariance of the posterior ``w ∝ exp(ℓ − ℓ_max)`` over the grid of poses
+    ``(dyaw[k], off[a], off[b])``; with ``cells``, plus each step's quantisation
+    (``step²/12``) and half a step's uncertainty of where in its cell the optimum lies."""
+    wts = np.exp(ll - ll.max())
+    wts /= wts.sum()
+    d = [np.broadcast_to(off[None, :, None], ll.shape), np.broadcast_to(off[None, None, :],
+         ll.shape), np.broadcast_to(dyaw[:, None, None], ll.shape)]
+    mean = np.array([float((wts * v).sum()) for v in d])
+    cov = np.empty((3, 3))
+    for i in range(3):
+        for j in range(i, 3):
+            cov[i, j] = cov[j, i] = float((wts * (d[i] - mean[i]) * (d[j] - mean[j])).sum())
+    if not cells:
+        return mean, cov
+    step = float(off[1] - off[0]) if off.shape[0] > 1 else 0.0
+    step_yaw = float(dyaw[1] - dyaw[0]) if dyaw.shape[0] > 1 else 0.0
+    cov += np.diag([step**2 / 12 + (0.5 * step) ** 2, step**2 / 12 + (0.5 * step) ** 2,
+                    step_yaw**2 / 12 + (0.5 * step_yaw) ** 2])
+    return mean, cov
+
+
 def correlate(ref_x: F64, ref_y: F64, ref_sx: F64, ref_sy: F64, qx: F64, qy: F64,
               prediction: F64, window: Window, *, res: float, sigma: float
               ) -> Correlation | None:
@@ -233,8 +258,10 @@ def correlate(ref_x: F64, ref_y: F64, ref_sx: F64, ref_sy: F64, qx: F64, qy: F64
     cx_, cy_ = ((qx[:, mid:mid + 1], qy[:, mid:mid + 1]) if window.step_xy >= 4 * res
                 else (qx, qy))
     ll_c = _loglik(coarse, cover_c, neutral_c, cx_, cy_, prediction, dyaw_c, off_c)
-    k, a, b = np.unravel_index(int(np.argmax(ll_c)), ll_c.shape)
-    if k in (0, len(dyaw_c) - 1) or a in (0, len(off_c) - 1) or b in (0, len(off_c) - 1):
+    inner = np.full(ll_c.shape, -np.inf)
+    inner[1:-1, 1:-1, 1:-1] = ll_c[1:-1, 1:-1, 1:-1]
+    k, a, b = np.unravel_index(int(np.argmax(inner)), ll_c.shape)
+    if not np.isfinite(inner[k, a, b]) or ll_c.max() - inner[k, a, b] > math.log(EDGE_RATIO):
         return None  # the optimum lies on the window's edge: the true pose may be outside
     centre = prediction + np.array([off_c[a], off_c[b], dyaw_c[k]])
     # ambiguity: the best coarse pose two coarse steps or more away from the optimum
@@ -255,18 +282,10 @@ def correlate(ref_x: F64, ref_y: F64, ref_sx: F64, ref_sy: F64, qx: F64, qy: F64
         if res < step_xy:
             k, a, b = np.unravel_index(int(np.argmax(ll)), ll.shape)
             centre = centre + np.array([off_f[a], off_f[b], dyaw_f[k]])
-    wts = np.exp(ll - ll.max())
-    wts /= wts.sum()
-    d = [np.broadcast_to(off_f[None, :, None], ll.shape), np.broadcast_to(off_f[None, None, :],
-         ll.shape), np.broadcast_to(dyaw_f[:, None, None], ll.shape)]
-    mean = np.array([float((wts * v).sum()) for v in d])
-    cov = np.empty((3, 3))
-    for i in range(3):
-        for j in range(i, 3):
-            cov[i, j] = cov[j, i] = float((wts * (d[i] - mean[i]) * (d[j] - mean[j])).sum())
-    step_yaw, step = float(dyaw_f[1] - dyaw_f[0]), float(off_f[1] - off_f[0])
-    cov += np.diag([step**2 / 12 + (0.5 * step) ** 2, step**2 / 12 + (0.5 * step) ** 2,
-                    step_yaw**2 / 12 + (0.5 * step_yaw) ** 2])
+    mean, cov = _moments(ll, off_f, dyaw_f)
+    if fine is not coarse:  # the fine grid spans ± two coarse steps: a flat posterior is cut
+        cov = cov + _moments(ll_c, off_c, dyaw_c, cells=False)[1]  # there; the whole
+        # window's spread says how far (a sharp peak's is ~0 on the coarse grid)
     pose = centre + mean
     pose[2] = float(wrap_angle(pose[2]))
     kb = np.unravel_index(int(np.argmax(ll)), ll.shape)
