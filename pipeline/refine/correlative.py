@@ -42,9 +42,6 @@ F32 = npt.NDArray[np.float32]
 
 OUTLIER = 0.05  # field value an echo gets where the reference saw nothing (a floor)
 UNSEEN = 0.5  # field value where the reference's beams never looked (the occupancy prior)
-# An edge pose this many times as likely as the best inside the window: the true pose may lie
-# outside (a flat direction, a corridor's, is as likely at the edge as inside: kept).
-EDGE_RATIO = 2.0
 
 
 @dataclass(frozen=True)
@@ -258,10 +255,8 @@ def correlate(ref_x: F64, ref_y: F64, ref_sx: F64, ref_sy: F64, qx: F64, qy: F64
     cx_, cy_ = ((qx[:, mid:mid + 1], qy[:, mid:mid + 1]) if window.step_xy >= 4 * res
                 else (qx, qy))
     ll_c = _loglik(coarse, cover_c, neutral_c, cx_, cy_, prediction, dyaw_c, off_c)
-    inner = np.full(ll_c.shape, -np.inf)
-    inner[1:-1, 1:-1, 1:-1] = ll_c[1:-1, 1:-1, 1:-1]
-    k, a, b = np.unravel_index(int(np.argmax(inner)), ll_c.shape)
-    if not np.isfinite(inner[k, a, b]) or ll_c.max() - inner[k, a, b] > math.log(EDGE_RATIO):
+    k, a, b = np.unravel_index(int(np.argmax(ll_c)), ll_c.shape)
+    if k in (0, len(dyaw_c) - 1) or a in (0, len(off_c) - 1) or b in (0, len(off_c) - 1):
         return None  # the optimum lies on the window's edge: the true pose may be outside
     centre = prediction + np.array([off_c[a], off_c[b], dyaw_c[k]])
     # ambiguity: the best coarse pose two coarse steps or more away from the optimum
