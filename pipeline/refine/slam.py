@@ -6,7 +6,9 @@
 2. **Scan-to-map matching**, in travel order: submap ``j`` is correlated
    (:mod:`~pipeline.refine.correlative`) against the previous ``local_map_submaps``
    submaps placed by their estimates, around the odometry's prediction (± ``search_xy_m``,
-   ``search_yaw_deg``); the match's posterior mean and covariance become a constraint.
+   ``search_yaw_deg``); every optimum inside the window becomes a constraint, its
+   posterior mean with its covariance plus the submaps' own odometry walk
+   (:func:`distortion`): a weak match weighs little instead of passing a score gate.
 3. **Loop closures**: earlier submaps (twice ``loop_radius_m`` of travel back) whose
    estimate lies within ``loop_radius_m`` are correlated over ± ``loop_search_xy_m``,
    ``loop_search_yaw_deg``; kept when the score reaches :data:`MIN_SCORE` and the best
@@ -21,8 +23,9 @@
    bends the graph and raises the χ² of the right ones; it goes first).
 5. **Acceptance**, two tests the solution must pass to replace the odometry: a
    likelihood ratio — were the odometry right, twice its cost minus the solution's would
-   be at most χ² with one degree of freedom per constraint coordinate (3 per constraint
-   kept), so it must exceed that χ²'s 99 % quantile — and the echoes, which the graph
+   be at most χ² with the matches' effective degrees of freedom
+   (:func:`~pipeline.refine.graph.match_dof`), so it must exceed that χ²'s 99 % quantile
+   — and the echoes, which the graph
    never saw whole: their consistency ``H/(H+F)``
    (:class:`~pipeline.refine.scores.Consistency`) must be higher on the solution's poses
    than on the odometry's (closures that agree with each other but not with the
@@ -70,7 +73,6 @@ SUBMAP_MIN_ECHOES = 60  # a shorter stretch joins the next submap (too few echoe
 SUBMAP_MAX_POINTS = 400  # echoes kept per submap (evenly thinned)
 LOCAL_MAP_SUBMAPS = 3  # a submap is matched against this many previous ones
 MIN_SCORE = 0.7  # a closure is kept when the reference explains this share of its echoes
-SEQUENTIAL_LIKELIHOOD = True  # sequential matches: every in-window optimum, robust loss
 MAX_AMBIGUITY = 0.99  # a closure whose distinct second pose is this likely is ambiguous
 # Priors on the odometry's systematic error (σ): a few percent of scale and a fraction of a
 # degree per metre are typical of uncalibrated wheel odometry (docs/POSE_REFINEMENT.md).
@@ -237,7 +239,7 @@ def slam_track(tt: np.ndarray, tx: F64, ty: F64, tyaw: F64, echoes: Echoes,
                                                 g.scale, g.bias)[0])
         refs = list(range(max(0, j - LOCAL_MAP_SUBMAPS), j))
         m = _match(g, refs, j, pred, seq, cfg)
-        if m is not None and (SEQUENTIAL_LIKELIHOOD or m.score >= MIN_SCORE):
+        if m is not None:  # every in-window optimum, weighed by its covariance
             g.add(j - 1, j, m.pose, m.cov + distortion(anchor_path, j, opt), loop=False)
             g.est[j] = m.pose
             seq_ok += 1
