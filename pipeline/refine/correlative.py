@@ -12,13 +12,14 @@ the cones from its sensors to its echoes) ``f`` is the occupancy prior ½ instea
 echo there is neither confirmed nor contradicted, which keeps the search from pulling new
 wall onto the reference's old wall. Every pose of a grid ``± window`` around the
 prediction is evaluated (Olson 2009: exhaustive, so no local minimum), coarse to fine:
-first on a field blurred to the coarse step with poses every coarse step, then on the
- The match is the posterior
+first on a field blurred to the coarse step with poses every coarse step, then on finer
+levels around its optimum. The match is the posterior
 over the fine grid, ``w ∝ exp(ℓ − ℓ_max)``:
 
 * ``pose`` and ``cov``: the weighted mean and covariance of the grid poses (plus each
-  step's quantisation ``step²/12``): a corridor's flat direction gives a wide covariance
-  instead of an arbitrary peak;
+  step's quantisation ``step²/12``), plus the coarse level's spread over the whole window
+  (the fine levels span ± two coarse steps and would cut a flat posterior there): a
+  corridor's flat direction gives a wide covariance instead of an arbitrary peak;
 * ``score``: the mean field value at the best pose (how much of the query the reference
   explains), ``ambiguity``: the best coarse ℓ farther than two coarse steps from the
   optimum, as a likelihood ratio ``exp(ℓ_other − ℓ_max)`` (near 1: another pose fits as
