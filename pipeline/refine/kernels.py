@@ -507,37 +507,46 @@ def correlation_grid(table: np.ndarray, h: int, w: int, fx: np.ndarray, fy: np.n
     cells[b]·res, dyaw[k])`` (:func:`pipeline.refine.correlative._loglik`, whose numpy
     version it replaces bit for bit): ``table`` the per-cell log values (row-major ``h × w``,
     then one more: the value outside), ``fx, fy`` the query's arc points (echo-major,
-    ``n_arc`` per echo); each echo scores its best arc point, summed over echoes in order."""
+    ``n_arc`` per echo); each echo scores its best arc point, summed over echoes in order.
+
+    The table is padded by ``2P + 1`` cells of the outside value (``P`` the largest offset)
+    and each point's cell clamped to ``P + 1`` outside the field, which moves no lookup
+    from outside to inside: the inner loop runs without bounds tests, along a row."""
     n_cells = cells.shape[0]
     n_pts = fx.shape[0]
     n_echo = n_pts // n_arc
+    reach = 0
+    for a in range(n_cells):
+        reach = max(reach, abs(cells[a]))
+    pad = 2 * reach + 1
+    wp = w + 2 * pad
+    padded = np.full((h + 2 * pad) * wp, table[h * w])
+    for r in range(h):
+        padded[(r + pad) * wp + pad:(r + pad) * wp + pad + w] = table[r * w:(r + 1) * w]
     out = np.zeros((dyaw.shape[0], n_cells, n_cells))
-    ix = np.empty(n_pts, np.int64)
-    iy = np.empty(n_pts, np.int64)
-    best = np.empty((n_cells, n_cells))
-    outside = h * w
+    base = np.empty(n_pts, np.int64)
+    best = np.empty((n_cells, n_cells))  # [b, a]: y offset, then x along a row
     for k in range(dyaw.shape[0]):
         th = centre[2] + dyaw[k]
         c, s = math.cos(th), math.sin(th)
         for p in range(n_pts):
-            ix[p] = np.int64(math.floor((centre[0] + c * fx[p] - s * fy[p] - origin_x) / res))
-            iy[p] = np.int64(math.floor((centre[1] + s * fx[p] + c * fy[p] - origin_y) / res))
+            ix = np.int64(math.floor((centre[0] + c * fx[p] - s * fy[p] - origin_x) / res))
+            iy = np.int64(math.floor((centre[1] + s * fx[p] + c * fy[p] - origin_y) / res))
+            ix = min(max(ix, -reach - 1), w + reach)
+            iy = min(max(iy, -reach - 1), h + reach)
+            base[p] = (iy + pad) * wp + ix + pad
         for e in range(n_echo):
-            for a in range(n_cells):
-                for b in range(n_cells):
-                    best[a, b] = -np.inf
+            best[:, :] = -np.inf
             for q in range(e * n_arc, (e + 1) * n_arc):
-                for a in range(n_cells):
-                    cx = ix[q] + cells[a]
-                    for b in range(n_cells):
-                        cy = iy[q] + cells[b]
-                        i = cy * w + cx if 0 <= cx < w and 0 <= cy < h else outside
-                        v = table[i]
-                        if v > best[a, b]:
-                            best[a, b] = v
+                if q > e * n_arc and base[q] == base[q - 1]:
+                    continue  # the arc's previous point's cell: the same values
+                for b in range(n_cells):
+                    row = base[q] + cells[b] * wp
+                    for a in range(n_cells):
+                        best[b, a] = max(best[b, a], padded[row + cells[a]])
             for a in range(n_cells):
                 for b in range(n_cells):
-                    out[k, a, b] += best[a, b]
+                    out[k, a, b] += best[b, a]
     return out
 
 

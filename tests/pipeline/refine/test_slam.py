@@ -180,6 +180,34 @@ def test_the_compiled_correlation_gives_the_numpy_versions_bits() -> None:
     assert np.ptp(fast) > 1.0  # the grid sees the room, not a flat field
 
 
+def test_the_compiled_correlation_keeps_its_bits_where_the_query_leaves_the_field() -> None:
+    """The kernel pads the field and clamps far points: lookups near and far beyond each
+    edge, and offsets that skip cells, still give the numpy version's values."""
+    from pipeline.refine.correlative import (
+        LikelihoodField,
+        _coverage,
+        _loglik,
+        _loglik_reference,
+    )
+
+    rx, ry, sx, sy = _room(np.random.default_rng(3))
+    qx, qy, _, _ = _room(np.random.default_rng(4))
+    fld = LikelihoodField.of_points(rx, ry, res=0.1, sigma=0.1, margin=0.3)
+    cover = _coverage(fld, rx, ry, sx, sy, 0.1)
+    h, w = fld.values.shape
+    dyaw = np.linspace(-0.2, 0.2, 3)
+    for centre in (np.array([0.0, 0.0, 0.0]), np.array([w * 0.1 * 0.6, -0.4, 0.5]),
+                   np.array([-50.0, 3.0, 1.0]), np.array([2.0, h * 0.1 + 0.35, -0.3])):
+        for offsets in (np.arange(-4, 5) * 0.1, np.arange(-3, 4) * 0.2):
+            fast = _loglik(fld, cover, math.log(0.55), qx, qy, centre, dyaw, offsets)
+            slow = _loglik_reference(fld, cover, math.log(0.55), qx, qy, centre, dyaw,
+                                     offsets)
+            assert np.array_equal(fast, slow)
+    far = _loglik(fld, cover, math.log(0.55), qx, qy, np.array([-50.0, 3.0, 1.0]), dyaw,
+                  np.arange(-4, 5) * 0.1)
+    assert np.allclose(far, qx.shape[0] * math.log(0.55))  # all outside: the neutral value
+
+
 def test_the_compiled_coverage_gives_the_numpy_versions_cells() -> None:
     from pipeline.refine.correlative import LikelihoodField, _coverage, _coverage_reference
 
