@@ -232,14 +232,17 @@ class _Problem:
         return np.concatenate(rows), np.concatenate(cols), np.concatenate(vals), r
 
     def match_chi2(self, v: F64) -> F64:
-        x, _, _ = self.unpack(v)
-        m = self.matches
-        if not len(m):
-            return np.zeros(0)
-        rel = between(x[m.i], x[m.j])
-        e = np.column_stack([rel[:, :2] - m.z[:, :2], wrap_angle(rel[:, 2] - m.z[:, 2])])
-        r = np.einsum("mab,mb->ma", m.u, e)
-        return np.asarray((r * r).sum(axis=1))
+        return match_chi2(self.unpack(v)[0], self.matches)
+
+
+def match_chi2(x: F64, m: MatchConstraints) -> F64:
+    """Each match's ``e·info·e`` at anchors ``x`` (no robust loss)."""
+    if not len(m):
+        return np.zeros(0)
+    rel = between(x[m.i], x[m.j])
+    e = np.column_stack([rel[:, :2] - m.z[:, :2], wrap_angle(rel[:, 2] - m.z[:, 2])])
+    r = np.einsum("mab,mb->ma", m.u, e)
+    return np.asarray((r * r).sum(axis=1))
 
 
 def robust_cost(r: F64, scale: float) -> float:

@@ -57,6 +57,7 @@ from pipeline.refine.graph import (
     MatchConstraints,
     Odometry,
     cost_at,
+    match_chi2,
     match_dof,
     solve,
     sqrt_information,
@@ -157,16 +158,17 @@ def _start(tt: np.ndarray, tx: F64, ty: F64, tyaw: F64, first: Submap) -> Submap
                   np.empty(0), np.empty(0))
 
 
-def _consistent(g: _Graph, last: int, keep: np.ndarray) -> np.ndarray:
+def _consistent(g: _Graph, last: int, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The constraints kept once every one the graph explains within χ²'s 99.9 % quantile:
     the worst is dropped and the graph solved again until none exceeds it (one at a time,
-    since a wrong constraint raises the χ² of the right ones it bends)."""
+    since a wrong constraint raises the χ² of the right ones it bends); and every
+    constraint's χ² at that last solution."""
     keep = keep.copy()
     while True:
         chi2 = g.solve_upto(last, keep)
         worst = int(np.argmax(np.where(keep, chi2, -1.0))) if keep.any() else -1
         if worst < 0 or chi2[worst] <= CHI2_OUTLIER:
-            return keep
+            return keep, chi2
         keep[worst] = False
 
 
@@ -233,7 +235,7 @@ def slam_track(tt: np.ndarray, tx: F64, ty: F64, tyaw: F64, echoes: Echoes,
     g = _Graph(submaps, odo, opt, odo_anchor.copy())
     seq = _window(cfg.search_xy_m, cfg.search_yaw_deg, cfg.field_resolution_m)
     wide = _window(cfg.loop_search_xy_m, cfg.loop_search_yaw_deg, cfg.field_resolution_m)
-    seq_ok = seq_bad = loop_tried = loop_gated = loop_inconsistent = 0
+    seq_ok = seq_bad = loop_tried = loop_gated = loop_inconsistent = explained = 0
     for j in range(1, len(submaps)):
         pred = compose(g.est[j - 1], calibrated(odo.delta[j - 1:j], odo.length[j - 1:j],
                                                 g.scale, g.bias)[0])
@@ -251,6 +253,7 @@ def slam_track(tt: np.ndarray, tx: F64, ty: F64, tyaw: F64, echoes: Echoes,
         cand = np.flatnonzero((d <= cfg.loop_radius_m) & far)
         cand = cand[np.argsort(d[cand], kind="stable")][:1]
         closed = False
+        first_new = len(g.i)
         for i in cand.tolist():
             loop_tried += 1
             refs = [r for r in (i - 1, i, i + 1) if 0 <= r < j]
@@ -260,14 +263,16 @@ def slam_track(tt: np.ndarray, tx: F64, ty: F64, tyaw: F64, echoes: Echoes,
                 continue
             g.add(i, j, m.pose, m.cov, loop=True)
             closed = True
-        if closed:
-            keep = _consistent(g, j, np.ones(len(g.i), bool))
+        if closed and (match_chi2(g.est, g.constraints().take(
+                np.arange(len(g.i)) >= first_new)) <= CHI2_OUTLIER).all():
+            explained += 1  # the estimate explains the closure already: no re-solve
+        elif closed:
+            keep, _ = _consistent(g, j, np.ones(len(g.i), bool))
             if not keep.all():  # a new closure the graph so far cannot explain goes
                 loop_inconsistent += int((~keep).sum())
                 g.drop(keep)
     g.opt = opt = dataclasses.replace(opt, scale_centre=scale)
-    keep = _consistent(g, len(submaps) - 1, np.ones(len(g.i), bool))
-    chi2 = g.solve_upto(len(submaps) - 1, keep)
+    keep, chi2 = _consistent(g, len(submaps) - 1, np.ones(len(g.i), bool))
     loop = np.array(g.loop, bool)
     mc = g.constraints(keep)
     cost_odometry = cost_at(odo_anchor, odo, mc, opt)
@@ -283,6 +288,7 @@ def slam_track(tt: np.ndarray, tx: F64, ty: F64, tyaw: F64, echoes: Echoes,
         "loop_closures_accepted": int((keep & loop).sum()),
         "loop_closures_rejected": loop_gated + loop_inconsistent + int((~keep & loop).sum()),
         "loop_closures_inconsistent": loop_inconsistent + int((~keep & loop).sum()),
+        "loop_closures_explained_at_once": explained,
         "cost_odometry": cost_odometry, "cost_final": cost_solution, "match_dof": dof,
         "scale_error": g.scale, "heading_bias_deg_per_m": math.degrees(g.bias),
         "accepted": bool(accepted),

@@ -111,6 +111,8 @@ def test_the_graph_closes_the_loops_of_a_random_walk(loop_logs: tuple[Path, Path
     pr = a.metrics.pose_refinement
     assert pr is not None and pr["accepted"] is True
     assert pr["loop_closures_accepted"] >= 3 and len(pr["loop_closure_edges"]) >= 3
+    # a drifted track's first closure disagrees with it: the graph is solved for it
+    assert pr["loop_closures_explained_at_once"] < pr["loop_closures_accepted"]
     assert pr["heading_bias_deg_per_m"] == pytest.approx(-0.5, abs=0.15)
     assert "graph" in pr["summary"]
     from mcap.reader import make_reader
@@ -129,6 +131,8 @@ def test_the_graph_leaves_correct_poses_alone(loop_logs: tuple[Path, Path],
     pr = r.metrics.pose_refinement
     assert pr is not None
     assert pr["moved_max_m"] < 0.05 or pr["accepted"] is False
+    # most closures of a right track agree with its estimate: no re-solve for them
+    assert 1 <= pr["loop_closures_explained_at_once"] <= pr["loop_closures_tried"]
 
 
 def _square_graph() -> tuple[object, np.ndarray]:
@@ -146,7 +150,7 @@ def _square_graph() -> tuple[object, np.ndarray]:
 
 
 def test_a_closure_the_graph_cannot_explain_is_dropped_and_the_right_ones_stay() -> None:
-    from pipeline.refine.slam import _consistent
+    from pipeline.refine.slam import CHI2_OUTLIER, _consistent
 
     g, truth = _square_graph()
     cov = np.diag([0.05**2, 0.05**2, math.radians(1) ** 2])
@@ -154,9 +158,10 @@ def test_a_closure_the_graph_cannot_explain_is_dropped_and_the_right_ones_stay()
     g.add(1, 6, truth[6], cov, loop=True)  # right
     wrong = truth[5] + np.array([1.5, -1.0, math.radians(25)])
     g.add(2, 5, wrong, cov, loop=True)
-    keep = _consistent(g, 7, np.ones(3, bool))
+    keep, chi2 = _consistent(g, 7, np.ones(3, bool))
     assert keep.tolist() == [True, True, False]
     assert np.abs(g.est[:, :2] - truth[:, :2]).max() < 0.01  # solved without it
+    assert chi2[2] == 0.0 and (chi2[:2] <= CHI2_OUTLIER).all()
 
 
 def test_the_compiled_correlation_gives_the_numpy_versions_bits() -> None:
