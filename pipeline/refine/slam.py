@@ -57,7 +57,6 @@ from pipeline.refine.graph import (
     MatchConstraints,
     Odometry,
     cost_at,
-    match_chi2,
     match_dof,
     solve,
     sqrt_information,
@@ -235,7 +234,7 @@ def slam_track(tt: np.ndarray, tx: F64, ty: F64, tyaw: F64, echoes: Echoes,
     g = _Graph(submaps, odo, opt, odo_anchor.copy())
     seq = _window(cfg.search_xy_m, cfg.search_yaw_deg, cfg.field_resolution_m)
     wide = _window(cfg.loop_search_xy_m, cfg.loop_search_yaw_deg, cfg.field_resolution_m)
-    seq_ok = seq_bad = loop_tried = loop_gated = loop_inconsistent = explained = 0
+    seq_ok = seq_bad = loop_tried = loop_gated = loop_inconsistent = 0
     for j in range(1, len(submaps)):
         pred = compose(g.est[j - 1], calibrated(odo.delta[j - 1:j], odo.length[j - 1:j],
                                                 g.scale, g.bias)[0])
@@ -253,7 +252,6 @@ def slam_track(tt: np.ndarray, tx: F64, ty: F64, tyaw: F64, echoes: Echoes,
         cand = np.flatnonzero((d <= cfg.loop_radius_m) & far)
         cand = cand[np.argsort(d[cand], kind="stable")][:1]
         closed = False
-        first_new = len(g.i)
         for i in cand.tolist():
             loop_tried += 1
             refs = [r for r in (i - 1, i, i + 1) if 0 <= r < j]
@@ -263,10 +261,7 @@ def slam_track(tt: np.ndarray, tx: F64, ty: F64, tyaw: F64, echoes: Echoes,
                 continue
             g.add(i, j, m.pose, m.cov, loop=True)
             closed = True
-        if closed and (match_chi2(g.est, g.constraints().take(
-                np.arange(len(g.i)) >= first_new)) <= CHI2_OUTLIER).all():
-            explained += 1  # the estimate explains the closure already: no re-solve
-        elif closed:
+        if closed:
             keep, _ = _consistent(g, j, np.ones(len(g.i), bool))
             if not keep.all():  # a new closure the graph so far cannot explain goes
                 loop_inconsistent += int((~keep).sum())
@@ -288,7 +283,6 @@ def slam_track(tt: np.ndarray, tx: F64, ty: F64, tyaw: F64, echoes: Echoes,
         "loop_closures_accepted": int((keep & loop).sum()),
         "loop_closures_rejected": loop_gated + loop_inconsistent + int((~keep & loop).sum()),
         "loop_closures_inconsistent": loop_inconsistent + int((~keep & loop).sum()),
-        "loop_closures_explained_at_once": explained,
         "cost_odometry": cost_odometry, "cost_final": cost_solution, "match_dof": dof,
         "scale_error": g.scale, "heading_bias_deg_per_m": math.degrees(g.bias),
         "accepted": bool(accepted),

@@ -111,8 +111,6 @@ def test_the_graph_closes_the_loops_of_a_random_walk(loop_logs: tuple[Path, Path
     pr = a.metrics.pose_refinement
     assert pr is not None and pr["accepted"] is True
     assert pr["loop_closures_accepted"] >= 3 and len(pr["loop_closure_edges"]) >= 3
-    # a drifted track's first closure disagrees with it: the graph is solved for it
-    assert pr["loop_closures_explained_at_once"] < pr["loop_closures_accepted"]
     assert pr["heading_bias_deg_per_m"] == pytest.approx(-0.5, abs=0.15)
     assert "graph" in pr["summary"]
     from mcap.reader import make_reader
@@ -131,8 +129,6 @@ def test_the_graph_leaves_correct_poses_alone(loop_logs: tuple[Path, Path],
     pr = r.metrics.pose_refinement
     assert pr is not None
     assert pr["moved_max_m"] < 0.05 or pr["accepted"] is False
-    # most closures of a right track agree with its estimate: no re-solve for them
-    assert 1 <= pr["loop_closures_explained_at_once"] <= pr["loop_closures_tried"]
 
 
 def _square_graph() -> tuple[object, np.ndarray]:
