@@ -530,8 +530,8 @@ def correlation_grid(table: np.ndarray, h: int, w: int, fx: np.ndarray, fy: np.n
         th = centre[2] + dyaw[k]
         c, s = math.cos(th), math.sin(th)
         for p in range(n_pts):
-            ix = int(math.floor((centre[0] + c * fx[p] - s * fy[p] - origin_x) / res))
-            iy = int(math.floor((centre[1] + s * fx[p] + c * fy[p] - origin_y) / res))
+            ix = math.floor((centre[0] + c * fx[p] - s * fy[p] - origin_x) / res)
+            iy = math.floor((centre[1] + s * fx[p] + c * fy[p] - origin_y) / res)
             ix = min(max(ix, -reach - 1), w + reach)
             iy = min(max(iy, -reach - 1), h + reach)
             base[p] = (iy + pad) * wp + ix + pad
