@@ -79,21 +79,23 @@ def test_no_echo_no_votes() -> None:
 def test_the_forward_method_uses_the_lines_in_pass_3_only() -> None:
     from pipeline.config import MapperConfig
     from pipeline.mapper import make_mapper
+    from pipeline.mapper.forward import ForwardMapper
     from pipeline.mapper.synthetic import ring_scans, room_grid
     from pipeline.methods import Method
 
     scans = ring_scans(60)
     mapper = make_mapper(MapperConfig(method=Method.FORWARD, wall_line_half_length_m=0.3),
                          room_grid(0.05))
-    own = None
+    assert isinstance(mapper, ForwardMapper)
+    own = np.zeros(0, dtype=np.float32)
     for index in range(mapper.passes):
         mapper.begin_pass(index)
-        if index == 3:
-            assert own is not None and mapper.votes.sum() > 0  # type: ignore[attr-defined]
-            assert (mapper.consistency == 1.0).sum() > (own == 1.0).sum()  # type: ignore[attr-defined]
-        if index == 4:
-            assert np.array_equal(mapper.consistency, own)  # type: ignore[attr-defined]
+        if index == 3:  # the lines' cells are surfaces of known orientation
+            assert mapper.votes.sum() > 0
+            assert (mapper.consistency == 1.0).sum() > (own == 1.0).sum()
+        if index == 4:  # the final attribution stops rays at the cells' own normals
+            assert np.array_equal(mapper.consistency, own)
         mapper.integrate_many(scans)
         if index == 2:
-            own = mapper.consistency.copy()  # type: ignore[attr-defined]
+            own = mapper.consistency.copy()
     assert mapper.snapshot().grid.shape == room_grid(0.05).shape
