@@ -22,6 +22,10 @@ This method measures them with one E-step of a forward sensor model (Thrun 2003)
    answered share with the coincidences taken out (:func:`unknown_rate`; the rate ``f``
    of an echo from elsewhere landing on a surface, from :func:`fit_detection`).
 
+With ``wall_line_half_length_m > 0`` pass 0 also votes every echo's tangent lines and pass 3
+judges passes near the wall lines found (:mod:`pipeline.mapper.wall_lines`) against the
+line's normal (consistency 1); pass 4 keeps the cells' own normals.
+
 Where the sonar hears surfaces at every incidence, ``p(θ) = p(0)``, every pass counts 1 and
 no ray stops: §9's evidence (with max-range readings' free cones). No configuration key of
 its own (the bins' smoothing is the uniform prior). Memory: §10's grids; the counts are 38
