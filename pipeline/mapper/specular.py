@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import numpy.typing as npt
 from scipy.special import ndtr
 
 from pipeline.config import MapperConfig
@@ -118,6 +119,9 @@ class SpecularMapper(AttributionMapper):
         self.hits2: F32 = empty_grid(grid.shape)
         self._unattributed2 = 0
         self._bands = RowBands(config.threads)
+        # Pass 2's shadows, group by group (bit-packed ``stopped``): pass 3 recomputes only
+        # the readings pass 2 found stopped (module doc).
+        self._shadowed: list[npt.NDArray[np.uint8]] = []
 
     def begin_pass(self, index: int) -> None:
         """Start pass ``index`` (module doc) over the same scans."""
@@ -127,6 +131,7 @@ class SpecularMapper(AttributionMapper):
             self._settle_counts()
         if index == 2:
             self._find_surfaces()
+            self._shadowed.clear()
         self.pass_index = index
         self._group_index = 0
 
@@ -171,15 +176,22 @@ class SpecularMapper(AttributionMapper):
         stops: F64 = np.empty(int(offsets[-1]))
         stopped: B = np.zeros(len(rows), dtype=bool)
         if self.occ_cols.size:
+            # Pass 3's shadows are pass 2's (the same cones, surfaces and table): only the
+            # readings pass 2 found stopped can be (an infinite inner radius skips a reading).
+            r_look = r_inner if self.pass_index != 3 else np.where(
+                self._was_shadowed(len(rows)), r_inner, np.inf)
+
             def shadows(lo: int, hi: int) -> int:
                 return int(shadow_profiles(
-                    cones, up_down, r_inner, alpha, half, g.origin_x, g.origin_y,
+                    cones, up_down, r_look, alpha, half, g.origin_x, g.origin_y,
                     g.resolution, self.occ_index, self.occ_cols, self.nx, self.ny,
                     self.consistency, self.cos_table, attribute, lo, hi, offsets, stops,
                     stopped,
                 ))
 
             self._bands.run(shadows, len(rows) // 2, len(rows))
+            if self.pass_index == 2:
+                self._shadowed.append(np.packbits(stopped))
 
         def trace(row_lo: int, row_hi: int) -> int:
             return int(trace_readings(
@@ -201,6 +213,14 @@ class SpecularMapper(AttributionMapper):
         elif attribute:
             # readings with no echo have no arc: not unattributed echoes
             self._unattributed2 += int(lost) - int(np.count_nonzero(d[rows] <= 0.0))
+
+    def _was_shadowed(self, readings: int) -> B:
+        """Pass 2's ``stopped`` of the current group (the same groups in passes 2 and 3)."""
+        packed = self._shadowed[self._group_index]
+        if packed.size != (readings + 7) // 8:
+            raise RuntimeError(f"scan group {self._group_index} differs between passes 2 and 3")
+        out: B = np.unpackbits(packed, count=readings).astype(bool)
+        return out
 
     def occupied(self) -> B:
         """§9's linear test on the second attribution and the surface-aware free counts."""
