@@ -171,7 +171,8 @@ def _count_spans(
     """:func:`trace_readings` without ``attribute``: one reading's free and arc counts on
     its spans ``rows, c0s, c1s`` (the rows ``row_lo ≤ r < row_hi``). A span's distances,
     incidences and shadow bins first, in loops without branches (vectorised: the same IEEE
-    operations, so the same bits), then its cells."""
+    operations, so the same bits), then its cells: for a reading that no surface stops,
+    every cell's visibility, then the adds without branches (vectorised)."""
     tmax = float(table.shape[0] - 1)
     ntab = table.shape[0] - 2
     for k in range(n):
@@ -187,15 +188,28 @@ def _count_spans(
             dv = math.sqrt(dxv * dxv + dy * dy)
             dbuf[j] = dv
             xbuf[j] = abs(dxv * nxr[j] + dy * nyr[j]) / max(dv, 1e-12) * tmax
-        if stopped:
+        if not stopped:
+            # Every cell's visibility, then the adds without branches: a cell that gets
+            # no evidence adds 0.0, which leaves its float32 value as it was.
             for j in range(w):
-                dxv = gx + ((c0 + j) + 0.5) * res - ox
-                along = max(dxv * ca + dy * sa, 1e-12)
-                kb = math.floor(((dy * ca - dxv * sa) / along + t_edge) / bin_w)
-                kbuf[j] = min(max(kb, 0), nb - 1)
+                x = xbuf[j]
+                kt = min(int(x), ntab)
+                f = x - kt
+                xbuf[j] = table[kt] * (1.0 - f) + table[kt + 1] * f
+            free_r, arcs_r, cons_r = free_out[r, c0:c0 + w], arcs_out[r, c0:c0 + w], cons[r, c0:c0 + w]
+            for j in range(w):
+                q = cons_r[j]
+                free_r[j] += (q * xbuf[j] + (1.0 - q) * v_unknown) if dbuf[j] < rf else 0.0
+                arcs_r[j] += 1.0 if dbuf[j] >= ri else 0.0
+            continue
+        for j in range(w):
+            dxv = gx + ((c0 + j) + 0.5) * res - ox
+            along = max(dxv * ca + dy * sa, 1e-12)
+            kb = math.floor(((dy * ca - dxv * sa) / along + t_edge) / bin_w)
+            kbuf[j] = min(max(kb, 0), nb - 1)
         for c in range(c0, c0 + w):
             dist = dbuf[c - c0]
-            if stopped and dist > stop[kbuf[c - c0]]:
+            if dist > stop[kbuf[c - c0]]:
                 continue
             if dist < rf:
                 q = cons[r, c]
