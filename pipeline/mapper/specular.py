@@ -206,15 +206,18 @@ class SpecularMapper(AttributionMapper):
             if self.pass_index == 2:
                 self._shadowed.append(np.packbits(stopped))
 
+        # The kernel's arguments taken now: the band thread holds arrays, not the mapper.
+        args = (
+            cones, up_down, r_inner, free_r[rows], alpha, half,
+            g.origin_x, g.origin_y, g.resolution, offsets, stops, stopped,
+            self.nx, self.ny, self.consistency, self.cos_table, self.v_unknown, attribute,
+            first, self.free if first else self.free2, self.arcs if first else self.arcs2,
+            cfg.attr_candidate_ratio, cfg.attr_dilution, self.free2, self.arcs2,
+            self.hits if first else self.hits2, self.arc_c, self.arc_s,
+        )
+
         def trace(row_lo: int, row_hi: int) -> int:
-            return int(trace_readings(
-                cones, up_down, r_inner, free_r[rows], alpha, half,
-                g.origin_x, g.origin_y, g.resolution, offsets, stops, stopped,
-                self.nx, self.ny, self.consistency, self.cos_table, self.v_unknown, attribute,
-                first, self.free if first else self.free2, self.arcs if first else self.arcs2,
-                cfg.attr_candidate_ratio, cfg.attr_dilution, self.free2, self.arcs2,
-                self.hits if first else self.hits2, self.arc_c, self.arc_s, row_lo, row_hi,
-            ))
+            return int(trace_readings(*args, row_lo, row_hi))
 
         if attribute:
             # One group's attribution at a time, in order, on the band thread: this group's
