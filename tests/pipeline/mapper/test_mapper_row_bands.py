@@ -156,3 +156,44 @@ def test_later_runs_in_order_on_the_worker_and_hands_back_errors() -> None:
             with pytest.raises(ValueError, match="attribution failed"):
                 bands.later(fails).result()
         bands.close()
+
+
+def test_a_mapper_dropped_with_an_attribution_pending_is_freed_on_the_calling_thread(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # The band thread holds the attribution's arrays, not the mapper: a mapper dropped
+    # mid-pass is freed (and its thread stopped) here, not on that thread (which cannot
+    # join itself).
+    import gc
+    import sys
+    import time
+    import weakref
+
+    raised: list[object] = []
+    monkeypatch.setattr(sys, "unraisablehook", raised.append)
+    trace = specular.trace_readings
+
+    def slow(*args: object) -> int:  # the attribution still runs when the mapper is dropped
+        time.sleep(0.3)
+        return int(trace(*args))
+
+    monkeypatch.setattr(specular, "trace_readings", slow)
+    scans = specular_scans(120, 20.0)
+    before = set(threading.enumerate())
+    m = make_mapper(MapperConfig(threads=2), room_grid())
+    for index in range(2):
+        m.begin_pass(index)
+        m.integrate_many(scans)  # pass 1 ends with its last group's attribution pending
+    assert m._attributing is not None  # type: ignore[attr-defined]
+    assert not m._attributing[0].done()  # type: ignore[attr-defined]
+    band_threads = [t for t in threading.enumerate()
+                    if t not in before and t.name.startswith("sonarmap-band")]
+    assert len(band_threads) == 1
+    alive = weakref.ref(m)
+    del m
+    gc.collect()
+    assert alive() is None
+    assert raised == []
+    for t in band_threads:
+        t.join(timeout=10)
+    assert not any(t.is_alive() for t in band_threads)
