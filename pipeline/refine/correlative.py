@@ -12,13 +12,14 @@ the cones from its sensors to its echoes) ``f`` is the occupancy prior ½ instea
 echo there is neither confirmed nor contradicted, which keeps the search from pulling new
 wall onto the reference's old wall. Every pose of a grid ``± window`` around the
 prediction is evaluated (Olson 2009: exhaustive, so no local minimum), coarse to fine:
-first on a field blurred to the coarse step with poses every coarse step, then on the
- The match is the posterior
+first on a field blurred to the coarse step with poses every coarse step, then on finer
+levels around its optimum. The match is the posterior
 over the fine grid, ``w ∝ exp(ℓ − ℓ_max)``:
 
 * ``pose`` and ``cov``: the weighted mean and covariance of the grid poses (plus each
-  step's quantisation ``step²/12``): a corridor's flat direction gives a wide covariance
-  instead of an arbitrary peak;
+  step's quantisation ``step²/12``), plus the coarse level's spread over the whole window
+  (the fine levels span ± two coarse steps and would cut a flat posterior there): a
+  corridor's flat direction gives a wide covariance instead of an arbitrary peak;
 * ``score``: the mean field value at the best pose (how much of the query the reference
   explains), ``ambiguity``: the best coarse ℓ farther than two coarse steps from the
   optimum, as a likelihood ratio ``exp(ℓ_other − ℓ_max)`` (near 1: another pose fits as
@@ -216,6 +217,28 @@ def _grid(half: float, step: float) -> F64:
     return np.arange(-n, n + 1, dtype=np.float64) * step
 
 
+def _moments(ll: F64, off: F64, dyaw: F64, cells: bool = True) -> tuple[F64, F64]:
+    """Mean and covariance of the posterior ``w ∝ exp(ℓ − ℓ_max)`` over the grid of poses
+    ``(dyaw[k], off[a], off[b])``; with ``cells``, plus each step's quantisation
+    (``step²/12``) and half a step's uncertainty of where in its cell the optimum lies."""
+    wts = np.exp(ll - ll.max())
+    wts /= wts.sum()
+    d = [np.broadcast_to(off[None, :, None], ll.shape), np.broadcast_to(off[None, None, :],
+         ll.shape), np.broadcast_to(dyaw[:, None, None], ll.shape)]
+    mean = np.array([float((wts * v).sum()) for v in d])
+    cov = np.empty((3, 3))
+    for i in range(3):
+        for j in range(i, 3):
+            cov[i, j] = cov[j, i] = float((wts * (d[i] - mean[i]) * (d[j] - mean[j])).sum())
+    if not cells:
+        return mean, cov
+    step = float(off[1] - off[0]) if off.shape[0] > 1 else 0.0
+    step_yaw = float(dyaw[1] - dyaw[0]) if dyaw.shape[0] > 1 else 0.0
+    cov += np.diag([step**2 / 12 + (0.5 * step) ** 2, step**2 / 12 + (0.5 * step) ** 2,
+                    step_yaw**2 / 12 + (0.5 * step_yaw) ** 2])
+    return mean, cov
+
+
 def correlate(ref_x: F64, ref_y: F64, ref_sx: F64, ref_sy: F64, qx: F64, qy: F64,
               prediction: F64, window: Window, *, res: float, sigma: float
               ) -> Correlation | None:
@@ -255,18 +278,10 @@ def correlate(ref_x: F64, ref_y: F64, ref_sx: F64, ref_sy: F64, qx: F64, qy: F64
         if res < step_xy:
             k, a, b = np.unravel_index(int(np.argmax(ll)), ll.shape)
             centre = centre + np.array([off_f[a], off_f[b], dyaw_f[k]])
-    wts = np.exp(ll - ll.max())
-    wts /= wts.sum()
-    d = [np.broadcast_to(off_f[None, :, None], ll.shape), np.broadcast_to(off_f[None, None, :],
-         ll.shape), np.broadcast_to(dyaw_f[:, None, None], ll.shape)]
-    mean = np.array([float((wts * v).sum()) for v in d])
-    cov = np.empty((3, 3))
-    for i in range(3):
-        for j in range(i, 3):
-            cov[i, j] = cov[j, i] = float((wts * (d[i] - mean[i]) * (d[j] - mean[j])).sum())
-    step_yaw, step = float(dyaw_f[1] - dyaw_f[0]), float(off_f[1] - off_f[0])
-    cov += np.diag([step**2 / 12 + (0.5 * step) ** 2, step**2 / 12 + (0.5 * step) ** 2,
-                    step_yaw**2 / 12 + (0.5 * step_yaw) ** 2])
+    mean, cov = _moments(ll, off_f, dyaw_f)
+    if fine is not coarse:  # the fine grid spans ± two coarse steps: a flat posterior is cut
+        cov = cov + _moments(ll_c, off_c, dyaw_c, cells=False)[1]  # there; the whole
+        # window's spread says how far (a sharp peak's is ~0 on the coarse grid)
     pose = centre + mean
     pose[2] = float(wrap_angle(pose[2]))
     kb = np.unravel_index(int(np.argmax(ll)), ll.shape)

@@ -306,3 +306,20 @@ def cost_at(x: F64, odo: Odometry, matches: MatchConstraints, opt: GraphOptions)
     prob = _Problem(x, odo, matches, opt)
     v = np.concatenate([x.ravel(), [0.0, 0.0] if opt.calibrate else []])
     return robust_cost(prob.residuals(v), opt.robust_scale)
+
+
+def match_dof(x: F64, odo: Odometry, matches: MatchConstraints, opt: GraphOptions,
+              scale: float, bias: float) -> float:
+    """The degrees of freedom the matches add to the graph at ``x`` (calibration ``scale``,
+    ``bias``): the trace of their share of the information, ``tr((JᵀJ)⁻¹·J_mᵀJ_m)``
+    (whitened Jacobian ``J``, its match rows ``J_m``) — 3 per match that nothing else
+    constrains, less for one the odometry already pins or that repeats another."""
+    if not len(matches):
+        return 0.0
+    prob = _Problem(x, odo, matches, opt)
+    v = np.concatenate([x.ravel(), [scale, bias] if opt.calibrate else []])
+    jac = prob.jacobian_dense(v)
+    first = 3 + 3 * (prob.n - 1)
+    jm = jac[first:first + 3 * len(matches)]
+    info = jac.T @ jac
+    return float(np.trace(np.linalg.solve(info, jm.T @ jm)))

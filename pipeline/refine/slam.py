@@ -6,7 +6,9 @@
 2. **Scan-to-map matching**, in travel order: submap ``j`` is correlated
    (:mod:`~pipeline.refine.correlative`) against the previous ``local_map_submaps``
    submaps placed by their estimates, around the odometry's prediction (± ``search_xy_m``,
-   ``search_yaw_deg``); the match's posterior mean and covariance become a constraint.
+   ``search_yaw_deg``); every optimum inside the window becomes a constraint, its
+   posterior mean with its covariance plus the submaps' own odometry walk
+   (:func:`distortion`): a weak match weighs little instead of passing a score gate.
 3. **Loop closures**: earlier submaps (twice ``loop_radius_m`` of travel back) whose
    estimate lies within ``loop_radius_m`` are correlated over ± ``loop_search_xy_m``,
    ``loop_search_yaw_deg``; kept when the score reaches :data:`MIN_SCORE` and the best
@@ -21,8 +23,9 @@
    bends the graph and raises the χ² of the right ones; it goes first).
 5. **Acceptance**, two tests the solution must pass to replace the odometry: a
    likelihood ratio — were the odometry right, twice its cost minus the solution's would
-   be at most χ² with one degree of freedom per constraint coordinate (3 per constraint
-   kept), so it must exceed that χ²'s 99 % quantile — and the echoes, which the graph
+   be at most χ² with the matches' effective degrees of freedom
+   (:func:`~pipeline.refine.graph.match_dof`), so it must exceed that χ²'s 99 % quantile
+   — and the echoes, which the graph
    never saw whole: their consistency ``H/(H+F)``
    (:class:`~pipeline.refine.scores.Consistency`) must be higher on the solution's poses
    than on the odometry's (closures that agree with each other but not with the
@@ -54,6 +57,7 @@ from pipeline.refine.graph import (
     MatchConstraints,
     Odometry,
     cost_at,
+    match_dof,
     solve,
     sqrt_information,
 )
@@ -68,7 +72,7 @@ Z99 = 2.326  # the standard normal's 99 % quantile (χ²(dof) ≈ dof + z·√(2
 SUBMAP_MIN_ECHOES = 60  # a shorter stretch joins the next submap (too few echoes to match)
 SUBMAP_MAX_POINTS = 400  # echoes kept per submap (evenly thinned)
 LOCAL_MAP_SUBMAPS = 3  # a submap is matched against this many previous ones
-MIN_SCORE = 0.7  # a match is kept when the reference explains this share of its echoes
+MIN_SCORE = 0.7  # a closure is kept when the reference explains this share of its echoes
 MAX_AMBIGUITY = 0.99  # a closure whose distinct second pose is this likely is ambiguous
 # Priors on the odometry's systematic error (σ): a few percent of scale and a fraction of a
 # degree per metre are typical of uncalibrated wheel odometry (docs/POSE_REFINEMENT.md).
@@ -130,6 +134,18 @@ class _Graph:
         idx = np.flatnonzero(inside) if keep is None else np.flatnonzero(keep)[inside]
         chi2[idx] = sol.match_chi2
         return chi2
+
+
+def distortion(anchor_path: F64, j: int, opt: GraphOptions) -> F64:
+    """The covariance a rigid match of submap ``j`` against its predecessors inherits from
+    the odometry inside them: each submap is pooled from ``L`` m of odometry around its
+    anchor, whose random walk (σ_xy, σ_θ per √m) bends it; a rigid fit averages the walk
+    over the submap's two halves (variance σ²·L/12 per submap, two submaps), and the
+    heading's share moves points a quarter of a submap away laterally."""
+    length = float(anchor_path[j] - anchor_path[j - 1]) if j > 0 else 0.0
+    var_yaw = opt.sigma_yaw**2 * length / 6
+    var_xy = opt.sigma_xy**2 * length / 6 + var_yaw * (length / 4) ** 2
+    return np.diag([var_xy, var_xy, var_yaw])
 
 
 def _start(tt: np.ndarray, tx: F64, ty: F64, tyaw: F64, first: Submap) -> Submap:
@@ -223,8 +239,8 @@ def slam_track(tt: np.ndarray, tx: F64, ty: F64, tyaw: F64, echoes: Echoes,
                                                 g.scale, g.bias)[0])
         refs = list(range(max(0, j - LOCAL_MAP_SUBMAPS), j))
         m = _match(g, refs, j, pred, seq, cfg)
-        if m is not None and m.score >= MIN_SCORE:
-            g.add(j - 1, j, m.pose, m.cov, loop=False)
+        if m is not None:  # every in-window optimum, weighed by its covariance
+            g.add(j - 1, j, m.pose, m.cov + distortion(anchor_path, j, opt), loop=False)
             g.est[j] = m.pose
             seq_ok += 1
         else:
@@ -257,8 +273,8 @@ def slam_track(tt: np.ndarray, tx: F64, ty: F64, tyaw: F64, echoes: Echoes,
     cost_odometry = cost_at(odo_anchor, odo, mc, opt)
     cost_solution = _cost_with(g, mc, opt)
     # likelihood ratio: were the odometry right, 2·(its cost − the solution's) would be at
-    # most χ² with one degree of freedom per constraint coordinate the solution can meet
-    dof = min(3 * int(keep.sum()), 3 * (len(submaps) - 1) + 2)
+    # most χ² with as many degrees of freedom as the matches add (their effective number)
+    dof = match_dof(g.est, odo, mc, opt, g.scale, g.bias)
     accepted = dof > 0 and 2 * (cost_odometry - cost_solution) > dof + Z99 * math.sqrt(2 * dof)
     metrics.update({
         "matches_accepted": int((keep & ~loop).sum()),
@@ -267,7 +283,7 @@ def slam_track(tt: np.ndarray, tx: F64, ty: F64, tyaw: F64, echoes: Echoes,
         "loop_closures_accepted": int((keep & loop).sum()),
         "loop_closures_rejected": loop_gated + loop_inconsistent + int((~keep & loop).sum()),
         "loop_closures_inconsistent": loop_inconsistent + int((~keep & loop).sum()),
-        "cost_odometry": cost_odometry, "cost_final": cost_solution,
+        "cost_odometry": cost_odometry, "cost_final": cost_solution, "match_dof": dof,
         "scale_error": g.scale, "heading_bias_deg_per_m": math.degrees(g.bias),
         "accepted": bool(accepted),
         "loop_closure_edges": [[*g.est[a, :2].tolist(), *g.est[b, :2].tolist()] for a, b, k, lp

@@ -120,3 +120,24 @@ def test_the_sparse_steps_reach_the_trust_regions_solution() -> None:
     assert sparse.match_chi2[-1] > 16.0 and sparse.match_chi2[:-1].max() < 16.0
     again = solve(*args, opt, method="sparse")
     assert np.array_equal(again.anchors, sparse.anchors)  # deterministic to the bit
+
+
+def test_the_matches_degrees_of_freedom_count_what_they_add() -> None:
+    from pipeline.refine.graph import match_dof
+
+    truth, odo, travelled, x0 = biased_square()
+    one = sqrt_information(np.diag([0.01**2, 0.01**2, math.radians(0.1) ** 2]))[None]
+    loop = MatchConstraints(np.array([0]), np.array([15]), between(truth[[0]], truth[[15]]), one)
+    opt = opts(False)
+    # one precise closure over a long loop: nearly all its three coordinates are new
+    assert 2.5 < match_dof(x0, Odometry(odo, travelled), loop, opt, 0.0, 0.0) <= 3.0
+    # the same closure twice: together still at most three
+    twice = MatchConstraints(np.array([0, 0]), np.array([15, 15]), np.repeat(loop.z, 2, 0),
+                             np.repeat(one, 2, 0))
+    assert match_dof(x0, Odometry(odo, travelled), twice, opt, 0.0, 0.0) <= 3.0
+    # a vague match between neighbours adds almost nothing to their odometry
+    vague = MatchConstraints(np.array([3]), np.array([4]), between(truth[[3]], truth[[4]]),
+                             sqrt_information(np.diag([5.0**2, 5.0**2, 1.0]))[None])
+    assert match_dof(x0, Odometry(odo, travelled), vague, opt, 0.0, 0.0) < 0.05
+    assert match_dof(x0, Odometry(odo, travelled), loop.take(np.array([False])), opt,
+                     0.0, 0.0) == 0.0

@@ -195,3 +195,39 @@ def test_the_compiled_coverage_gives_the_numpy_versions_cells() -> None:
     near = LikelihoodField.of_points(rx[:5], ry[:5], res=0.05, sigma=0.1, margin=0.1)
     assert np.array_equal(_coverage(near, rx, ry, sx, sy, 0.1),
                           _coverage_reference(near, rx, ry, sx, sy, 0.1))
+
+
+def _corridor(rng: np.random.Generator, half: float
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Arcs (echoes × 3) on the two walls of a straight corridor along x (y = ±1 m) over
+    ±``half`` m, seen from sensors on its axis: nothing fixes a shift along it."""
+    x = np.linspace(-half, half, 300) + rng.uniform(-0.005, 0.005, 300)
+    y = np.where(rng.uniform(0, 1, 300) < 0.5, -1.0, 1.0)
+    return (np.stack([x - 0.05, x, x + 0.05], axis=1), np.stack([y, y, y], axis=1), x.copy(),
+            np.zeros(300))
+
+
+def test_a_corridors_match_is_wide_along_it_and_sharp_across() -> None:
+    rx, ry, sx, sy = _corridor(np.random.default_rng(0), 3.3)
+    qx, qy, _, _ = _corridor(np.random.default_rng(1), 3.0)
+    m = correlate(rx, ry, sx, sy, qx, qy - 0.1, np.zeros(3),
+                  Window(0.6, math.radians(8), 0.1, math.radians(1)), res=0.05, sigma=0.1)
+    assert m is not None
+    assert m.pose[1] == pytest.approx(0.1, abs=0.05)  # across: the offset found
+    sd_along, sd_across = math.sqrt(m.cov[0, 0]), math.sqrt(m.cov[1, 1])
+    # along: every shift within ±0.3 m keeps the query on the reference's walls, as likely
+    # (uniform: σ ≈ 0.17 m), not cut to the fine grid's ± two coarse steps (σ ≤ 0.12 m)
+    assert sd_along > 0.15
+    assert sd_across < 0.08
+
+
+def test_a_submaps_own_odometry_walk_widens_its_match() -> None:
+    from pipeline.refine.graph import GraphOptions
+    from pipeline.refine.slam import distortion
+
+    opt = GraphOptions(0.01, 0.01, True, 0.01, 0.03, 1.0)
+    cov = distortion(np.array([0.0, 8.0, 14.0]), 1, opt)
+    assert cov[2, 2] == pytest.approx(0.01**2 * 8 / 6)  # heading: σ²·L/6
+    assert cov[0, 0] == pytest.approx(0.01**2 * 8 / 6 + 0.01**2 * 8 / 6 * 4.0)  # + lever L/4
+    assert cov[0, 1] == 0 and cov[1, 1] == cov[0, 0]
+    assert distortion(np.array([0.0, 8.0, 14.0]), 2, opt)[2, 2] == pytest.approx(0.01**2)
