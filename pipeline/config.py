@@ -157,7 +157,7 @@ class MapperConfig:
         "forward (§11): half length of the wall segment along which echoes from different "
         "places must agree on one tangent line (normal and offset) for its cells to be a wall "
         "in the surface-aware count pass, m; 0 = off (the cells' own arcs give the normals)",
-        default=0.0,
+        default=0.3,
     )
     spec_max_range_free: bool = doc_field(
         "specular (§10): readings with no echo are free evidence out to r_max, weighted like "
