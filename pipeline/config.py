@@ -153,6 +153,12 @@ class MapperConfig:
         "pooled into its surface normal, m",
         default=0.05,
     )
+    wall_line_half_length_m: float = doc_field(
+        "forward (§11): half length of the wall segment along which echoes from different "
+        "places must agree on one tangent line (normal and offset) for its cells to be a wall "
+        "in the surface-aware count pass, m; 0 = off (the cells' own arcs give the normals)",
+        default=0.3,
+    )
     spec_max_range_free: bool = doc_field(
         "specular (§10): readings with no echo are free evidence out to r_max, weighted like "
         "any ray by the chance that a surface there would have answered",
@@ -455,6 +461,7 @@ RANGES: dict[str, Range] = {
     "mapper.spec_critical_angle_deg": Range(0.1, 90),
     "mapper.spec_critical_spread": Range(0.001, 5),
     "mapper.spec_normal_radius_m": Range(0, 10),
+    "mapper.wall_line_half_length_m": Range(0, 10),
     "mapper.seed": Range(0, 2**63, hi_open=True),
     "mapper.threads": Range(1, 2),
     "grid.resolution": CELL_M,

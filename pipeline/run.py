@@ -24,6 +24,7 @@ import math
 import time
 from collections import Counter
 from collections.abc import Callable, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NoReturn
@@ -163,6 +164,10 @@ def run(
             # order) and spills them; the later passes stream them back.
             spill = ScanSpill() if passes > 1 else None
             spilled: SpilledScans | None = None
+            # trajectory.csv needs only the poses, walked by the first pass alone: written
+            # on a thread of its own beside the later passes (their kernels release the GIL).
+            writer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sonarmap-trajectory")
+            trajectory: Future[None] | None = None
             try:
                 for index in range(passes):
                     active = {k: m for k, m in mappers.items() if index < m.passes}
@@ -174,6 +179,7 @@ def run(
                                             each, spill)
                         spilled = spill.finish() if spill is not None else None
                         spill = None
+                        trajectory = writer.submit(_write_trajectory, out, sv.track)
                     else:
                         _map_spilled(spilled, active, timer, each, sv.ranges.count)
             except InputError as err:
@@ -183,11 +189,11 @@ def run(
             finally:
                 if spill is not None:
                     spill.close()
+                t_trajectory = time.perf_counter()
+                writer.shutdown(wait=True)  # a failed run leaves no thread writing
             del spilled  # its files go with it
-        # trajectory.csv needs only the poses: written while the paper's thread (the
-        # default method's features) finishes its last groups, before the snapshot waits.
-        t_trajectory = time.perf_counter()
-        _write_trajectory(out, sv.track)
+        if trajectory is not None:
+            trajectory.result()  # its error, if any
         timer.seconds["outputs"] = time.perf_counter() - t_trajectory
         with timer.stage("mapping"):
             snapshots = {k: m.snapshot() for k, m in mappers.items()}

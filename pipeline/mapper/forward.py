@@ -22,6 +22,10 @@ This method measures them with one E-step of a forward sensor model (Thrun 2003)
    answered share with the coincidences taken out (:func:`unknown_rate`; the rate ``f``
    of an echo from elsewhere landing on a surface, from :func:`fit_detection`).
 
+With ``wall_line_half_length_m > 0`` pass 0 also votes every echo's tangent lines and pass 3
+judges passes near the wall lines found (:mod:`pipeline.mapper.wall_lines`) against the
+line's normal (consistency 1); pass 4 keeps the cells' own normals.
+
 Where the sonar hears surfaces at every incidence, ``p(θ) = p(0)``, every pass counts 1 and
 no ray stops: §9's evidence (with max-range readings' free cones). No configuration key of
 its own (the bins' smoothing is the uniform prior). Memory: §10's grids; the counts are 38
@@ -39,11 +43,13 @@ from pipeline.config import MapperConfig
 from pipeline.mapper.attribution import AttributionMapper
 from pipeline.mapper.free_space import cone_table
 from pipeline.mapper.kernels.forward import detection_counts
+from pipeline.mapper.kernels.lines import vote_tangents
 from pipeline.mapper.kernels.specular import cell_lists
 from pipeline.mapper.reading_features import distance_sigma
 from pipeline.mapper.scan_group import ScanGroup
 from pipeline.mapper.specular import TABLE_STEP, SpecularMapper, cos_table
-from pipeline.mapper.types import F64, B, GridSpec
+from pipeline.mapper.types import F32, F64, B, GridSpec
+from pipeline.mapper.wall_lines import NEAR_LINE_M, empty_votes, near_lines, wall_lines
 from pipeline.stages import reading_quality as rq
 
 INCIDENCE_BINS = 9  # equal bins of the detection curve over [0, 90°]
@@ -142,6 +148,9 @@ class ForwardMapper(SpecularMapper):
         self.surfaces: B = np.zeros(grid.shape, dtype=bool)  # the first map
         self.surface_index, self.surface_cols = cell_lists(self.surfaces)
         self._measuring = False
+        self._lines_on = config.wall_line_half_length_m > 0.0
+        self.votes = empty_votes(grid if self._lines_on else GridSpec(0, 0, 1, 0, 0))
+        self._own: tuple[F32, F32, F32, float] | None = None  # pass 3's own normals
 
     def begin_pass(self, index: int) -> None:
         """Start pass ``index`` (module doc) over the same scans."""
@@ -167,8 +176,30 @@ class ForwardMapper(SpecularMapper):
                 self.table = evidence_table(pass_evidence(self.p_reach))
                 self.cos_table = cos_table(self.table)
             super().begin_pass(index - 1)
+            if self._lines_on and index == 3:
+                self._own = (self.nx, self.ny, self.consistency, self.v_unknown)
+                self._use_lines()
+            elif self._own is not None and index == 4:
+                self.nx, self.ny, self.consistency, self.v_unknown = self._own
+                self._own = None
+
+    def _use_lines(self) -> None:
+        """Pass 3 judges passes within :data:`NEAR_LINE_M` of an estimated wall line
+        (:mod:`pipeline.mapper.wall_lines`) against the line: its normal, consistency 1;
+        elsewhere the cells keep their own arcs' normals and consistency."""
+        g = self.grid
+        on, nx, ny = wall_lines(self.votes, g.resolution, self.config.wall_line_half_length_m)
+        near, lnx, lny = near_lines(on, nx, ny, NEAR_LINE_M / g.resolution)
+        self.nx = np.where(near, lnx, self.nx)
+        self.ny = np.where(near, lny, self.ny)
+        self.consistency = np.where(near, np.float32(1.0), self.consistency)
 
     def _integrate_group(self, group: ScanGroup) -> None:
+        if self._lines_on and self.pass_index == 0:
+            cat, g = group.cat, self.grid
+            r: F64 = np.where(group.codes == rq.OK, cat.range_m, 0.0)
+            vote_tangents(cat.origin_x, cat.origin_y, cat.alpha, 0.5 * cat.fov, r,
+                          g.origin_x, g.origin_y, g.resolution, self.votes)
         if not self._measuring:
             super()._integrate_group(group)
             return

@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 import weakref
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
 
@@ -62,6 +62,15 @@ class RowBands:
         finally:
             total = upper.result()
         return lower + total
+
+    def later(self, work: Callable[[], int]) -> Future[int]:
+        """``work()`` on the worker thread (after the work handed to it before), or now on
+        this thread with one thread; its result or error comes from the future."""
+        if self._pool is not None:
+            return self._pool.submit(work)
+        done: Future[int] = Future()
+        done.set_result(work())
+        return done
 
     def close(self) -> None:
         """Stop the worker thread (the bands after run in one call on this thread)."""

@@ -19,8 +19,12 @@ Four passes over the log's scans, in the same order:
    out to ``r_max`` the same way.
 3. §9's attribution with these counts and the same stops; the map is §9's linear test.
 
-With ``threads = 2`` pass 2 runs on two threads by row band and the stops of passes 2-3
-on two halves of each group's readings (:mod:`~pipeline.mapper.row_bands`): the same bytes.
+With ``threads = 2`` pass 2 runs on two threads by row band (its stops on two halves of
+each group's readings), and the attributions of passes 1 and 3 run on the second thread,
+one group at a time in order, beside the next group's preparation and stops
+(:mod:`~pipeline.mapper.row_bands`): the same bytes. The grids are complete once the next
+pass begins or the map is taken. Pass 3 recomputes the stops of only the readings pass 2
+found stopped (the same cones, surfaces and table).
 Memory: §9's grids and seven more grids, the list of surfaces and per-group buffers;
 nothing grows with the log (docs/PERFORMANCE.md).
 """
@@ -28,8 +32,10 @@ nothing grows with the log (docs/PERFORMANCE.md).
 from __future__ import annotations
 
 import math
+from concurrent.futures import Future
 
 import numpy as np
+import numpy.typing as npt
 from scipy.special import ndtr
 
 from pipeline.config import MapperConfig
@@ -118,15 +124,23 @@ class SpecularMapper(AttributionMapper):
         self.hits2: F32 = empty_grid(grid.shape)
         self._unattributed2 = 0
         self._bands = RowBands(config.threads)
+        # Pass 2's shadows, group by group (bit-packed ``stopped``): pass 3 recomputes only
+        # the readings pass 2 found stopped (module doc).
+        self._shadowed: list[npt.NDArray[np.uint8]] = []
+        # The attribution of the last group (passes 1 and 3), running on the band thread:
+        # (its unattributed echoes, first attribution?, readings with no echo).
+        self._attributing: tuple[Future[int], bool, int] | None = None
 
     def begin_pass(self, index: int) -> None:
         """Start pass ``index`` (module doc) over the same scans."""
         if index not in range(self.passes):
             raise ValueError(f"the specular method has passes 0 to 3, not {index}")
+        self._attributed()
         if index == 1:
             self._settle_counts()
         if index == 2:
             self._find_surfaces()
+            self._shadowed.clear()
         self.pass_index = index
         self._group_index = 0
 
@@ -137,6 +151,7 @@ class SpecularMapper(AttributionMapper):
 
     def _find_surfaces(self) -> None:
         """The first map's occupied cells, their normal lines and consistency."""
+        self._attributed()  # the first map's hits and bearings are complete
         surfaces = AttributionMapper.occupied(self)
         radius = max(0, round(self.config.spec_normal_radius_m / self.grid.resolution))
         psi, self.consistency = normal_lines(self.arc_c, self.arc_s, self.arcs, radius)
@@ -171,51 +186,88 @@ class SpecularMapper(AttributionMapper):
         stops: F64 = np.empty(int(offsets[-1]))
         stopped: B = np.zeros(len(rows), dtype=bool)
         if self.occ_cols.size:
+            # Pass 3's shadows are pass 2's (the same cones, surfaces and table): only the
+            # readings pass 2 found stopped can be (an infinite inner radius skips a reading).
+            r_look = r_inner if self.pass_index != 3 else np.where(
+                self._was_shadowed(len(rows)), r_inner, np.inf)
+
             def shadows(lo: int, hi: int) -> int:
                 return int(shadow_profiles(
-                    cones, up_down, r_inner, alpha, half, g.origin_x, g.origin_y,
+                    cones, up_down, r_look, alpha, half, g.origin_x, g.origin_y,
                     g.resolution, self.occ_index, self.occ_cols, self.nx, self.ny,
                     self.consistency, self.cos_table, attribute, lo, hi, offsets, stops,
                     stopped,
                 ))
 
-            self._bands.run(shadows, len(rows) // 2, len(rows))
+            if attribute:  # on this thread, beside the previous group's attribution
+                shadows(0, len(rows))
+            else:
+                self._bands.run(shadows, len(rows) // 2, len(rows))
+            if self.pass_index == 2:
+                self._shadowed.append(np.packbits(stopped))
+
+        # The kernel's arguments taken now: the band thread holds arrays, not the mapper.
+        args = (
+            cones, up_down, r_inner, free_r[rows], alpha, half,
+            g.origin_x, g.origin_y, g.resolution, offsets, stops, stopped,
+            self.nx, self.ny, self.consistency, self.cos_table, self.v_unknown, attribute,
+            first, self.free if first else self.free2, self.arcs if first else self.arcs2,
+            cfg.attr_candidate_ratio, cfg.attr_dilution, self.free2, self.arcs2,
+            self.hits if first else self.hits2, self.arc_c, self.arc_s,
+        )
 
         def trace(row_lo: int, row_hi: int) -> int:
-            return int(trace_readings(
-                cones, up_down, r_inner, free_r[rows], alpha, half,
-                g.origin_x, g.origin_y, g.resolution, offsets, stops, stopped,
-                self.nx, self.ny, self.consistency, self.cos_table, self.v_unknown, attribute,
-                first, self.free if first else self.free2, self.arcs if first else self.arcs2,
-                cfg.attr_candidate_ratio, cfg.attr_dilution, self.free2, self.arcs2,
-                self.hits if first else self.hits2, self.arc_c, self.arc_s, row_lo, row_hi,
-            ))
+            return int(trace_readings(*args, row_lo, row_hi))
 
         if attribute:
-            lost = trace(0, height)
+            # One group's attribution at a time, in order, on the band thread: this group's
+            # waits for the previous one's, and the next group's preparation and shadows
+            # overlap it (the attribution writes only the hits and bearings).
+            self._attributed()
+            no_echo = 0 if first else int(np.count_nonzero(d[rows] <= 0.0))
+            self._attributing = (self._bands.later(lambda: trace(0, height)), first, no_echo)
         else:
             split = balanced_split(cones, alpha, g.origin_y, g.resolution, height)
-            lost = self._bands.run(trace, split, height)
+            self._bands.run(trace, split, height)
+
+    def _attributed(self) -> None:
+        """Wait for the attribution of the last group handed to the band thread and count
+        its unattributed echoes (readings with no echo have no arc: not unattributed)."""
+        if self._attributing is None:
+            return
+        future, first, no_echo = self._attributing
+        self._attributing = None
+        lost = future.result()
         if first:
-            self._unattributed += int(lost)
-        elif attribute:
-            # readings with no echo have no arc: not unattributed echoes
-            self._unattributed2 += int(lost) - int(np.count_nonzero(d[rows] <= 0.0))
+            self._unattributed += lost
+        else:
+            self._unattributed2 += lost - no_echo
+
+    def _was_shadowed(self, readings: int) -> B:
+        """Pass 2's ``stopped`` of the current group (the same groups in passes 2 and 3)."""
+        packed = self._shadowed[self._group_index]
+        if packed.size != (readings + 7) // 8:
+            raise RuntimeError(f"scan group {self._group_index} differs between passes 2 and 3")
+        out: B = np.unpackbits(packed, count=readings).astype(bool)
+        return out
 
     def occupied(self) -> B:
         """§9's linear test on the second attribution and the surface-aware free counts."""
+        self._attributed()
         self._settle_counts()
         return self._linear_test(self.hits2, self.free2)
 
     @property
     def counters(self) -> MapperCounters:
         """§9's counters, with the echoes the second attribution left unattributed."""
+        self._attributed()
         counters = AttributionMapper.counters.fget(self)  # type: ignore[attr-defined]
         counters.echoes_unattributed = self._unattributed2
         return counters
 
     def snapshot(self) -> MapSnapshot:
         """§9's snapshot with the surface-aware free counts."""
+        self._attributed()
         self._bands.close()  # the passes are done
         first, self.free = self.free, self.free2
         try:

@@ -69,6 +69,24 @@ def shade(stop: F64, nb: int, dist: float, t: float, t_edge: float, res: float,
         stop[kb] = min(stop[kb], dist)
 
 
+@njit(cache=True, inline="always")
+def cone_columns(ox: float, r_out: float, c1: float, c2: float, alpha: float, hb: float,
+                 gx: float, res: float, width: int) -> tuple[int, int]:
+    """The grid columns ``b0..b1`` (clipped) that hold every cell of a cone, with a cell of
+    margin: its x extent is set by the edges' tips and the origin, and ``r_out`` where the
+    wedge holds the +x or −x direction. A row span of the cone lies inside, so a row with
+    no listed cell in ``b0..b1`` has none in its span either."""
+    lo_x = min(0.0, min(r_out * c1, r_out * c2))
+    hi_x = max(0.0, max(r_out * c1, r_out * c2))
+    if abs(wrap_angle(-alpha)) <= hb:
+        hi_x = r_out
+    if abs(wrap_angle(math.pi - alpha)) <= hb:
+        lo_x = -r_out
+    b0 = min(max(math.floor(((ox + lo_x) - gx) / res - 0.5) - 1, 0), width - 1)
+    b1 = min(max(math.ceil(((ox + hi_x) - gx) / res - 0.5) + 1, 0), width - 1)
+    return b0, b1
+
+
 @njit(cache=True, nogil=True)
 def shadow_offsets(cones: F64, half_fov: F64, res: float) -> I64:
     """Where each reading's shadow profile starts in :func:`shadow_profiles`' ``stops``
@@ -103,16 +121,7 @@ def shadow_profiles(
         s1, c1, s2, c2 = cones[i, 3], cones[i, 4], cones[i, 5], cones[i, 6]
         # edge_sector_spans' spans, on the rows that hold a surface that may be silent
         r0, r1 = cone_rows(oy, r_out, s1, s2, up_down[i, 0], up_down[i, 1], gy, res, height)
-        # The cone's columns, with a cell of margin: the edges' tips and the origin, and
-        # r_out where the wedge holds the +x or -x direction.
-        lo_x = min(0.0, min(r_out * c1, r_out * c2))
-        hi_x = max(0.0, max(r_out * c1, r_out * c2))
-        if abs(wrap_angle(-alpha[i])) <= half_fov[i]:
-            hi_x = r_out
-        if abs(wrap_angle(math.pi - alpha[i])) <= half_fov[i]:
-            lo_x = -r_out
-        b0 = min(max(math.floor(((ox + lo_x) - gx) / res - 0.5) - 1, 0), width - 1)
-        b1 = min(max(math.ceil(((ox + hi_x) - gx) / res - 0.5) + 1, 0), width - 1)
+        b0, b1 = cone_columns(ox, r_out, c1, c2, a, hb, gx, res, width)
         n = 0
         for row in range(r0, r1 + 1):
             if occ_index[row, b1 + 1] == occ_index[row, b0]:
@@ -162,7 +171,8 @@ def _count_spans(
     """:func:`trace_readings` without ``attribute``: one reading's free and arc counts on
     its spans ``rows, c0s, c1s`` (the rows ``row_lo ≤ r < row_hi``). A span's distances,
     incidences and shadow bins first, in loops without branches (vectorised: the same IEEE
-    operations, so the same bits), then its cells."""
+    operations, so the same bits), then its cells: for a reading that no surface stops,
+    every cell's visibility, then the adds without branches (vectorised)."""
     tmax = float(table.shape[0] - 1)
     ntab = table.shape[0] - 2
     for k in range(n):
@@ -178,15 +188,28 @@ def _count_spans(
             dv = math.sqrt(dxv * dxv + dy * dy)
             dbuf[j] = dv
             xbuf[j] = abs(dxv * nxr[j] + dy * nyr[j]) / max(dv, 1e-12) * tmax
-        if stopped:
+        if not stopped:
+            # Every cell's visibility, then the adds without branches: a cell that gets
+            # no evidence adds 0.0, which leaves its float32 value as it was.
             for j in range(w):
-                dxv = gx + ((c0 + j) + 0.5) * res - ox
-                along = max(dxv * ca + dy * sa, 1e-12)
-                kb = math.floor(((dy * ca - dxv * sa) / along + t_edge) / bin_w)
-                kbuf[j] = min(max(kb, 0), nb - 1)
+                x = xbuf[j]
+                kt = min(int(x), ntab)
+                f = x - kt
+                xbuf[j] = table[kt] * (1.0 - f) + table[kt + 1] * f
+            free_r, arcs_r, cons_r = free_out[r, c0:c0 + w], arcs_out[r, c0:c0 + w], cons[r, c0:c0 + w]
+            for j in range(w):
+                q = cons_r[j]
+                free_r[j] += (q * xbuf[j] + (1.0 - q) * v_unknown) if dbuf[j] < rf else 0.0
+                arcs_r[j] += 1.0 if dbuf[j] >= ri else 0.0
+            continue
+        for j in range(w):
+            dxv = gx + ((c0 + j) + 0.5) * res - ox
+            along = max(dxv * ca + dy * sa, 1e-12)
+            kb = math.floor(((dy * ca - dxv * sa) / along + t_edge) / bin_w)
+            kbuf[j] = min(max(kb, 0), nb - 1)
         for c in range(c0, c0 + w):
             dist = dbuf[c - c0]
-            if stopped and dist > stop[kbuf[c - c0]]:
+            if dist > stop[kbuf[c - c0]]:
                 continue
             if dist < rf:
                 q = cons[r, c]

@@ -68,8 +68,9 @@ def _specular_grids(threads: int) -> dict[str, np.ndarray]:
     for index in range(m.passes):
         m.begin_pass(index)
         m.integrate_many(scans)
+    occupied = m.snapshot().occupied  # the grids are complete once the map is taken
     out = {k: getattr(m, k).copy() for k in ("free2", "arcs2", "hits2", "hits", "free", "stats", "reaches")}
-    out["occupied"] = m.snapshot().occupied
+    out["occupied"] = occupied
     return out
 
 
@@ -109,3 +110,90 @@ def test_silent_candidates_list_the_consistent_surfaces_row_by_row() -> None:
     assert index[1, 0] == index[1, 4] == 2
     assert cols[index[2, 1]:index[2, 4]].tolist() == [1, 3]
     assert index.dtype == np.int32 and index.shape == (3, 5)
+
+
+def test_the_attributions_on_the_band_thread_keep_their_bytes_across_batches() -> None:
+    # Passes 1 and 3 attribute each group on the band thread while the next group (of the
+    # next batch, too) is prepared: the grids and counts of one thread, batch by batch.
+    scans = specular_scans(120, 20.0)
+    got = []
+    for threads in (1, 2):
+        m = make_mapper(MapperConfig(threads=threads), room_grid())
+        for index in range(m.passes):
+            m.begin_pass(index)
+            for b in range(0, len(scans), 9):
+                m.integrate_many(scans[b:b + 9])
+        occupied = m.snapshot().occupied
+        grids = {k: getattr(m, k).copy() for k in ("hits", "arc_c", "arc_s", "hits2", "free2")}
+        got.append((grids, occupied, m.counters.echoes_unattributed, m._unattributed))
+    (one, occ1, un1, first1), (two, occ2, un2, first2) = got
+    assert one["hits2"].sum() > 10 and np.abs(one["arc_c"]).sum() > 10 and un1 > 0
+    assert (un1, first1) == (un2, first2) and np.array_equal(occ1, occ2)
+    for name, grid in one.items():
+        assert np.array_equal(grid, two[name]), name
+
+
+def test_later_runs_in_order_on_the_worker_and_hands_back_errors() -> None:
+    done: list[int] = []
+
+    def work(k: int) -> int:
+        done.append(k)
+        return k * 10
+
+    for threads in (1, 2):
+        done.clear()
+        bands = RowBands(threads)
+        futures = [bands.later(lambda k=k: work(k)) for k in range(5)]
+        assert [f.result() for f in futures] == [0, 10, 20, 30, 40] and done == list(range(5))
+
+        def fails() -> int:
+            raise ValueError("attribution failed")
+
+        if threads == 1:
+            with pytest.raises(ValueError, match="attribution failed"):
+                bands.later(fails)
+        else:
+            with pytest.raises(ValueError, match="attribution failed"):
+                bands.later(fails).result()
+        bands.close()
+
+
+def test_a_mapper_dropped_with_an_attribution_pending_is_freed_on_the_calling_thread(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # The band thread holds the attribution's arrays, not the mapper: a mapper dropped
+    # mid-pass is freed (and its thread stopped) here, not on that thread (which cannot
+    # join itself).
+    import gc
+    import sys
+    import time
+    import weakref
+
+    raised: list[object] = []
+    monkeypatch.setattr(sys, "unraisablehook", raised.append)
+    trace = specular.trace_readings
+
+    def slow(*args: object) -> int:  # the attribution still runs when the mapper is dropped
+        time.sleep(0.3)
+        return int(trace(*args))
+
+    monkeypatch.setattr(specular, "trace_readings", slow)
+    scans = specular_scans(120, 20.0)
+    before = set(threading.enumerate())
+    m = make_mapper(MapperConfig(threads=2), room_grid())
+    for index in range(2):
+        m.begin_pass(index)
+        m.integrate_many(scans)  # pass 1 ends with its last group's attribution pending
+    assert m._attributing is not None  # type: ignore[attr-defined]
+    assert not m._attributing[0].done()  # type: ignore[attr-defined]
+    band_threads = [t for t in threading.enumerate()
+                    if t not in before and t.name.startswith("sonarmap-band")]
+    assert len(band_threads) == 1
+    alive = weakref.ref(m)
+    del m
+    gc.collect()
+    assert alive() is None
+    assert raised == []
+    for t in band_threads:
+        t.join(timeout=10)
+    assert not any(t.is_alive() for t in band_threads)

@@ -1,0 +1,89 @@
+"""Wall lines estimated from the echoes' tangents (ALGORITHM.md §11, ``wall_line_half_length_m``).
+
+Regions of constant depth (Leonard & Durrant-Whyte 1992): an echo of range r from a sonar
+at p is tangent to the wall that answered it, the line of normal ψ (inside the cone) at
+offset ``p·n(ψ) + r``, touched at ``p + r·n(ψ)``. Each echo votes once per direction bin
+(:data:`LINE_BINS` over [0, π)) at its touching cell (:mod:`pipeline.mapper.kernels.lines`).
+A wall seen from several places collects one bin's votes along one line; a single reading
+gives one vote per bin, readings repeated from one place fall on one cell, and a wall's
+tangents in a bin far from its normal (an oblique wall answered at the cone's edge) run
+along the wall, not along the bin's line.
+
+Per cell and bin, the bin's votes in the (2n + 1)² box around the cell (n = the half length
+in cells) are summarised by their centre and second moments along the bin's normal (``n``)
+and line (``t``). The cell lies on a wall line of that bin when
+
+* the votes come from at least two distinct cells (two places agree),
+* they form a line: spread across it ``σ_n ≤`` :data:`LINE_THICK` cells, along it
+  ``σ_t ≥ 2·σ_n``, and their principal axis within half a bin of the bin's line
+  (a sonar Hough peak in (ψ, d)),
+* the cell lies on it (within one cell of the votes' offset along the normal);
+
+its normal is that of the bin with the most votes among those. Memory: ``LINE_BINS`` uint16
+grids. :func:`near_lines` spreads the lines' normals to the cells within
+:data:`NEAR_LINE_M` (the scorer's tolerance).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import numpy.typing as npt
+from scipy.ndimage import distance_transform_edt
+
+from pipeline.mapper.specular import box_sum
+from pipeline.mapper.types import F32, F64, B, GridSpec
+
+LINE_BINS = 18  # direction bins of the normal line over [0, π): 10°, finer than a cone
+LINE_THICK = 1.0  # spread of a line's votes across it, cells (σ)
+NEAR_LINE_M = 0.10  # a cell this close to a wall line's cell is on the wall, m
+
+Votes = npt.NDArray[np.uint16]
+
+
+def empty_votes(grid: GridSpec) -> Votes:
+    """The vote accumulator, ``(LINE_BINS, height, width)``."""
+    return np.zeros((LINE_BINS, *grid.shape), dtype=np.uint16)
+
+
+def wall_lines(votes: Votes, resolution: float, half_length_m: float) -> tuple[B, F32, F32]:
+    """The cells on a wall line and its normal ``(on, nx, ny)`` (module doc)."""
+    bins, h, w = votes.shape
+    n = max(1, round(half_length_m / resolution))
+    rows, cols = np.mgrid[0:h, 0:w].astype(np.float64)
+    best: F64 = np.zeros((h, w))
+    nx: F32 = np.zeros((h, w), dtype=np.float32)
+    ny: F32 = np.zeros((h, w), dtype=np.float32)
+    for b in range(bins):
+        v = votes[b].astype(np.float64)
+        if not v.any():
+            continue
+        psi = (b + 0.5) * math.pi / bins
+        c, s = math.cos(psi), math.sin(psi)
+        on_n, on_t = cols * c + rows * s, rows * c - cols * s  # cell coordinates, cells
+        with np.errstate(invalid="ignore", divide="ignore"):
+            m = box_sum(v, n)
+            mn, mt = box_sum(v * on_n, n) / m, box_sum(v * on_t, n) / m
+            var_n = box_sum(v * on_n * on_n, n) / m - mn * mn
+            var_t = box_sum(v * on_t * on_t, n) / m - mt * mt
+            cov = box_sum(v * on_n * on_t, n) / m - mn * mt
+            tilt = 0.5 * np.arctan2(2.0 * cov, var_t - var_n)  # principal axis off t
+            ok = ((box_sum((v > 0).astype(np.float64), n) >= 2.0)
+                  & (var_n <= LINE_THICK ** 2) & (var_t >= 4.0 * var_n)
+                  & (np.abs(tilt) <= 0.5 * math.pi / bins) & (np.abs(on_n - mn) <= 1.0)
+                  & (m > best))
+        best = np.where(ok, m, best)
+        nx = np.where(ok, np.float32(c), nx)
+        ny = np.where(ok, np.float32(s), ny)
+    return best > 0, nx, ny
+
+
+def near_lines(on: B, nx: F32, ny: F32, radius_cells: float) -> tuple[B, F32, F32]:
+    """The cells within ``radius_cells`` of a line cell, with the nearest one's normal."""
+    if not on.any():
+        return np.zeros_like(on), np.zeros_like(nx), np.zeros_like(ny)
+    dist, (ir, ic) = distance_transform_edt(~on, return_indices=True)
+    near: B = dist <= radius_cells
+    zero = np.float32(0.0)
+    return near, np.where(near, nx[ir, ic], zero), np.where(near, ny[ir, ic], zero)

@@ -1,0 +1,59 @@
+"""The specular and default methods' last pass recomputes the shadows of only the readings
+the pass before it found stopped: the same grids as recomputing every reading's."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from specular_room import specular_scans
+
+from pipeline.config import MapperConfig
+from pipeline.mapper import make_mapper
+from pipeline.mapper.specular import SpecularMapper
+from pipeline.mapper.synthetic import room_grid
+from pipeline.methods import Method
+
+GRIDS = ("free2", "arcs2", "hits2")
+
+
+def _mapped(method: Method, threads: int = 1) -> SpecularMapper:
+    m = make_mapper(MapperConfig(method=method, threads=threads), room_grid())
+    assert isinstance(m, SpecularMapper)
+    scans = specular_scans(120, 20.0)
+    for index in range(m.passes):
+        m.begin_pass(index)
+        m.integrate_many(scans)
+    return m
+
+
+@pytest.mark.parametrize("method", [Method.FORWARD, Method.SPECULAR])
+def test_the_last_pass_keeps_its_bytes_with_the_shadows_reused(
+    method: Method, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    reused = _mapped(method)
+    flags = np.unpackbits(np.concatenate(reused._shadowed))
+    # Some readings are stopped by a silent wall, most are not (those are skipped).
+    assert 0 < flags.sum() < 0.8 * flags.size
+    occupied = reused.snapshot().occupied  # the grids are complete once the map is taken
+    want = {k: getattr(reused, k).copy() for k in GRIDS}
+    want["occupied"] = occupied
+    assert want["hits2"].sum() > 10 and want["occupied"].sum() > 100
+
+    def everyone(self: SpecularMapper, readings: int) -> np.ndarray:
+        return np.ones(readings, dtype=bool)  # every reading's shadows computed again
+
+    monkeypatch.setattr(SpecularMapper, "_was_shadowed", everyone)
+    again = _mapped(method)
+    assert np.array_equal(want["occupied"], again.snapshot().occupied)
+    for name in GRIDS:
+        assert np.array_equal(want[name], getattr(again, name)), name
+    assert again.counters.echoes_unattributed == reused.counters.echoes_unattributed
+
+
+def test_a_group_that_differs_between_the_passes_is_refused() -> None:
+    m = _mapped(Method.SPECULAR)
+    m._group_index = 0
+    n = 8 * m._shadowed[0].size
+    assert m._was_shadowed(n).shape == (n,)
+    with pytest.raises(RuntimeError, match="scan group 0 differs"):
+        m._was_shadowed(n + 8)
