@@ -2,7 +2,7 @@
 (docs/research/forward_walls.md §5).
 
 Usage: ``python -m benchmarks.research.wall_lines_score LOG TRUTH.yaml OUT HALF_LENGTH_M``
-(0 = the default as on main). Scores as ``sonarmap evaluate`` and ``make compare`` do
+(0 = off, the default before wall lines). Scores as ``sonarmap evaluate`` and ``make compare`` do
 (trajectory ``<stem>.truth.csv`` beside the truth, the log's sensor reach, 0.10 m) and
 prints F1, precision, recall and the run's seconds.
 """

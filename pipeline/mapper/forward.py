@@ -183,6 +183,13 @@ class ForwardMapper(SpecularMapper):
                 self.nx, self.ny, self.consistency, self.v_unknown = self._own
                 self._own = None
 
+    def _was_shadowed(self, readings: int) -> B:
+        """With wall lines, pass 3 judged passes against the lines and pass 4 against the
+        cells' own normals: other surfaces, so pass 4 computes every reading's shadows."""
+        if self._lines_on:
+            return np.ones(readings, dtype=bool)
+        return super()._was_shadowed(readings)
+
     def _use_lines(self) -> None:
         """Pass 3 judges passes within :data:`NEAR_LINE_M` of an estimated wall line
         (:mod:`pipeline.mapper.wall_lines`) against the line: its normal, consistency 1;

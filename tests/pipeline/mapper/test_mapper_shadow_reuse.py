@@ -9,6 +9,7 @@ from specular_room import specular_scans
 
 from pipeline.config import MapperConfig
 from pipeline.mapper import make_mapper
+from pipeline.mapper.forward import ForwardMapper
 from pipeline.mapper.specular import SpecularMapper
 from pipeline.mapper.synthetic import room_grid
 from pipeline.methods import Method
@@ -16,8 +17,9 @@ from pipeline.methods import Method
 GRIDS = ("free2", "arcs2", "hits2")
 
 
-def _mapped(method: Method, threads: int = 1) -> SpecularMapper:
-    m = make_mapper(MapperConfig(method=method, threads=threads), room_grid())
+def _mapped(method: Method, threads: int = 1, lines_m: float = 0.0) -> SpecularMapper:
+    config = MapperConfig(method=method, threads=threads, wall_line_half_length_m=lines_m)
+    m = make_mapper(config, room_grid())
     assert isinstance(m, SpecularMapper)
     scans = specular_scans(120, 20.0)
     for index in range(m.passes):
@@ -57,3 +59,18 @@ def test_a_group_that_differs_between_the_passes_is_refused() -> None:
     assert m._was_shadowed(n).shape == (n,)
     with pytest.raises(RuntimeError, match="scan group 0 differs"):
         m._was_shadowed(n + 8)
+
+
+def test_with_wall_lines_the_last_pass_computes_every_readings_shadows(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # Pass 3 judges passes against the estimated wall lines, pass 4 against the cells' own
+    # normals: its stops differ, so pass 3's flags cannot be reused.
+    kept = _mapped(Method.FORWARD, lines_m=0.3)
+    assert isinstance(kept, ForwardMapper) and kept._lines_on
+    assert kept._was_shadowed(13).all()
+    kept_map = kept.snapshot().occupied
+
+    monkeypatch.setattr(ForwardMapper, "_was_shadowed", SpecularMapper._was_shadowed)
+    reused = _mapped(Method.FORWARD, lines_m=0.3)
+    assert not np.array_equal(kept_map, reused.snapshot().occupied)

@@ -99,3 +99,19 @@ def test_the_forward_method_uses_the_lines_in_pass_3_only() -> None:
         if index == 2:
             own = mapper.consistency.copy()
     assert mapper.snapshot().grid.shape == room_grid(0.05).shape
+
+
+def test_a_cone_edge_on_a_bin_centre_votes_the_same_whatever_the_last_bits() -> None:
+    # A sonar at 90° with a 30° beam: its cone edge 105° is bin 10's centre (10° bins). A
+    # yaw read from a quaternion or from text differs in its last bits; the votes must not.
+    def bins_voted(alpha: float) -> list[int]:
+        votes = np.zeros((18, 40, 40), dtype=np.uint16)
+        one = np.array([0.0])
+        vote_tangents(one, one, np.array([alpha]), np.array([math.radians(15.0)]),
+                      np.array([0.5]), -1.0, -1.0, 0.05, votes)
+        return [b for b in range(18) if votes[b].any()]
+
+    exact = bins_voted(math.pi / 2)
+    assert exact == [7, 8, 9, 10]  # 75°, 85°, 95° and the edge 105°
+    assert bins_voted(np.nextafter(math.pi / 2, 0.0)) == exact
+    assert bins_voted(np.nextafter(math.pi / 2, 4.0)) == exact
