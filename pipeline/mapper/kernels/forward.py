@@ -31,8 +31,7 @@ import numpy as np
 from numba import njit
 
 from pipeline.mapper.kernels.attribution import reach_cells, span_buffers
-from pipeline.mapper.kernels.cone import cone_row_span, cone_rows
-from pipeline.mapper.kernels.specular import MAX_BINS, cone_columns, shade, shadow_bins
+from pipeline.mapper.kernels.specular import MAX_BINS, listed_row_spans, shade, shadow_bins
 from pipeline.mapper.types import F32, F64, I32, B
 
 
@@ -68,20 +67,9 @@ def detection_counts(
     for i in range(cones.shape[0]):
         ox, oy, r_out = cones[i, 0], cones[i, 1], cones[i, 2]
         a, hb = alpha[i], half_fov[i]
-        s1, c1, s2, c2 = cones[i, 3], cones[i, 4], cones[i, 5], cones[i, 6]
         # edge_sector_spans' spans, on the rows that hold a surface in the cone's columns
-        r0, r1 = cone_rows(oy, r_out, s1, s2, up_down[i, 0], up_down[i, 1], gy, res, height)
-        b0, b1 = cone_columns(ox, r_out, c1, c2, a, hb, gx, res, width)
-        n = 0
-        for row in range(r0, r1 + 1):
-            if occ_index[row, b1 + 1] == occ_index[row, b0]:
-                continue
-            c_lo, c_hi = cone_row_span(ox, oy, r_out, s1, c1, s2, c2, row, gx, gy, res, width)
-            if c_lo <= c_hi:
-                rows[n] = row
-                c0s[n] = c_lo
-                c1s[n] = c_hi
-                n += 1
+        n = listed_row_spans(cones, up_down, i, a, hb, occ_index, gx, gy, res, height, width,
+                             rows, c0s, c1s)
         ca, sa = math.cos(a), math.sin(a)
         t_edge = math.tan(hb)
         nb = shadow_bins(hb, r_out, res)

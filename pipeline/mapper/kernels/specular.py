@@ -87,6 +87,30 @@ def cone_columns(ox: float, r_out: float, c1: float, c2: float, alpha: float, hb
     return b0, b1
 
 
+@njit(cache=True, inline="always")
+def listed_row_spans(cones: F64, up_down: B, i: int, alpha: float,
+                     hb: float, occ_index: I32, gx: float, gy: float, res: float,
+                     height: int, width: int, rows: I64, c0s: I64, c1s: I64) -> int:
+    """edge_sector_spans' spans of cone ``i`` on only the rows that hold a listed cell
+    (``occ_index``, CSR by row) in the cone's columns (:func:`cone_columns`), written to
+    ``rows``, ``c0s``, ``c1s``; returns how many."""
+    ox, oy, r_out = cones[i, 0], cones[i, 1], cones[i, 2]
+    s1, c1, s2, c2 = cones[i, 3], cones[i, 4], cones[i, 5], cones[i, 6]
+    r0, r1 = cone_rows(oy, r_out, s1, s2, up_down[i, 0], up_down[i, 1], gy, res, height)
+    b0, b1 = cone_columns(ox, r_out, c1, c2, alpha, hb, gx, res, width)
+    n = 0
+    for row in range(r0, r1 + 1):
+        if occ_index[row, b1 + 1] == occ_index[row, b0]:
+            continue
+        c_lo, c_hi = cone_row_span(ox, oy, r_out, s1, c1, s2, c2, row, gx, gy, res, width)
+        if c_lo <= c_hi:
+            rows[n] = row
+            c0s[n] = c_lo
+            c1s[n] = c_hi
+            n += 1
+    return n
+
+
 @njit(cache=True, nogil=True)
 def shadow_offsets(cones: F64, half_fov: F64, res: float) -> I64:
     """Where each reading's shadow profile starts in :func:`shadow_profiles`' ``stops``
@@ -118,20 +142,9 @@ def shadow_profiles(
         if attribute and not r_inner[i] < r_out:
             continue
         a, hb = alpha[i], half_fov[i]
-        s1, c1, s2, c2 = cones[i, 3], cones[i, 4], cones[i, 5], cones[i, 6]
         # edge_sector_spans' spans, on the rows that hold a surface that may be silent
-        r0, r1 = cone_rows(oy, r_out, s1, s2, up_down[i, 0], up_down[i, 1], gy, res, height)
-        b0, b1 = cone_columns(ox, r_out, c1, c2, a, hb, gx, res, width)
-        n = 0
-        for row in range(r0, r1 + 1):
-            if occ_index[row, b1 + 1] == occ_index[row, b0]:
-                continue
-            c_lo, c_hi = cone_row_span(ox, oy, r_out, s1, c1, s2, c2, row, gx, gy, res, width)
-            if c_lo <= c_hi:
-                rows[n] = row
-                c0s[n] = c_lo
-                c1s[n] = c_hi
-                n += 1
+        n = listed_row_spans(cones, up_down, i, a, hb, occ_index, gx, gy, res, height, width,
+                             rows, c0s, c1s)
         ca, sa = math.cos(a), math.sin(a)
         t_edge = math.tan(hb)
         nb = offsets[i + 1] - offsets[i]
