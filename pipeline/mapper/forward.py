@@ -150,7 +150,7 @@ class ForwardMapper(SpecularMapper):
         self._measuring = False
         self._lines_on = config.wall_line_half_length_m > 0.0
         self.votes = empty_votes(grid if self._lines_on else GridSpec(0, 0, 1, 0, 0))
-        self._own: tuple[F32, F32, F32, float] | None = None  # pass 3's own normals
+        self._own: tuple[F32, F32, F32] | None = None  # the cells' own normals (pass 3)
 
     def begin_pass(self, index: int) -> None:
         """Start pass ``index`` (module doc) over the same scans."""
@@ -177,18 +177,11 @@ class ForwardMapper(SpecularMapper):
                 self.cos_table = cos_table(self.table)
             super().begin_pass(index - 1)
             if self._lines_on and index == 3:
-                self._own = (self.nx, self.ny, self.consistency, self.v_unknown)
-                self._use_lines()
+                self._own = (self.nx, self.ny, self.consistency)
+                self._use_lines()  # new arrays: pass 4's shadows are computed again
             elif self._own is not None and index == 4:
-                self.nx, self.ny, self.consistency, self.v_unknown = self._own
+                self.nx, self.ny, self.consistency = self._own
                 self._own = None
-
-    def _was_shadowed(self, readings: int) -> B:
-        """With wall lines, pass 3 judged passes against the lines and pass 4 against the
-        cells' own normals: other surfaces, so pass 4 computes every reading's shadows."""
-        if self._lines_on:
-            return np.ones(readings, dtype=bool)
-        return super()._was_shadowed(readings)
 
     def _use_lines(self) -> None:
         """Pass 3 judges passes within :data:`NEAR_LINE_M` of an estimated wall line

@@ -127,6 +127,9 @@ class SpecularMapper(AttributionMapper):
         # Pass 2's shadows, group by group (bit-packed ``stopped``): pass 3 recomputes only
         # the readings pass 2 found stopped (module doc).
         self._shadowed: list[npt.NDArray[np.uint8]] = []
+        # The surfaces and table pass 2's shadows were computed against (replaced, never
+        # changed in place, by whoever changes them): pass 3 reuses the shadows only on them.
+        self._shadow_basis: tuple[object, ...] = ()
         # The attribution of the last group (passes 1 and 3), running on the band thread:
         # (its unattributed echoes, first attribution?, readings with no echo).
         self._attributing: tuple[Future[int], bool, int] | None = None
@@ -205,6 +208,7 @@ class SpecularMapper(AttributionMapper):
                 self._bands.run(shadows, len(rows) // 2, len(rows))
             if self.pass_index == 2:
                 self._shadowed.append(np.packbits(stopped))
+                self._shadow_basis = self._surfaces_now()
 
         # The kernel's arguments taken now: the band thread holds arrays, not the mapper.
         args = (
@@ -243,8 +247,16 @@ class SpecularMapper(AttributionMapper):
         else:
             self._unattributed2 += lost - no_echo
 
+    def _surfaces_now(self) -> tuple[object, ...]:
+        """What a reading's shadows depend on besides its cone."""
+        return (self.nx, self.ny, self.consistency, self.cos_table)
+
     def _was_shadowed(self, readings: int) -> B:
-        """Pass 2's ``stopped`` of the current group (the same groups in passes 2 and 3)."""
+        """Pass 2's ``stopped`` of the current group (the same groups in passes 2 and 3);
+        every reading when the surfaces or the table have changed since."""
+        if any(a is not b for a, b in zip(self._shadow_basis, self._surfaces_now(),
+                                          strict=False)):
+            return np.ones(readings, dtype=bool)
         packed = self._shadowed[self._group_index]
         if packed.size != (readings + 7) // 8:
             raise RuntimeError(f"scan group {self._group_index} differs between passes 2 and 3")

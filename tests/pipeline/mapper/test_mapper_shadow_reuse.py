@@ -36,6 +36,9 @@ def test_the_last_pass_keeps_its_bytes_with_the_shadows_reused(
     flags = np.unpackbits(np.concatenate(reused._shadowed))
     # Some readings are stopped by a silent wall, most are not (those are skipped).
     assert 0 < flags.sum() < 0.8 * flags.size
+    reused._group_index = 0  # the last pass read these flags (its surfaces are pass 2's)
+    n = 8 * reused._shadowed[0].size
+    assert np.array_equal(reused._was_shadowed(n), np.unpackbits(reused._shadowed[0]) == 1)
     occupied = reused.snapshot().occupied  # the grids are complete once the map is taken
     want = {k: getattr(reused, k).copy() for k in GRIDS}
     want["occupied"] = occupied
@@ -71,6 +74,9 @@ def test_with_wall_lines_the_last_pass_computes_every_readings_shadows(
     assert kept._was_shadowed(13).all()
     kept_map = kept.snapshot().occupied
 
-    monkeypatch.setattr(ForwardMapper, "_was_shadowed", SpecularMapper._was_shadowed)
+    def pass_twos_flags(self: SpecularMapper, readings: int) -> np.ndarray:
+        return np.unpackbits(self._shadowed[self._group_index], count=readings).astype(bool)
+
+    monkeypatch.setattr(SpecularMapper, "_was_shadowed", pass_twos_flags)  # reused blindly
     reused = _mapped(Method.FORWARD, lines_m=0.3)
     assert not np.array_equal(kept_map, reused.snapshot().occupied)
