@@ -24,7 +24,8 @@ This method measures them with one E-step of a forward sensor model (Thrun 2003)
 
 With ``wall_line_half_length_m > 0`` pass 0 also votes every echo's tangent lines and pass 3
 judges passes near the wall lines found (:mod:`pipeline.mapper.wall_lines`) against the
-line's normal (consistency 1); pass 4 keeps the cells' own normals.
+line's normal (consistency 1); pass 4 keeps the cells' own normals (pass 3's shadows flag
+the readings these stop: pass 4 recomputes only theirs).
 
 Where the sonar hears surfaces at every incidence, ``p(θ) = p(0)``, every pass counts 1 and
 no ray stops: §9's evidence (with max-range readings' free cones). No configuration key of
@@ -35,6 +36,9 @@ numbers.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
+from typing import TypeVar
 
 import numpy as np
 from scipy.special import ndtr
@@ -52,6 +56,7 @@ from pipeline.mapper.types import F32, F64, B, GridSpec
 from pipeline.mapper.wall_lines import NEAR_LINE_M, empty_votes, near_lines, wall_lines
 from pipeline.stages import reading_quality as rq
 
+T = TypeVar("T")
 INCIDENCE_BINS = 9  # equal bins of the detection curve over [0, 90°]
 
 
@@ -133,6 +138,15 @@ def evidence_table(weights: F64) -> F64:
     return out
 
 
+def _on_own_thread(work: Callable[[], T]) -> Future[T]:
+    """``work()`` on a thread of its own, which ends with it (numpy releases the GIL)."""
+    pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sonarmap-lines")
+    try:
+        return pool.submit(work)
+    finally:
+        pool.shutdown(wait=False)
+
+
 class ForwardMapper(SpecularMapper):
     """§10 with ``visible(θ)`` and ``v̄`` measured on the first map (module doc); five
     passes."""
@@ -151,6 +165,9 @@ class ForwardMapper(SpecularMapper):
         self._lines_on = config.wall_line_half_length_m > 0.0
         self.votes = empty_votes(grid if self._lines_on else GridSpec(0, 0, 1, 0, 0))
         self._own: tuple[F32, F32, F32] | None = None  # the cells' own normals (pass 3)
+        # The wall lines near each cell (pass 3), found from pass 0's votes on a thread of
+        # their own while passes 1 and 2 run.
+        self._lines: Future[tuple[B, F32, F32]] | None = None
 
     def begin_pass(self, index: int) -> None:
         """Start pass ``index`` (module doc) over the same scans."""
@@ -159,6 +176,8 @@ class ForwardMapper(SpecularMapper):
         self._measuring = index == 2
         if index <= 1:
             super().begin_pass(index)
+            if self._lines_on and index == 1:  # the votes are complete
+                self._lines = _on_own_thread(self._near_lines)
         elif index == 2:
             self._find_surfaces()
             self.surfaces = AttributionMapper.occupied(self)
@@ -178,21 +197,28 @@ class ForwardMapper(SpecularMapper):
             super().begin_pass(index - 1)
             if self._lines_on and index == 3:
                 self._own = (self.nx, self.ny, self.consistency)
-                self._use_lines()  # new arrays: pass 4's shadows are computed again
+                self._use_lines()  # new arrays
+                self.later_surfaces = self._own  # pass 3 flags the readings pass 4's stop
             elif self._own is not None and index == 4:
                 self.nx, self.ny, self.consistency = self._own
-                self._own = None
+                self._own = self.later_surfaces = None
 
     def _use_lines(self) -> None:
         """Pass 3 judges passes within :data:`NEAR_LINE_M` of an estimated wall line
         (:mod:`pipeline.mapper.wall_lines`) against the line: its normal, consistency 1;
         elsewhere the cells keep their own arcs' normals and consistency."""
-        g = self.grid
-        on, nx, ny = wall_lines(self.votes, g.resolution, self.config.wall_line_half_length_m)
-        near, lnx, lny = near_lines(on, nx, ny, NEAR_LINE_M / g.resolution)
+        near, lnx, lny = self._lines.result() if self._lines else self._near_lines()
+        self._lines = None
         self.nx = np.where(near, lnx, self.nx)
         self.ny = np.where(near, lny, self.ny)
         self.consistency = np.where(near, np.float32(1.0), self.consistency)
+
+    def _near_lines(self) -> tuple[B, F32, F32]:
+        """The cells within :data:`NEAR_LINE_M` of a wall line of pass 0's votes and the
+        line's normal there (pass 3's surfaces near the lines)."""
+        g = self.grid
+        on, nx, ny = wall_lines(self.votes, g.resolution, self.config.wall_line_half_length_m)
+        return near_lines(on, nx, ny, NEAR_LINE_M / g.resolution)
 
     def _integrate_group(self, group: ScanGroup) -> None:
         if self._lines_on and self.pass_index == 0:

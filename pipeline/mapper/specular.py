@@ -130,6 +130,9 @@ class SpecularMapper(AttributionMapper):
         # The surfaces and table pass 2's shadows were computed against (replaced, never
         # changed in place, by whoever changes them): pass 3 reuses the shadows only on them.
         self._shadow_basis: tuple[object, ...] = ()
+        # The surfaces ``(nx, ny, consistency)`` pass 3 will judge against, set by a method
+        # whose pass 2 judges against others: pass 2 then flags the readings these stop.
+        self.later_surfaces: tuple[F32, F32, F32] | None = None
         # The attribution of the last group (passes 1 and 3), running on the band thread:
         # (its unattributed echoes, first attribution?, readings with no echo).
         self._attributing: tuple[Future[int], bool, int] | None = None
@@ -188,6 +191,9 @@ class SpecularMapper(AttributionMapper):
         offsets = shadow_offsets(cones, half, g.resolution)
         stops: F64 = np.empty(int(offsets[-1]))
         stopped: B = np.zeros(len(rows), dtype=bool)
+        later = self.later_surfaces if self.pass_index == 2 else None
+        nx2, ny2, cons2 = later if later is not None else (self.nx, self.ny, self.consistency)
+        stopped2: B = np.zeros(len(rows), dtype=bool) if later is not None else stopped
         if self.occ_cols.size:
             # Pass 3's shadows are pass 2's (the same cones, surfaces and table): only the
             # readings pass 2 found stopped can be (an infinite inner radius skips a reading).
@@ -199,7 +205,7 @@ class SpecularMapper(AttributionMapper):
                     cones, up_down, r_look, alpha, half, g.origin_x, g.origin_y,
                     g.resolution, self.occ_index, self.occ_cols, self.nx, self.ny,
                     self.consistency, self.cos_table, attribute, lo, hi, offsets, stops,
-                    stopped,
+                    stopped, later is not None, nx2, ny2, cons2, stopped2,
                 ))
 
             if attribute:  # on this thread, beside the previous group's attribution
@@ -207,8 +213,8 @@ class SpecularMapper(AttributionMapper):
             else:
                 self._bands.run(shadows, len(rows) // 2, len(rows))
             if self.pass_index == 2:
-                self._shadowed.append(np.packbits(stopped))
-                self._shadow_basis = self._surfaces_now()
+                self._shadowed.append(np.packbits(stopped2))
+                self._shadow_basis = (nx2, ny2, cons2, self.cos_table)
 
         # The kernel's arguments taken now: the band thread holds arrays, not the mapper.
         args = (

@@ -125,20 +125,25 @@ def shadow_offsets(cones: F64, half_fov: F64, res: float) -> I64:
 def shadow_profiles(
     cones: F64, up_down: B, r_inner: F64, alpha: F64, half_fov: F64, gx: float, gy: float,
     res: float, occ_index: I32, occ_cols: I32, nx: F32, ny: F32, cons: F32, table: F64,
-    attribute: bool, lo: int, hi: int, offsets: I64, stops: F64, stopped: B,
+    attribute: bool, lo: int, hi: int, offsets: I64, stops: F64, stopped: B, later: bool,
+    nx2: F32, ny2: F32, cons2: F32, stopped2: B,
 ) -> int:
     """The shadows of the silent surfaces in the cones of readings ``lo:hi``: ``stopped[i]``
     whether a ray of reading ``i`` stops, and ``stops[offsets[i] + b]`` the distance where
     the rays of its angular bin ``b`` stop (bins uniform in the tangent of the bearing off
-    the axis). With ``attribute`` the readings with no echo are left out (no arc). Writes
-    only these readings' entries, so calls on disjoint readings may run side by side;
-    returns how many readings have a shadow."""
+    the axis). With ``attribute`` the readings with no echo are left out (no arc). With
+    ``later``, ``stopped2[i]``: whether a ray of reading ``i`` would stop at the same cells
+    judged against the surfaces ``nx2, ny2, cons2`` (a later pass's), by the same test.
+    Writes only these readings' entries, so calls on disjoint readings may run side by
+    side; returns how many readings have a shadow."""
     height, width = cons.shape
     rows, c0s, c1s = span_buffers(cones, res)
     count = 0
     for i in range(lo, hi):
         ox, oy, r_out = cones[i, 0], cones[i, 1], cones[i, 2]
         stopped[i] = False
+        if later:
+            stopped2[i] = False
         if attribute and not r_inner[i] < r_out:
             continue
         a, hb = alpha[i], half_fov[i]
@@ -159,10 +164,18 @@ def shadow_profiles(
                 dist = math.sqrt(dx * dx + dy * dy)
                 # Silent with probability q·(1 − visible): a ray stops only at a surface
                 # whose orientation is known and that it meets obliquely.
-                if cons[r, c] * (1.0 - visible(dx, dy, dist, nx[r, c], ny[r, c], table)) <= 0.5:
+                silent = cons[r, c] * (1.0 - visible(dx, dy, dist, nx[r, c], ny[r, c],
+                                                      table)) > 0.5
+                silent2 = later and not stopped2[i] and cons2[r, c] * (
+                    1.0 - visible(dx, dy, dist, nx2[r, c], ny2[r, c], table)) > 0.5
+                if not (silent or silent2):
                     continue
                 along = dx * ca + dy * sa
                 if along <= 0.0:
+                    continue
+                if silent2:
+                    stopped2[i] = True
+                if not silent:
                     continue
                 if not stopped[i]:
                     stop[:] = np.inf

@@ -1,5 +1,6 @@
 """The specular and default methods' last pass recomputes the shadows of only the readings
-the pass before it found stopped: the same grids as recomputing every reading's."""
+the pass before it found stopped (with wall lines: stopped against the last pass's
+surfaces): the same grids as recomputing every reading's."""
 
 from __future__ import annotations
 
@@ -28,11 +29,12 @@ def _mapped(method: Method, threads: int = 1, lines_m: float = 0.0) -> SpecularM
     return m
 
 
-@pytest.mark.parametrize("method", [Method.FORWARD, Method.SPECULAR])
+@pytest.mark.parametrize(("method", "lines_m"),
+                         [(Method.FORWARD, 0.0), (Method.SPECULAR, 0.0), (Method.FORWARD, 0.3)])
 def test_the_last_pass_keeps_its_bytes_with_the_shadows_reused(
-    method: Method, monkeypatch: pytest.MonkeyPatch
+    method: Method, lines_m: float, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    reused = _mapped(method)
+    reused = _mapped(method, lines_m=lines_m)
     flags = np.unpackbits(np.concatenate(reused._shadowed))
     # Some readings are stopped by a silent wall, most are not (those are skipped).
     assert 0 < flags.sum() < 0.8 * flags.size
@@ -48,7 +50,7 @@ def test_the_last_pass_keeps_its_bytes_with_the_shadows_reused(
         return np.ones(readings, dtype=bool)  # every reading's shadows computed again
 
     monkeypatch.setattr(SpecularMapper, "_was_shadowed", everyone)
-    again = _mapped(method)
+    again = _mapped(method, lines_m=lines_m)
     assert np.array_equal(want["occupied"], again.snapshot().occupied)
     for name in GRIDS:
         assert np.array_equal(want[name], getattr(again, name)), name
@@ -64,19 +66,26 @@ def test_a_group_that_differs_between_the_passes_is_refused() -> None:
         m._was_shadowed(n + 8)
 
 
-def test_with_wall_lines_the_last_pass_computes_every_readings_shadows(
+def test_with_wall_lines_pass_3_flags_the_readings_pass_4s_surfaces_stop(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     # Pass 3 judges passes against the estimated wall lines, pass 4 against the cells' own
-    # normals: its stops differ, so pass 3's flags cannot be reused.
+    # normals: pass 3 flags the readings the latter stop, which pass 4 reuses.
     kept = _mapped(Method.FORWARD, lines_m=0.3)
     assert isinstance(kept, ForwardMapper) and kept._lines_on
-    assert kept._was_shadowed(13).all()
+    kept._group_index = 0
+    n = 8 * kept._shadowed[0].size
+    assert np.array_equal(kept._was_shadowed(n), np.unpackbits(kept._shadowed[0]) == 1)
+    kept_flags = np.unpackbits(np.concatenate(kept._shadowed))
     kept_map = kept.snapshot().occupied
 
-    def pass_twos_flags(self: SpecularMapper, readings: int) -> np.ndarray:
+    def pass_threes_flags(self: SpecularMapper, readings: int) -> np.ndarray:
         return np.unpackbits(self._shadowed[self._group_index], count=readings).astype(bool)
 
-    monkeypatch.setattr(SpecularMapper, "_was_shadowed", pass_twos_flags)  # reused blindly
-    reused = _mapped(Method.FORWARD, lines_m=0.3)
-    assert not np.array_equal(kept_map, reused.snapshot().occupied)
+    # Pass 3's own stops (against the lines) reused blindly: other readings, another map.
+    monkeypatch.setattr(SpecularMapper, "later_surfaces", property(
+        lambda self: None, lambda self, value: None), raising=False)
+    monkeypatch.setattr(SpecularMapper, "_was_shadowed", pass_threes_flags)
+    blind = _mapped(Method.FORWARD, lines_m=0.3)
+    assert not np.array_equal(kept_flags, np.unpackbits(np.concatenate(blind._shadowed)))
+    assert not np.array_equal(kept_map, blind.snapshot().occupied)
