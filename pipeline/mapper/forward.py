@@ -36,6 +36,7 @@ numbers.
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from typing import TypeVar
@@ -53,11 +54,20 @@ from pipeline.mapper.reading_features import distance_sigma
 from pipeline.mapper.scan_group import ScanGroup
 from pipeline.mapper.specular import TABLE_STEP, SpecularMapper, cos_table
 from pipeline.mapper.types import F32, F64, B, GridSpec
-from pipeline.mapper.wall_lines import NEAR_LINE_M, empty_votes, near_lines, wall_lines
+from pipeline.mapper.wall_lines import (
+    NEAR_LINE_M,
+    Votes,
+    empty_votes,
+    near_lines,
+    wall_lines,
+)
+from pipeline.mapper.work_share import WorkShare
 from pipeline.stages import reading_quality as rq
 
 T = TypeVar("T")
-INCIDENCE_BINS = 9  # equal bins of the detection curve over [0, 90°]
+INCIDENCE_BINS = 9
+# Groups of E-step counts the worker thread may have pending (each holds its group's cones).
+COUNT_BACKLOG = 2  # equal bins of the detection curve over [0, 90°]
 
 
 def fitted_detection(stats: F64) -> F64:
@@ -138,6 +148,13 @@ def evidence_table(weights: F64) -> F64:
     return out
 
 
+def _near_lines(votes: Votes, resolution: float, half_length_m: float) -> tuple[B, F32, F32]:
+    """The cells within :data:`NEAR_LINE_M` of a wall line of pass 0's votes and the line's
+    normal there (pass 3's surfaces near the lines)."""
+    on, nx, ny = wall_lines(votes, resolution, half_length_m)
+    return near_lines(on, nx, ny, NEAR_LINE_M / resolution)
+
+
 def _on_own_thread(work: Callable[[], T]) -> Future[T]:
     """``work()`` on a thread of its own, which ends with it (numpy releases the GIL)."""
     pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="sonarmap-lines")
@@ -168,6 +185,10 @@ class ForwardMapper(SpecularMapper):
         # The wall lines near each cell (pass 3), found from pass 0's votes on a thread of
         # their own while passes 1 and 2 run.
         self._lines: Future[tuple[B, F32, F32]] | None = None
+        # The E-step's parts on the worker thread not yet added: (their future, this
+        # thread's own and counting seconds of that group, and its share).
+        self._counting: list[tuple[Future[tuple[F64, F64, float]], float, float, float]] = []
+        self._estep_share = WorkShare()
 
     def begin_pass(self, index: int) -> None:
         """Start pass ``index`` (module doc) over the same scans."""
@@ -177,7 +198,9 @@ class ForwardMapper(SpecularMapper):
         if index <= 1:
             super().begin_pass(index)
             if self._lines_on and index == 1:  # the votes are complete
-                self._lines = _on_own_thread(self._near_lines)
+                votes, res = self.votes, self.grid.resolution
+                half_length = self.config.wall_line_half_length_m  # (the thread holds no mapper)
+                self._lines = _on_own_thread(lambda: _near_lines(votes, res, half_length))
         elif index == 2:
             self._find_surfaces()
             self.surfaces = AttributionMapper.occupied(self)
@@ -187,6 +210,7 @@ class ForwardMapper(SpecularMapper):
             self.pass_index = 2
             self._group_index = 0
         else:
+            self._counted()  # every group's counts
             if index == 3:
                 self.p_d = fitted_detection(self.stats)
                 floor = fit_detection(self.stats)[3]  # the coincidences' rate
@@ -207,18 +231,12 @@ class ForwardMapper(SpecularMapper):
         """Pass 3 judges passes within :data:`NEAR_LINE_M` of an estimated wall line
         (:mod:`pipeline.mapper.wall_lines`) against the line: its normal, consistency 1;
         elsewhere the cells keep their own arcs' normals and consistency."""
-        near, lnx, lny = self._lines.result() if self._lines else self._near_lines()
+        near, lnx, lny = self._lines.result() if self._lines else _near_lines(
+            self.votes, self.grid.resolution, self.config.wall_line_half_length_m)
         self._lines = None
         self.nx = np.where(near, lnx, self.nx)
         self.ny = np.where(near, lny, self.ny)
         self.consistency = np.where(near, np.float32(1.0), self.consistency)
-
-    def _near_lines(self) -> tuple[B, F32, F32]:
-        """The cells within :data:`NEAR_LINE_M` of a wall line of pass 0's votes and the
-        line's normal there (pass 3's surfaces near the lines)."""
-        g = self.grid
-        on, nx, ny = wall_lines(self.votes, g.resolution, self.config.wall_line_half_length_m)
-        return near_lines(on, nx, ny, NEAR_LINE_M / g.resolution)
 
     def _integrate_group(self, group: ScanGroup) -> None:
         if self._lines_on and self.pass_index == 0:
@@ -229,6 +247,7 @@ class ForwardMapper(SpecularMapper):
         if not self._measuring:
             super()._integrate_group(group)
             return
+        started = time.thread_time()
         g, cfg = self.grid, self.config
         cat = group.cat
         d: F64 = np.where(group.codes == rq.OK, cat.range_m, 0.0)
@@ -240,21 +259,45 @@ class ForwardMapper(SpecularMapper):
         r_inner = np.where(d > 0.0, np.maximum(d - band, 0.0), np.inf)[rows]
         half = np.minimum(0.5 * cat.fov[rows], 0.5 * math.pi - 1e-9)
         r_free, alpha = free_r[rows], cat.alpha[rows]
-        parts: list[tuple[int, F64, F64]] = []
+        # The kernel's arguments taken now: the worker thread holds arrays, not the mapper.
+        surfaces = (self.surface_index, self.surface_cols, self.nx, self.ny, self.consistency)
+        bins = self.stats.shape[1] - 1
 
-        def count(lo: int, hi: int) -> int:
-            # Each half of the readings counts into its own tables (integer counts: their
-            # sums do not depend on the split).
-            stats, reaches = np.zeros_like(self.stats), np.zeros_like(self.reaches)
+        def count(lo: int, hi: int) -> tuple[F64, F64, float]:
+            # Each part of the readings counts into its own tables (integer counts: their
+            # sums do not depend on the split); returns them and its thread CPU seconds.
+            t = time.thread_time()
+            stats, reaches = np.zeros((2, bins + 1)), np.zeros((2, bins))
             detection_counts(
                 cones[lo:hi], up_down[lo:hi], r_inner[lo:hi], r_free[lo:hi], alpha[lo:hi],
-                half[lo:hi], g.origin_x, g.origin_y, g.resolution, self.surface_index,
-                self.surface_cols, self.nx, self.ny, self.consistency, stats, reaches,
+                half[lo:hi], g.origin_x, g.origin_y, g.resolution, *surfaces, stats, reaches,
             )
-            parts.append((lo, stats, reaches))
-            return 0
+            return stats, reaches, time.thread_time() - t
 
-        self._bands.run(count, len(rows) // 2, len(rows))
-        for _, stats, reaches in sorted(parts, key=lambda p: p[0]):
-            self.stats += stats
-            self.reaches += reaches
+        n = len(rows)
+        if not self._bands.parallel:
+            self._add_counts(count(0, n))
+            return
+        # The worker counts the last readings of the group beside this thread's next
+        # group (WorkShare balances the two); nothing waits for it before pass 3.
+        share = self._estep_share.share
+        cut = round(share * n)
+        theirs = self._bands.later(lambda: count(cut, n))
+        own = time.thread_time() - started
+        mine = count(0, cut)
+        self._add_counts(mine)
+        self._counting.append((theirs, own, mine[2], share))
+        self._counted(keep=COUNT_BACKLOG)
+
+    def _add_counts(self, part: tuple[F64, F64, float]) -> None:
+        self.stats += part[0]
+        self.reaches += part[1]
+
+    def _counted(self, keep: int = 0) -> None:
+        """Add the E-step counts the worker has done (all but ``keep`` groups: waits for
+        them) and balance the next groups by their times."""
+        while self._counting and (len(self._counting) > keep or self._counting[0][0].done()):
+            theirs, own, mine, share = self._counting.pop(0)
+            part = theirs.result()
+            self._add_counts(part)
+            self._estep_share.update(own, mine, part[2], share)

@@ -19,19 +19,23 @@ import math
 import weakref
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
+from typing import TypeVar
 
 import numpy as np
 
 from pipeline.mapper.types import F64
 
+T = TypeVar("T")
 # A cone's cells lie about this share of its radius out along its axis (the centroid of a
 # sector of a narrow beam: 2/3).
 CENTROID = 2.0 / 3.0
 
 
-def balanced_split(cones: F64, alpha: F64, gy: float, res: float, height: int) -> int:
-    """The row that halves the cones' estimated cells: the median of their centroids' rows,
-    each weighted by its area (``cones`` as :func:`~pipeline.mapper.free_space.cone_table`)."""
+def balanced_split(cones: F64, alpha: F64, gy: float, res: float, height: int,
+                   share: float = 0.5) -> int:
+    """The row below which the cones hold the ``share`` of their estimated cells (a half:
+    the median of their centroids' rows, each weighted by its area; ``cones`` as
+    :func:`~pipeline.mapper.free_space.cone_table`)."""
     if cones.shape[0] == 0:
         return height // 2
     radius = cones[:, 2]
@@ -39,7 +43,7 @@ def balanced_split(cones: F64, alpha: F64, gy: float, res: float, height: int) -
     weight = radius * radius
     order = np.argsort(row, kind="stable")
     cum = np.cumsum(weight[order])
-    mid = int(np.searchsorted(cum, 0.5 * cum[-1]))
+    mid = int(np.searchsorted(cum, share * cum[-1]))
     return min(max(math.floor(row[order][min(mid, len(order) - 1)]), 0), height)
 
 
@@ -63,12 +67,17 @@ class RowBands:
             total = upper.result()
         return lower + total
 
-    def later(self, work: Callable[[], int]) -> Future[int]:
+    @property
+    def parallel(self) -> bool:
+        """Whether a worker thread runs beside the calling thread."""
+        return self._pool is not None
+
+    def later(self, work: Callable[[], T]) -> Future[T]:
         """``work()`` on the worker thread (after the work handed to it before), or now on
         this thread with one thread; its result or error comes from the future."""
         if self._pool is not None:
             return self._pool.submit(work)
-        done: Future[int] = Future()
+        done: Future[T] = Future()
         done.set_result(work())
         return done
 

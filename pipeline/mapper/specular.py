@@ -19,11 +19,12 @@ Four passes over the log's scans, in the same order:
    out to ``r_max`` the same way.
 3. §9's attribution with these counts and the same stops; the map is §9's linear test.
 
-With ``threads = 2`` pass 2 runs on two threads by row band (its stops on two halves of
-each group's readings), and the attributions of passes 1 and 3 run on the second thread,
-one group at a time in order, beside the next group's preparation and stops
-(:mod:`~pipeline.mapper.row_bands`): the same bytes. The grids are complete once the next
-pass begins or the map is taken. Pass 3 recomputes the stops of only the readings pass 2
+With ``threads = 2`` pass 2 runs on two threads by row band, pipelined: a group's upper
+band runs on the second thread beside the next group's preparation and stops and its own
+lower band (sized by :mod:`~pipeline.mapper.work_share`), and the attributions of passes 1
+and 3 run on the second thread, one group at a time in order, beside the next group's
+preparation and stops (:mod:`~pipeline.mapper.row_bands`): the same bytes. The grids are
+complete once the next pass begins or the map is taken. Pass 3 recomputes the stops of only the readings pass 2
 found stopped (the same cones, surfaces and table).
 Memory: §9's grids and seven more grids, the list of surfaces and per-group buffers;
 nothing grows with the log (docs/PERFORMANCE.md).
@@ -32,7 +33,10 @@ nothing grows with the log (docs/PERFORMANCE.md).
 from __future__ import annotations
 
 import math
+import time
+from collections.abc import Callable
 from concurrent.futures import Future
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -42,6 +46,7 @@ from pipeline.config import MapperConfig
 from pipeline.mapper.attribution import AttributionMapper
 from pipeline.mapper.free_space import cone_table
 from pipeline.mapper.kernels.attribution import empty_grid
+from pipeline.mapper.kernels.echo_lists import echo_candidate_lists, spread_candidate_lists
 from pipeline.mapper.kernels.specular import (
     shadow_offsets,
     shadow_profiles,
@@ -52,12 +57,31 @@ from pipeline.mapper.reading_features import distance_sigma
 from pipeline.mapper.row_bands import RowBands, balanced_split
 from pipeline.mapper.scan_group import GROUP, ScanGroup
 from pipeline.mapper.types import F32, F64, B, GridSpec, MapperCounters, MapSnapshot
+from pipeline.mapper.work_share import WorkShare
 from pipeline.stages import reading_quality as rq
 
 TABLE_STEP = math.radians(0.25)  # sampling of the visibility table, rad
 COS_SAMPLES = 4097  # samples of the kernel's visibility table, uniform in cos θ
 # Scans per group in passes 2 and 3 (the groups of passes 0 and 1 are the paper's mapper's).
 LATE_GROUP = 4 * GROUP
+
+
+# A split attribution's balance: this thread's own and listing seconds, its share, and
+# the band thread's seconds (appended once it is done).
+Balance = tuple[float, float, float, list[float]]
+# trace_readings' arguments that are one value per reading (cones … half_fov, stopped_in)
+# and its offsets into the shadow profiles (one more).
+PER_READING, OFFSETS = (0, 1, 2, 3, 4, 5, 11), 9
+
+
+def _first_readings(args: tuple[Any, ...], cut: int) -> tuple[Any, ...]:
+    """:func:`trace_readings`' arguments for its first ``cut`` readings alone (the offsets
+    keep pointing into the same shadow profiles)."""
+    out = list(args)
+    for k in PER_READING:
+        out[k] = args[k][:cut]
+    out[OFFSETS] = args[OFFSETS][:cut + 1]
+    return tuple(out)
 
 
 def visibility_table(median_deg: float, spread: float) -> F64:
@@ -134,8 +158,15 @@ class SpecularMapper(AttributionMapper):
         # whose pass 2 judges against others: pass 2 then flags the readings these stop.
         self.later_surfaces: tuple[F32, F32, F32] | None = None
         # The attribution of the last group (passes 1 and 3), running on the band thread:
-        # (its unattributed echoes, first attribution?, readings with no echo).
-        self._attributing: tuple[Future[int], bool, int] | None = None
+        # (its unattributed echoes, first attribution?, readings with no echo, and for a
+        # split one this thread's own and listing seconds, its share and the band's).
+        self._attributing: tuple[Future[int], bool, int, Balance | None] | None = None
+        self._attribution_share = WorkShare()
+        # The last group of the count pass (pass 2): its trace, split row, upper band on
+        # the band thread (its thread CPU seconds) and this thread's own seconds before.
+        self._tracing: tuple[Callable[[int, int], int], int, Future[float], float,
+                             float] | None = None
+        self._trace_share = WorkShare()
 
     def begin_pass(self, index: int) -> None:
         """Start pass ``index`` (module doc) over the same scans."""
@@ -168,6 +199,7 @@ class SpecularMapper(AttributionMapper):
         if self.pass_index == 0:
             super()._integrate_group(group)
             return
+        started = time.thread_time()
         if self.pass_index == 1 and self._paper_thread is not None:
             self._paper_thread.give(self._group_index, group)
         g, cfg = self.grid, self.config
@@ -208,10 +240,7 @@ class SpecularMapper(AttributionMapper):
                     stopped, later is not None, nx2, ny2, cons2, stopped2,
                 ))
 
-            if attribute:  # on this thread, beside the previous group's attribution
-                shadows(0, len(rows))
-            else:
-                self._bands.run(shadows, len(rows) // 2, len(rows))
+            shadows(0, len(rows))  # on this thread, beside the band thread's work
             if self.pass_index == 2:
                 self._shadowed.append(np.packbits(stopped2))
                 self._shadow_basis = (nx2, ny2, cons2, self.cos_table)
@@ -233,21 +262,86 @@ class SpecularMapper(AttributionMapper):
             # One group's attribution at a time, in order, on the band thread: this group's
             # waits for the previous one's, and the next group's preparation and shadows
             # overlap it (the attribution writes only the hits and bearings).
-            self._attributed()
             no_echo = 0 if first else int(np.count_nonzero(d[rows] <= 0.0))
-            self._attributing = (self._bands.later(lambda: trace(0, height)), first, no_echo)
+            work, balance = lambda: trace(0, height), None
+            if not first and self._bands.parallel:
+                work, balance = self._split_attribution(args, len(rows), started)
+            self._attributed()
+            self._attributing = (self._bands.later(work), first, no_echo, balance)
+        elif not self._bands.parallel:
+            self._bands.run(trace, height, height)
         else:
-            split = balanced_split(cones, alpha, g.origin_y, g.resolution, height)
-            self._bands.run(trace, split, height)
+            # Pipelined: this group's upper band runs on the band thread beside the next
+            # group's preparation and shadows and this group's lower band, which this thread
+            # runs then (_traced); WorkShare sizes the bands so that both finish together.
+            own = time.thread_time() - started
+            self._traced()
+            split = balanced_split(cones, alpha, g.origin_y, g.resolution, height,
+                                   self._trace_share.share)
+
+            def upper() -> float:
+                t = time.thread_time()
+                trace(split, height)
+                return time.thread_time() - t
+
+            self._tracing = (trace, split, self._bands.later(upper), own,
+                             self._trace_share.share)
+
+    def _traced(self) -> None:
+        """The count pass's last group handed over: its lower band here, then the end of
+        its upper band on the band thread (each row's adds stay in group order)."""
+        if self._tracing is None:
+            return
+        trace, split, upper, own, share = self._tracing
+        self._tracing = None
+        t = time.thread_time()
+        try:
+            trace(0, split)
+        finally:
+            theirs = upper.result()
+        self._trace_share.update(own, time.thread_time() - t, theirs, share)
+
+    def _split_attribution(self, args: tuple[Any, ...], n: int,
+                           started: float) -> tuple[Callable[[], int], Balance]:
+        """Pass 3's attribution of a group split in two (no bearings): this thread lists
+        the echo candidates of its last readings now, the band thread traces the first ones
+        and spreads those lists after them (:mod:`~pipeline.mapper.kernels.echo_lists`);
+        :class:`WorkShare` sizes the parts. ``args``: :func:`trace_readings`'."""
+        share = self._attribution_share.share
+        cut = n - round(share * n)
+        own = time.thread_time() - started
+        (cones, up_down, r_inner, _, alpha, half, gx, gy, res, offsets, stops, stopped,
+         *_, free_in, arcs_in, ratio, dilution, _, _, hits, _, _) = args
+        lists = echo_candidate_lists(cones, up_down, r_inner, alpha, half, gx, gy, res,
+                                     offsets, stops, stopped, free_in, arcs_in, ratio, cut, n)
+        mine = time.thread_time() - started - own
+        first_part = _first_readings(args, cut)
+        height = free_in.shape[0]
+        seconds: list[float] = []
+
+        def work() -> int:
+            t = time.thread_time()
+            lost = int(trace_readings(*first_part, 0, height))
+            lost += int(spread_candidate_lists(hits, *lists, dilution))
+            seconds.append(time.thread_time() - t)
+            return lost
+
+        return work, (own, mine, share, seconds)
 
     def _attributed(self) -> None:
-        """Wait for the attribution of the last group handed to the band thread and count
-        its unattributed echoes (readings with no echo have no arc: not unattributed)."""
+        """Finish the grid writes handed to the band thread (the count pass's last group,
+        :meth:`_traced`); wait for the attribution of the last group handed to it and
+        count its unattributed echoes (readings with no echo have no arc: not
+        unattributed)."""
+        self._traced()
         if self._attributing is None:
             return
-        future, first, no_echo = self._attributing
+        future, first, no_echo, balance = self._attributing
         self._attributing = None
         lost = future.result()
+        if balance is not None:
+            own, mine, share, seconds = balance
+            self._attribution_share.update(own, mine, seconds[0], share)
         if first:
             self._unattributed += lost
         else:

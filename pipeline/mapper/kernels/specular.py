@@ -282,6 +282,41 @@ def _arc_candidates(
     return m
 
 
+@njit(cache=True, inline="always")
+def _shadow_frame(alpha: F64, half_fov: F64, offsets: I64,
+                  i: int) -> tuple[float, float, float, float, int]:
+    """Reading ``i``'s axis ``(cos α, sin α)`` and its shadow profile's bins: the tangent
+    of the cone's half width, a bin's width in tangent units and the number of bins."""
+    a = alpha[i]
+    nb = offsets[i + 1] - offsets[i]
+    t_edge = math.tan(half_fov[i])  # bins uniform in tan(bearing − α) across the cone
+    return math.cos(a), math.sin(a), t_edge, 2.0 * t_edge / nb, nb
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def echo_candidates(
+    cones: F64, up_down: B, r_inner: F64, alpha: F64, half_fov: F64, i: int, gx: float,
+    gy: float, res: float, width: int, height: int, offsets: I64, stops: F64, stopped_in: B,
+    bearings: bool, arc_c: F32, arc_s: F32, free_in: F32, arcs_in: F32, ratio: float,
+    rows: I64, c0s: I64, c1s: I64, cand_r: I64, cand_c: I64,
+) -> int:
+    """:func:`trace_readings` with ``attribute`` for reading ``i``: its echo's candidate
+    cells in ``cand_r, cand_c`` (returns how many; none for a reading with no echo: no arc),
+    and with ``bearings`` its arc cells' bearings added to ``arc_c, arc_s``."""
+    ox, oy, r_out = cones[i, 0], cones[i, 1], cones[i, 2]
+    ri = r_inner[i]
+    if not ri < r_out:  # no echo: no arc to attribute
+        return 0
+    ca, sa, t_edge, bin_w, nb = _shadow_frame(alpha, half_fov, offsets, i)
+    # only the arc's cells matter: the annulus' spans
+    n = edge_sector_spans(ox, oy, cones[i, 3], cones[i, 4], cones[i, 5], cones[i, 6],
+                          up_down[i, 0], up_down[i, 1], ri, r_out, gx, gy, res, width, height,
+                          rows, c0s, c1s)
+    return _arc_candidates(rows, c0s, c1s, n, gx, gy, res, ox, oy, ri, stopped_in[i], ca, sa,
+                           t_edge, bin_w, nb, stops[offsets[i]:offsets[i + 1]], bearings, arc_c,
+                           arc_s, free_in, arcs_in, ratio, cand_r, cand_c)
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def trace_readings(
     cones: F64, up_down: B, r_inner: F64, r_free: F64, alpha: F64, half_fov: F64,
@@ -312,46 +347,32 @@ def trace_readings(
     xbuf = np.empty(width + 1, dtype=np.float64)
     lost = 0
     for i in range(cones.shape[0]):
+        if attribute:
+            m = echo_candidates(cones, up_down, r_inner, alpha, half_fov, i, gx, gy, res,
+                                width, height, offsets, stops, stopped_in, bearings, arc_c,
+                                arc_s, free_in, arcs_in, ratio, rows, c0s, c1s, cand_r, cand_c)
+            if m == 0:  # no echo (no arc to attribute) or no candidate cell
+                lost += 1
+            else:
+                spread_echo(hits, cand_r, cand_c, m, dilution)
+            continue
         ox, oy, r_out = cones[i, 0], cones[i, 1], cones[i, 2]
-        rf, ri = r_free[i], r_inner[i]
-        if attribute and not ri < r_out:  # no echo: no arc to attribute
-            lost += 1
-            continue
-        a, hb = alpha[i], half_fov[i]
         s1, c1, s2, c2 = cones[i, 3], cones[i, 4], cones[i, 5], cones[i, 6]
-        stopped = stopped_in[i]
-        stop = stops[offsets[i]:offsets[i + 1]]
-        nb = offsets[i + 1] - offsets[i]
-        ca, sa = math.cos(a), math.sin(a)
-        t_edge = math.tan(hb)  # bins uniform in tan(bearing − α) across the cone
-        bin_w = 2.0 * t_edge / nb
-        if attribute:  # only the arc's cells matter: the annulus' spans
-            n = edge_sector_spans(ox, oy, s1, c1, s2, c2, up_down[i, 0], up_down[i, 1], ri,
-                                  r_out, gx, gy, res, width, height, rows, c0s, c1s)
-        else:  # edge_sector_spans' spans, on this call's rows
-            r0, r1 = cone_rows(oy, r_out, s1, s2, up_down[i, 0], up_down[i, 1], gy, res,
-                               height)
-            n = 0
-            for row in range(max(r0, row_lo), min(r1 + 1, row_hi)):
-                c_lo, c_hi = cone_row_span(ox, oy, r_out, s1, c1, s2, c2, row, gx, gy, res,
-                                           width)
-                if c_lo <= c_hi:
-                    rows[n] = row
-                    c0s[n] = c_lo
-                    c1s[n] = c_hi
-                    n += 1
-        if not attribute:
-            _count_spans(rows, c0s, c1s, n, row_lo, row_hi, gx, gy, res, ox, oy, rf, ri,
-                         stopped, ca, sa, t_edge, bin_w, nb, stop, nx, ny, cons, table,
-                         v_unknown, free_out, arcs_out, dbuf, kbuf, xbuf)
-            continue
-        m = _arc_candidates(rows, c0s, c1s, n, gx, gy, res, ox, oy, ri, stopped, ca, sa,
-                            t_edge, bin_w, nb, stop, bearings, arc_c, arc_s, free_in,
-                            arcs_in, ratio, cand_r, cand_c)
-        if m == 0:
-            lost += 1
-            continue
-        spread_echo(hits, cand_r, cand_c, m, dilution)
+        ca, sa, t_edge, bin_w, nb = _shadow_frame(alpha, half_fov, offsets, i)
+        # edge_sector_spans' spans, on this call's rows
+        r0, r1 = cone_rows(oy, r_out, s1, s2, up_down[i, 0], up_down[i, 1], gy, res, height)
+        n = 0
+        for row in range(max(r0, row_lo), min(r1 + 1, row_hi)):
+            c_lo, c_hi = cone_row_span(ox, oy, r_out, s1, c1, s2, c2, row, gx, gy, res, width)
+            if c_lo <= c_hi:
+                rows[n] = row
+                c0s[n] = c_lo
+                c1s[n] = c_hi
+                n += 1
+        _count_spans(rows, c0s, c1s, n, row_lo, row_hi, gx, gy, res, ox, oy, r_free[i],
+                     r_inner[i], stopped_in[i], ca, sa, t_edge, bin_w, nb,
+                     stops[offsets[i]:offsets[i + 1]], nx, ny, cons, table, v_unknown,
+                     free_out, arcs_out, dbuf, kbuf, xbuf)
     return lost
 
 

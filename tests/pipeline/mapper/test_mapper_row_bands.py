@@ -1,6 +1,7 @@
 """The specular and default methods' speed-ups keep their bytes: the row-band split between two
-threads (any split row, one thread or two), the E-step's two halves of the readings, and the
-list of surfaces that may be silent, the later passes' group size."""
+threads (any split row, one thread or two), the E-step's two parts of the readings, the
+last attribution's two parts, any share of the work between the threads, the list of
+surfaces that may be silent, the later passes' group size."""
 
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ from pipeline.mapper import make_mapper
 from pipeline.mapper.kernels.specular import silent_candidates
 from pipeline.mapper.row_bands import RowBands, balanced_split
 from pipeline.mapper.synthetic import room_grid
+from pipeline.mapper.work_share import WorkShare
 
 
 def test_balanced_split_halves_the_cones_area() -> None:
@@ -71,6 +73,7 @@ def _specular_grids(threads: int) -> dict[str, np.ndarray]:
     occupied = m.snapshot().occupied  # the grids are complete once the map is taken
     out = {k: getattr(m, k).copy() for k in ("free2", "arcs2", "hits2", "hits", "free", "stats", "reaches")}
     out["occupied"] = occupied
+    out["unattributed"] = np.array([m.counters.echoes_unattributed])
     return out
 
 
@@ -82,10 +85,29 @@ def test_the_specular_maps_do_not_depend_on_threads_or_the_split(
     assert one["stats"].sum() > 100  # the E-step's counts (its readings split in two halves)
     for split in (None, 0, 37, 10**6):
         if split is not None:
-            monkeypatch.setattr(specular, "balanced_split", lambda *a, s=split: min(s, a[-1]))
+            monkeypatch.setattr(specular, "balanced_split",
+                                lambda *a, s=split: min(s, a[4]))  # a[4]: the height
         two = _specular_grids(2)
         for name, grid in one.items():
             assert np.array_equal(grid, two[name]), (split, name)
+
+
+@pytest.mark.parametrize("forced", [0.0, 0.3, 1.0])
+def test_the_maps_do_not_depend_on_how_the_work_is_shared(
+    forced: float, monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # The E-step's parts, the count pass's row bands and the last attribution's two parts
+    # are sized by measured times (WorkShare): any share gives the same grids and counts.
+    one = _specular_grids(1)
+
+    def fixed(self: WorkShare, *args: float) -> None:
+        self.share = forced
+
+    monkeypatch.setattr(WorkShare, "update", fixed)
+    monkeypatch.setattr(WorkShare, "__init__", fixed)
+    two = _specular_grids(2)
+    for name, grid in one.items():
+        assert np.array_equal(grid, two[name]), (forced, name)
 
 
 def test_the_later_passes_do_not_depend_on_their_groups(monkeypatch: pytest.MonkeyPatch) -> None:
