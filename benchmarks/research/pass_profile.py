@@ -1,4 +1,4 @@
-"""Where a run's time goes, pass by pass (docs/PERFORMANCE.md §5).
+"""Where a run's time goes, pass by pass (docs/PERFORMANCE.md §1).
 
 Usage: ``python -m benchmarks.research.pass_profile LOG OUT [--threads 1|2]``
 
@@ -19,6 +19,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+import pipeline.mapper.andersone as andersone
 import pipeline.mapper.attribution as attribution
 import pipeline.mapper.forward as forward
 import pipeline.mapper.specular as specular
@@ -28,8 +29,12 @@ from pipeline.mapper.kernels.warm import warm
 
 KERNELS = (
     (attribution, ("count_free", "count_arcs", "attribute_echoes", "cone_table")),
-    (specular, ("trace_readings", "shadow_profiles", "cone_table")),
-    (forward, ("detection_counts", "cone_table")),
+    (specular, ("trace_readings", "shadow_profiles", "cone_table", "echo_candidate_lists",
+                "spread_candidate_lists")),
+    (forward, ("detection_counts", "cone_table", "vote_tangents", "wall_lines", "near_lines",
+               "fit_detection")),
+    (andersone, ("free_unions", "add_free_unions", "reading_features")),
+    (andersone.andersone_scans, ("integrate_scans",)),
 )
 
 

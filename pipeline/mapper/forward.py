@@ -30,7 +30,8 @@ the readings these stop: pass 4 recomputes only theirs).
 Where the sonar hears surfaces at every incidence, ``p(θ) = p(0)``, every pass counts 1 and
 no ray stops: §9's evidence (with max-range readings' free cones). No configuration key of
 its own (the bins' smoothing is the uniform prior). Memory: §10's grids; the counts are 38
-numbers.
+numbers. With ``threads = 2`` the E-step's readings are split between two threads, each
+part counted into its own tables (integer counts: the sums do not depend on the split).
 """
 
 from __future__ import annotations
@@ -194,6 +195,7 @@ class ForwardMapper(SpecularMapper):
         """Start pass ``index`` (module doc) over the same scans."""
         if index not in range(self.passes):
             raise ValueError(f"the forward method has passes 0 to 4, not {index}")
+        self._counted()  # every E-step group's counts, before anything reads or resets them
         self._measuring = index == 2
         if index <= 1:
             super().begin_pass(index)
@@ -210,7 +212,6 @@ class ForwardMapper(SpecularMapper):
             self.pass_index = 2
             self._group_index = 0
         else:
-            self._counted()  # every group's counts
             if index == 3:
                 self.p_d = fitted_detection(self.stats)
                 floor = fit_detection(self.stats)[3]  # the coincidences' rate

@@ -21,11 +21,13 @@ Four passes over the log's scans, in the same order:
 
 With ``threads = 2`` pass 2 runs on two threads by row band, pipelined: a group's upper
 band runs on the second thread beside the next group's preparation and stops and its own
-lower band (sized by :mod:`~pipeline.mapper.work_share`), and the attributions of passes 1
-and 3 run on the second thread, one group at a time in order, beside the next group's
-preparation and stops (:mod:`~pipeline.mapper.row_bands`): the same bytes. The grids are
-complete once the next pass begins or the map is taken. Pass 3 recomputes the stops of only the readings pass 2
-found stopped (the same cones, surfaces and table).
+lower band; the attributions of passes 1 and 3 run on the second thread, one group at a time
+in order, beside the next group's preparation and stops (pass 3's lists the candidates of
+a group's last readings on this thread first: :mod:`~pipeline.mapper.kernels.echo_lists`);
+:mod:`~pipeline.mapper.work_share` sizes the parts (:mod:`~pipeline.mapper.row_bands`): the
+same bytes. The grids are complete once the next pass begins or the map is taken. Pass 3
+recomputes the stops of only the readings pass 2 found stopped (the same cones and table;
+against ``later_surfaces`` when a method judges pass 3 against other surfaces).
 Memory: §9's grids and seven more grids, the list of surfaces and per-group buffers;
 nothing grows with the log (docs/PERFORMANCE.md).
 """
