@@ -317,13 +317,12 @@ class SpecularMapper(AttributionMapper):
         lists = echo_candidate_lists(cones, up_down, r_inner, alpha, half, gx, gy, res,
                                      offsets, stops, stopped, free_in, arcs_in, ratio, cut, n)
         mine = time.thread_time() - started - own
-        first_part = _first_readings(args, cut)
-        height = free_in.shape[0]
+        first_part = (*_first_readings(args, cut), 0, free_in.shape[0])  # all rows
         seconds: list[float] = []
 
         def work() -> int:
             t = time.thread_time()
-            lost = int(trace_readings(*first_part, 0, height))
+            lost = int(trace_readings(*first_part))
             lost += int(spread_candidate_lists(hits, *lists, dilution))
             seconds.append(time.thread_time() - t)
             return lost
