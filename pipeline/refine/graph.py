@@ -263,6 +263,20 @@ DENSE_MAX_VARIABLES = 400
 
 
 def _trust_region(prob: _Problem, v0: F64, opt: GraphOptions) -> Any:
+    """scipy's exact trust-region steps (:mod:`pipeline.refine.trust_region`): a
+    least-squares start with ``linear_start``, then the Cauchy loss."""
+    from pipeline.refine.trust_region import minimise
+
+    if opt.linear_start:  # least squares first: a robust loss ignores what starts far off
+        v0 = minimise(prob.residuals, prob.jacobian, v0, loss_scale=None, max_nfev=50,
+                      xtol=1e-8, ftol=1e-8).x
+    return minimise(prob.residuals, prob.jacobian, v0, loss_scale=opt.robust_scale,
+                    max_nfev=200, xtol=1e-10, ftol=1e-10)
+
+
+def _trust_region_scipy(prob: _Problem, v0: F64, opt: GraphOptions) -> Any:
+    """:func:`_trust_region` by scipy's own ``least_squares`` (an SVD of the dense Jacobian
+    per step): the reference the Cholesky steps are tested against."""
     from scipy.optimize import least_squares
 
     how: dict[str, object] = {"jac": prob.jacobian_dense, "tr_solver": "exact"}
@@ -295,6 +309,8 @@ def solve(x0: F64, odo: Odometry, matches: MatchConstraints, opt: GraphOptions,
                           xtol=1e-8, ftol=1e-8).x
         res = minimise(prob.residuals, prob.jacobian, v0, loss_scale=opt.robust_scale,
                        max_nfev=200, xtol=1e-10, ftol=1e-10)
+    elif method == "scipy":
+        res = _trust_region_scipy(prob, v0, opt)
     else:
         res = _trust_region(prob, v0, opt)
     x, k, b = prob.unpack(res.x)
