@@ -110,6 +110,7 @@ class _Problem:
         self.w_odo = 1.0 / _odometry_sigmas(odo, opt)
         self.n_var = 3 * self.n + (2 if opt.calibrate else 0)
         self._pattern: tuple[I64, I64, I64] | None = None
+        self._places: tuple[I64, I64, int] | None = None  # the entries' rows, columns
 
     def unpack(self, v: F64) -> tuple[F64, float, float]:
         x = v[: 3 * self.n].reshape(self.n, 3)
@@ -165,20 +166,24 @@ class _Problem:
         return out
 
     def _entries(self, v: F64) -> tuple[I64, I64, F64, int]:
-        """The Jacobian's non-zero entries: rows, columns, values and the number of rows."""
+        """The Jacobian's non-zero entries: rows, columns, values and the number of rows
+        (the rows and columns, which depend on the constraints alone, found once)."""
         x, k, b = self.unpack(v)
         rows: list[I64] = []
         cols: list[I64] = []
         vals: list[F64] = []
+        known = self._places is not None
 
         def put(r0: I64, c0: I64, block: F64) -> None:
             """Blocks ``block[m]`` (3 × w) at rows ``r0[m]..+3``, columns ``c0[m]..+w``."""
+            vals.append(block.ravel())
+            if known:
+                return
             w = block.shape[2]
             rr = r0[:, None, None] + np.arange(3)[None, :, None]
             cc = c0[:, None, None] + np.arange(w)[None, None, :]
             rows.append(np.broadcast_to(rr, block.shape).ravel())
             cols.append(np.broadcast_to(cc, block.shape).ravel())
-            vals.append(block.ravel())
 
         put(np.array([0]), np.array([0]),
             np.diag([1e3, 1e3, 1.0 / math.radians(0.01)])[None])
@@ -225,11 +230,14 @@ class _Problem:
             put(r0, 3 * mt.j, np.einsum("mab,mbc->mac", mt.u, jb))
             r += 3 * len(mt)
         if self.opt.calibrate:
-            rows.append(np.array([r, r + 1]))
-            cols.append(np.array([self.n_var - 2, self.n_var - 1]))
+            if not known:
+                rows.append(np.array([r, r + 1]))
+                cols.append(np.array([self.n_var - 2, self.n_var - 1]))
             vals.append(np.array([1.0 / self.opt.prior_scale, 1.0 / self.opt.prior_bias]))
             r += 2
-        return np.concatenate(rows), np.concatenate(cols), np.concatenate(vals), r
+        if self._places is None:
+            self._places = (np.concatenate(rows), np.concatenate(cols), r)
+        return self._places[0], self._places[1], np.concatenate(vals), self._places[2]
 
     def match_chi2(self, v: F64) -> F64:
         return match_chi2(self.unpack(v)[0], self.matches)

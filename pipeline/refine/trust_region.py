@@ -57,23 +57,36 @@ def _solve(c: F64, b: F64) -> F64:
     return np.asarray(x)
 
 
-def _step(a: F64, g: F64, delta: float, alpha: float, m_rows: int) -> tuple[F64, float]:
+@dataclass(frozen=True)
+class _GaussNewton:
+    """A step's Gauss-Newton solution of the scaled normal equations ``a·p = −g``, whatever
+    the radius (found once per Jacobian, as scipy's SVD): None where ``a`` is singular."""
+
+    p: F64 | None
+    p_norm: float
+    slope: float  # d‖p(α)‖/dα at α = 0: −pᵀa⁻¹p / ‖p‖
+
+    @staticmethod
+    def of(a: F64, g: F64, m_rows: int) -> _GaussNewton:
+        fac = _factor(a, 0.0) if m_rows >= a.shape[0] else None
+        # full rank as scipy's SVD tells it (s_min > ε·m·s_max), from the factor's pivots
+        if fac is None or not (float(np.abs(np.diag(fac)).min()) ** 2
+                               > (EPS * m_rows) ** 2 * float(np.diag(a).max())):
+            return _GaussNewton(None, 0.0, 0.0)
+        p = -_solve(fac, g)
+        p_norm = float(np.linalg.norm(p))
+        return _GaussNewton(p, p_norm, -float(p @ _solve(fac, p)) / p_norm if p_norm else 0.0)
+
+
+def _step(a: F64, g: F64, gn: _GaussNewton, delta: float, alpha: float) -> tuple[F64, float]:
     """Moré's trust-region step for the normal matrix ``a`` and gradient ``g`` (scaled),
     radius ``delta``, from ``alpha``: the step and its α (0 for Gauss-Newton)."""
-    n = a.shape[0]
-    gn = _factor(a, 0.0) if m_rows >= n else None
-    # full rank as scipy's SVD tells it (s_min > ε·m·s_max), from the factor's pivots
-    full_rank = gn is not None and (float(np.abs(np.diag(gn)).min()) ** 2
-                                    > (EPS * m_rows) ** 2 * float(np.diag(a).max()))
     alpha_upper = float(np.linalg.norm(g)) / delta
     alpha_lower = 0.0
-    if full_rank:
-        assert gn is not None
-        p = -_solve(gn, g)
-        p_norm = float(np.linalg.norm(p))
-        if p_norm <= delta:
-            return p, 0.0
-        alpha_lower = (p_norm - delta) * p_norm / float(p @ _solve(gn, p))
+    if gn.p is not None:
+        if gn.p_norm <= delta:
+            return gn.p, 0.0
+        alpha_lower = -(gn.p_norm - delta) / gn.slope
     elif alpha == 0:
         alpha = max(0.001 * alpha_upper, (alpha_lower * alpha_upper) ** 0.5)
     for _ in range(MAX_ALPHA_ITERATIONS):
@@ -124,9 +137,10 @@ def minimise(fun: Callable[[F64], F64], jac: Callable[[F64], object], v0: F64, *
         d = 1.0 / scale_inv
         g_h = d * g
         a = d[:, None] * b * d[None, :]
+        gn = _GaussNewton.of(a, g_h, m_rows)
         reduction = -1.0
         while reduction <= 0 and nfev < max_nfev:
-            step_h, alpha = _step(a, g_h, delta, alpha, m_rows)
+            step_h, alpha = _step(a, g_h, gn, delta, alpha)
             predicted = -(0.5 * float(step_h @ (a @ step_h)) + float(g_h @ step_h))
             step = d * step_h
             x_new = x + step
