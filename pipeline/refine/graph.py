@@ -19,8 +19,9 @@ remove most of its drift. Residuals, each whitened by its square-root informatio
 
 ``⊖`` subtracts poses component-wise with the angle wrapped. A robust loss (Cauchy,
 scale ``robust_scale``) bounds the pull of a wrong match. The Jacobian is analytic; small
-graphs take exact trust-region steps on it dense, large ones sparse Levenberg-Marquardt
-steps (:data:`DENSE_MAX_VARIABLES`).
+graphs take scipy's exact trust-region steps, computed from Cholesky factorisations of the
+normal matrix (:mod:`pipeline.refine.trust_region`), large ones sparse
+Levenberg-Marquardt steps (:data:`DENSE_MAX_VARIABLES`).
 """
 
 from __future__ import annotations
@@ -258,15 +259,16 @@ def robust_cost(r: F64, scale: float) -> float:
     return float(0.5 * np.sum(scale**2 * np.log1p((r / scale) ** 2)))
 
 
-# Variables up to which the steps are exact trust-region steps on the dense Jacobian (an
-# SVD, O(m·n²): ~0.5 s single-threaded at 700 variables, so ~130 anchors, about 1 km of 8 m
-# submaps); larger graphs take Levenberg-Marquardt steps on the sparse Jacobian
-# (:mod:`pipeline.refine.sparse_lm`, a sparse LU per step). The sparse steps on small graphs
-# too were measured (docs/POSE_REFINEMENT.md, "Time"): 20-25 % less CPU per run, the same
-# solution to 1e-5 m on most solves, but a different local minimum on a few with wrong
-# closures, and the Intel lab's walk row moved (ATE 0.241 → 0.304 m): not the default there.
-# (scipy's iterative lsmr steps, used for large graphs before, stopped early: FHW's walk row
-# solved by them reached ATE 1.73 m against 0.70 m exact.)
+# Variables up to which the steps are scipy's exact trust-region steps (from a dense
+# Cholesky factorisation of the n × n normal matrix per trial α, :mod:`trust_region`: ~0.3 ms
+# at 300 variables; scipy's own SVD of the m × n Jacobian took ~10× that); larger graphs
+# take Levenberg-Marquardt steps on the sparse Jacobian (:mod:`pipeline.refine.sparse_lm`,
+# a sparse LU per step). The sparse steps on small graphs too were measured
+# (docs/POSE_REFINEMENT.md, "Time"): the same solution to 1e-5 m on most solves, but a
+# different local minimum on a few with wrong closures, and the Intel lab's walk row moved
+# (ATE 0.241 → 0.304 m): not the default there. (scipy's iterative lsmr steps, used for
+# large graphs before, stopped early: FHW's walk row solved by them reached ATE 1.73 m
+# against 0.70 m exact.)
 DENSE_MAX_VARIABLES = 400
 
 
@@ -300,10 +302,11 @@ def _trust_region_scipy(prob: _Problem, v0: F64, opt: GraphOptions) -> Any:
 def solve(x0: F64, odo: Odometry, matches: MatchConstraints, opt: GraphOptions,
           method: str | None = None) -> Solution:
     """Optimise the anchors (and the calibration) from ``x0``: by ``method``
-    ``"trust-region"`` (scipy's least_squares, exact steps on the dense Jacobian) or
-    ``"sparse"`` (Levenberg-Marquardt on the sparse Jacobian,
-    :mod:`pipeline.refine.sparse_lm`); by default the first up to
-    :data:`DENSE_MAX_VARIABLES` variables, the second beyond."""
+    ``"trust-region"`` (scipy's exact trust-region steps from Cholesky factorisations,
+    :mod:`pipeline.refine.trust_region`), ``"scipy"`` (the same by scipy's least_squares, an
+    SVD of the dense Jacobian per step: the reference) or ``"sparse"`` (Levenberg-Marquardt
+    on the sparse Jacobian, :mod:`pipeline.refine.sparse_lm`); by default the first up to
+    :data:`DENSE_MAX_VARIABLES` variables, the last beyond."""
     prob = _Problem(x0, odo, matches, opt)
     v0 = np.concatenate([x0.ravel(), [opt.scale_centre, 0.0] if opt.calibrate else []])
     cost0 = robust_cost(prob.residuals(v0), opt.robust_scale)
