@@ -46,7 +46,7 @@ class Result:
 def _factor(a: F64, alpha: float) -> F64 | None:
     """Upper Cholesky factor of ``a + α·I``, or None when not positive definite."""
     m = a.copy()
-    m[np.diag_indices_from(m)] += alpha
+    m.flat[:: m.shape[0] + 1] += alpha  # the diagonal
     c, info = dpotrf(m, lower=0, clean=0, overwrite_a=1)
     return None if info != 0 else np.asarray(c)
 
