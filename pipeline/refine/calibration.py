@@ -9,7 +9,7 @@ determined by all the echoes at once than by any local match. A candidate scale 
 re-integrated under it (:mod:`pipeline.refine.scores`: their *sharpness* and their
 *echo consistency*); this module searches the candidates and decides what is applied.
 
-Design notes and the measurements behind them: docs/POSE_REFINEMENT.md, "calibration.py".
+Design notes and the measurements behind them: docs/research/pose_refinement.md, "calibration.py".
 """
 
 from __future__ import annotations
@@ -46,7 +46,7 @@ FAR_TEST_Z = 2.0  # _far_agrees: the far echoes' scale within 2 errors of the di
 MODELS_TEST_Z = 2.0  # _patch_models_agree: the two patch models' scales within 2 errors
 SCALE_STEP = 0.01  # coarse step of the scale search (fraction)
 CONSISTENT_SPAN = 8  # the bias's value by consistency within ± this many coarse steps
-# The calibration's acceptance, as refinement runs it (docs/POSE_REFINEMENT.md "calibration.py"
+# The calibration's acceptance, as refinement runs it (docs/research/pose_refinement.md "calibration.py"
 # has the measurements behind each; not yet replaced by the graph's likelihood):
 MIN_GAIN = 0.01  # a heading bias must make the echoes sharper and more consistent by this
 STRONG_GAIN = 0.10  # ... or, where the two scores disagree, the one in its favour by this

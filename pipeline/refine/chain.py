@@ -1,5 +1,5 @@
 """The chain that preceded the one model (``[pose_refinement] model = "chain"``), kept for
-comparison until the graph matches it on every row (docs/POSE_REFINEMENT.md, "Measured"):
+comparison until the graph matches it on every row (docs/POSE_REFINEMENT.md, "Current results"):
 the calibration, then the walls as a compass (:mod:`~pipeline.refine.compass`: the walls'
 spectrum overrules an aliased heading bias, their windows take out a drift left), then
 local corrections per stretch of travel (:mod:`~pipeline.refine.stretches`). Its former

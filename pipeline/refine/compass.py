@@ -32,7 +32,7 @@ whole run shares without a single revisit, so the lever arm is the run's length.
   ``c``'s standard error is the larger of the weighted model's and a sandwich over the
   residuals with neighbouring windows correlated (Newey-West, ``HAC_LAG``).
 
-Design notes and the measurements behind them: docs/POSE_REFINEMENT.md, "compass.py".
+Design notes and the measurements behind them: docs/research/pose_refinement.md, "How it works", item 2.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 they release the GIL, so candidate calibrations score on parallel threads); the numpy
 versions in :mod:`pipeline.refine.scores` stay as the reference the tests compare with.
 
-Design notes and the measurements behind them: docs/POSE_REFINEMENT.md, "kernels.py".
+Design notes and the measurements behind them: docs/research/pose_refinement.md, "kernels.py".
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ echoes of every visit must agree on the wall's offset (:mod:`pipeline.refine.sur
 ``n·s − r cos γ = c`` for a plane of normal ``n``), so the visits' pose errors show as
 disagreements of that offset, and they are linear in small pose corrections:
 
-Design notes and the measurements behind them: docs/POSE_REFINEMENT.md, "stretches.py".
+Design notes and the measurements behind them: docs/research/pose_refinement.md, "How it works", item 3.
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ only slide along a wall carry no information and no bias.
 
 One evaluation ``f(k₀)``, from the echoes alone:
 
-Design notes and the measurements behind them: docs/POSE_REFINEMENT.md, "surfaces.py".
+Design notes and the measurements behind them: docs/research/pose_refinement.md, "surfaces.py".
 """
 
 from __future__ import annotations
