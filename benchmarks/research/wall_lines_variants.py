@@ -14,11 +14,17 @@ by :func:`install` (as :mod:`benchmarks.research.line_oracle` does) and scored b
 * ``votes=G``: segments between any two vote cells of one bin up to ``G`` m apart on the
   bin's line (:func:`vote_segments`), added to the lines.
 
-* ``oracle=reach|full`` (reads the truth: an upper bound, not a method): the true walls
+* ``votecells=K``: every vote cell whose bin has ``K`` distinct vote cells in the line
+  test's box (:func:`vote_cells`), added to the lines.
+* ``llr=1``: the line cells (after the other options) kept only where the bin's votes in
+  the box outweigh the head-on passes through the voted cells (:func:`supported`; the
+  passes counted in pass 0 by :func:`vote_passes`).
+* ``oracle=reach|reachbin|full`` (reads the truth: an upper bound, not a method): the true walls
   within 0.10 m of a tangent vote (what a perfect line detector could find from these
   echoes) take the true wall's normal with consistency 1 in pass 3; elsewhere the method's
   own (``reach``) or, as :mod:`benchmarks.research.line_oracle`, consistency 0 and ``v̄ = 1``
-  (``full``). :data:`TRUTH` is the row's truth map (set by the caller).
+  (``full``); ``reachbin``: ``reach`` with the normals rounded to the line bins' centres.
+  :data:`TRUTH` is the row's truth map (set by the caller).
 
 Variants combine with commas (``stops3=on,stops4=on``).
 """
@@ -28,6 +34,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 from pipeline.mapper.kernels.specular import cell_lists
 from pipeline.mapper.types import F32, B
@@ -100,7 +107,7 @@ def vote_segments(votes: Votes, gap_cells: float, slack: float = 0.5) -> tuple[B
     return out, onx, ony
 
 
-def vote_reach_oracle(m: object, full: bool) -> None:
+def vote_reach_oracle(m: object, full: bool, binned: bool = False) -> None:
     """``oracle=`` (module doc): the truth's walls near a vote, with the truth's normals."""
     from scipy.ndimage import distance_transform_edt
 
@@ -116,6 +123,10 @@ def vote_reach_oracle(m: object, full: bool) -> None:
     if not walls.any():
         return
     nx, ny, _ = wall_normals(walls, g.resolution)
+    if binned:  # the normal of the nearest line bin's centre, as a line detector gives
+        b = _bins_of(nx.astype(np.float32), ny.astype(np.float32))
+        p = (b + 0.5) * math.pi / LINE_BINS
+        nx, ny = np.cos(p), np.sin(p)
     dist, (ir, ic) = distance_transform_edt(~walls, return_indices=True)
     near = dist <= NEAR_LINE_M / g.resolution
     m.nx = np.where(near, nx[ir, ic], m.nx).astype(np.float32)  # type: ignore[attr-defined]
@@ -124,6 +135,83 @@ def vote_reach_oracle(m: object, full: bool) -> None:
     m.consistency = np.where(near, 1.0, rest).astype(np.float32)  # type: ignore[attr-defined]
     if full:
         m.v_unknown = 1.0  # type: ignore[attr-defined]
+
+
+def vote_cells(votes: Votes, least: int, half_cells: float) -> tuple[B, F32, F32]:
+    """Every vote cell whose bin has votes in at least ``least`` distinct cells of the
+    box of half side ``half_cells`` around it, with the normal of the bin with the most."""
+    from pipeline.mapper.specular import box_sum
+
+    n = max(1, round(half_cells))
+    bins, h, w = votes.shape
+    best = np.zeros((h, w))
+    onx: F32 = np.zeros((h, w), dtype=np.float32)
+    ony: F32 = np.zeros((h, w), dtype=np.float32)
+    for b in range(bins):
+        v = votes[b] > 0
+        if not v.any():
+            continue
+        m = box_sum(v.astype(np.float32), n)
+        ok = v & (m >= least) & (m > best)
+        p = (b + 0.5) * math.pi / bins
+        best = np.where(ok, m, best)
+        onx[ok], ony[ok] = np.float32(math.cos(p)), np.float32(math.sin(p))
+    return best > 0, onx, ony
+
+
+@njit(cache=True)
+def vote_passes(ox: np.ndarray, oy: np.ndarray, alpha: np.ndarray, half: np.ndarray,
+                reach: np.ndarray, gx: float, gy: float, res: float,
+                passes: np.ndarray) -> None:
+    """Per reading, along each line bin's centre direction ψ inside its cone (as
+    :func:`pipeline.mapper.kernels.lines.vote_tangents`), every cell the ray ψ crosses short
+    of ``reach`` (the echo's arc, or ``r_max`` with no echo) gets one head-on pass in
+    ``passes[bin]``: a wall of normal ψ there would have faced the sonar."""
+    bins, height, width = passes.shape
+    step = math.pi / bins
+    for i in range(len(reach)):
+        if not reach[i] > 0.0:
+            continue
+        j0 = math.ceil((alpha[i] - half[i]) / step - 0.5 - 1e-9)
+        j1 = math.floor((alpha[i] + half[i]) / step - 0.5 + 1e-9)
+        n = int(reach[i] / (0.5 * res))
+        for j in range(j0, j1 + 1):
+            psi = (j + 0.5) * step
+            c, s = math.cos(psi), math.sin(psi)
+            b = j % bins
+            last_r, last_c = -1, -1
+            for k in range(n):
+                rho = (k + 0.5) * 0.5 * res
+                col = math.floor((ox[i] + rho * c - gx) / res)
+                row = math.floor((oy[i] + rho * s - gy) / res)
+                if row == last_r and col == last_c:
+                    continue
+                last_r, last_c = row, col
+                if 0 <= row < height and 0 <= col < width and passes[b, row, col] < 65535:
+                    passes[b, row, col] += 1
+
+
+def supported(on: B, nx: F32, ny: F32, votes: Votes, passes: np.ndarray, half_cells: float,
+              p0: float, floor: float) -> B:
+    """The line cells whose bin's votes in the box outweigh the head-on passes through the
+    voted cells: ``S·ln(p0/f) + C·ln((1 − p0)/(1 − f)) > 0`` (``S`` votes, ``C`` passes;
+    ``p0`` the measured head-on detection, ``f`` the coincidences' rate)."""
+    from pipeline.mapper.specular import box_sum
+
+    n = max(1, round(half_cells))
+    bins = _bins_of(nx, ny)
+    f = min(max(floor, 1e-3), 0.5 * p0)
+    a, b_ = math.log(p0 / f), math.log((1.0 - p0) / (1.0 - f))
+    out: B = np.zeros_like(on)
+    for b in range(LINE_BINS):
+        mine = on & (bins == b)
+        if not mine.any():
+            continue
+        v = votes[b].astype(np.float32)
+        c = np.where(votes[b] > 0, passes[b], 0).astype(np.float32)
+        llr = box_sum(v, n) * a + box_sum(c, n) * b_
+        out |= mine & (llr > 0.0)
+    return out
 
 
 def install(variant: str) -> None:
@@ -141,12 +229,24 @@ def install(variant: str) -> None:
     def use_lines(self: ForwardMapper) -> None:
         g = self.grid
         on, nx, ny = wall_lines(self.votes, g.resolution, self.config.wall_line_half_length_m)
+        if "votecells" in opts:
+            von, vnx, vny = vote_cells(self.votes, int(opts["votecells"]),
+                                       self.config.wall_line_half_length_m / g.resolution)
+            add = von & ~on
+            on, nx, ny = on | von, np.where(add, vnx, nx), np.where(add, vny, ny)
         if "link" in opts:
             on, nx, ny = link_segments(on, nx, ny, float(opts["link"]) / g.resolution)
         if "votes" in opts:
             von, vnx, vny = vote_segments(self.votes, float(opts["votes"]) / g.resolution)
             add = von & ~on
             on, nx, ny = on | von, np.where(add, vnx, nx), np.where(add, vny, ny)
+        if "llr" in opts:
+            from pipeline.mapper.forward import fit_detection
+
+            keep = supported(on, nx, ny, self.votes, self._q57_passes,  # type: ignore[attr-defined]
+                             self.config.wall_line_half_length_m / g.resolution,
+                             float(self.p_reach[0]), fit_detection(self.stats)[3])
+            on = keep
         near, lnx, lny = near_lines(on, nx, ny, NEAR_LINE_M / g.resolution)
         self.nx = np.where(near, lnx, self.nx)
         self.ny = np.where(near, lny, self.ny)
@@ -156,7 +256,7 @@ def install(variant: str) -> None:
         if "stops3" in opts:
             self.occ_index, self.occ_cols = stoppers(self, opts["stops3"])
         if "oracle" in opts:
-            vote_reach_oracle(self, opts["oracle"] == "full")
+            vote_reach_oracle(self, opts["oracle"] == "full", opts["oracle"] == "reachbin")
 
     def begin_pass(self: ForwardMapper, index: int) -> None:
         begin(self, index)
@@ -173,5 +273,26 @@ def install(variant: str) -> None:
         self._own_occ = (self.occ_index, self.occ_cols)  # type: ignore[attr-defined]
         use_lines(self)
 
+    integrate = ForwardMapper._integrate_group
+
+    def integrate_group(self: ForwardMapper, group: object) -> None:
+        if "llr" in opts and self.pass_index == 0:
+            from pipeline.mapper.reading_features import distance_sigma
+            from pipeline.stages import reading_quality as rq
+
+            cat, g, cfg = group.cat, self.grid, self.config  # type: ignore[attr-defined]
+            codes = group.codes  # type: ignore[attr-defined]
+            d = np.where(codes == rq.OK, cat.range_m, 0.0)
+            band = np.maximum(cfg.attr_band_sigmas * distance_sigma(d, cfg), 0.5 * g.resolution)
+            silent = (codes == rq.MAX_RANGE) & np.isfinite(cat.max_range)
+            reach = np.where(silent, cat.max_range - cfg.eps_max, np.maximum(d - band, 0.0))
+            if not hasattr(self, "_q57_passes"):
+                self._q57_passes = np.zeros_like(self.votes)  # type: ignore[attr-defined]
+            vote_passes(cat.origin_x, cat.origin_y, cat.alpha, 0.5 * cat.fov, reach,
+                        g.origin_x, g.origin_y, g.resolution,
+                        self._q57_passes)  # type: ignore[attr-defined]
+        integrate(self, group)  # type: ignore[arg-type]
+
+    ForwardMapper._integrate_group = integrate_group  # type: ignore[method-assign]
     ForwardMapper._use_lines = own_then_lines  # type: ignore[method-assign]
     ForwardMapper.begin_pass = begin_pass  # type: ignore[method-assign]

@@ -69,3 +69,19 @@ def test_two_places_far_apart_make_a_segment_the_box_test_misses() -> None:
     assert pos.max() - pos.min() >= 0.75  # from one touching point to the other
     none, _, _ = vote_segments(votes, 0.5 / GRID.resolution)
     assert not none.any()
+
+
+def test_head_on_passes_run_along_each_bin_short_of_the_echo() -> None:
+    from benchmarks.research.wall_lines_variants import vote_passes
+
+    passes = np.zeros((LINE_BINS, 120, 120), dtype=np.uint16)
+    one = np.array([3.0])
+    vote_passes(one, one, np.array([PSI]), np.array([HALF_FOV]), np.array([1.5]),
+                0.0, 0.0, GRID.resolution, passes)
+    assert [b for b in range(LINE_BINS) if passes[b].any()] == [7, 8, 9]  # 75°, 85°, 95°
+    rows, cols = np.nonzero(passes[8])
+    x, y = (cols + 0.5) * GRID.resolution - 3.0, (rows + 0.5) * GRID.resolution - 3.0
+    reach = x * math.cos(PSI) + y * math.sin(PSI)
+    assert reach.min() < 0.05 and 1.4 < reach.max() <= 1.5  # from the sonar to the reach
+    assert np.abs(y * math.cos(PSI) - x * math.sin(PSI)).max() <= GRID.resolution  # one ray
+    assert passes[8].max() == 1  # each cell once per ray
