@@ -19,6 +19,8 @@ by :func:`install` (as :mod:`benchmarks.research.line_oracle` does) and scored b
 * ``llr=1``: the line cells (after the other options) kept only where the bin's votes in
   the box outweigh the head-on passes through the voted cells (:func:`supported`; the
   passes counted in pass 0 by :func:`vote_passes`).
+* ``offfull=1``: cells away from the lines (after the other options) get consistency 0
+  and ``v̄ = 1`` in pass 3 (a pass there counts in full: §3's substitution).
 * ``oracle=reach|reachbin|full`` (reads the truth: an upper bound, not a method): the true walls
   within 0.10 m of a tangent vote (what a perfect line detector could find from these
   echoes) take the true wall's normal with consistency 1 in pass 3; elsewhere the method's
@@ -251,6 +253,9 @@ def install(variant: str) -> None:
         self.nx = np.where(near, lnx, self.nx)
         self.ny = np.where(near, lny, self.ny)
         self.consistency = np.where(near, np.float32(1.0), self.consistency)
+        if "offfull" in opts:  # §3's substitution: away from the lines passes count in full
+            self.consistency = np.where(near, self.consistency, np.float32(0.0))
+            self.v_unknown = 1.0
         self._q57_masks = (on, near)  # type: ignore[attr-defined]
         self._q57_arrays = (self.nx, self.ny, self.consistency)  # type: ignore[attr-defined]
         if "stops3" in opts:
