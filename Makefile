@@ -115,7 +115,7 @@ compare: $(STAMP) $(RADISH_LOGS) $(REALISTIC_LOGS)
 	$(BIN)/python -m benchmarks.compare_methods --drifted
 	$(BIN)/python -m benchmarks.drift_variety
 
-# The pose refinement's time target (issue 17): whole `sonarmap run` processes unrefined and
+# The pose refinement's time target (issue 63: at most 3×): whole `sonarmap run` processes unrefined and
 # refined on make compare's drifted cases and a loop floor (~5 min).
 refine-time: $(STAMP)
 	$(BIN)/python -m benchmarks.refine_time

@@ -468,18 +468,19 @@ REAL_ODOMETRY_CASES = ("intel-lab-odometry", "freiburg-101-odometry", "fhw-odome
 DRIFT_CASES = SYNTHETIC_DRIFT_CASES + REAL_ODOMETRY_CASES
 
 
-def _drift_cases(work: Path, names: tuple[str, ...] = DRIFT_CASES, walk: bool = False
-                 ) -> list[tuple[str, Path, Path, Path, Path]]:
+def _drift_cases(work: Path, names: tuple[str, ...] = DRIFT_CASES, walk: bool = False,
+                 drift_seed: int = 0) -> list[tuple[str, Path, Path, Path, Path]]:
     """(name, true-pose log, drifted log, truth map, truth trajectory) per case: the office,
     corridor and orchard simulations and the five real buildings (the Belgioioso castle
     beside make compare's four), emulated with drift applied to their corrected poses
-    (:func:`drifted_case`)."""
+    (:func:`drifted_case`; ``drift_seed`` draws the buildings' drift noise)."""
     drift = WALK if walk else DriftModel(DRIFT_SCALE, DRIFT_BIAS_DEG_PER_M)
     work.mkdir(parents=True, exist_ok=True)
     cases = []
     for case in names:
-        drifted = work / f"{case}_{'walk' if walk else 'drifted'}.mcap"
-        clean, truth, traj = drifted_case(case, drifted, drift)
+        seed = f"_seed{drift_seed}" if drift_seed else ""
+        drifted = work / f"{case}_{'walk' if walk else 'drifted'}{seed}.mcap"
+        clean, truth, traj = drifted_case(case, drifted, drift, drift_seed)
         cases.append((case, clean, drifted, truth, traj))
     return cases
 
@@ -553,11 +554,14 @@ def drifted_case(case: str, drifted: Path, drift: DriftModel, drift_seed: int = 
 
 
 def drifted_comparison(work: Path, tolerance: float, names: tuple[str, ...] = DRIFT_CASES,
-                       config: Path | None = None, walk: bool = False) -> list[DriftRow]:
+                       config: Path | None = None, walk: bool = False,
+                       drift_seed: int = 0) -> list[DriftRow]:
     """Map and score every drifted case (see the section comment); ``config`` (TOML) sets
     the refined runs' ``[pose_refinement]`` (enabled either way); ``walk``: the random-walk
-    drift (``WALK``) instead of the systematic one."""
-    return score_drift_cases(_drift_cases(work, names, walk), work, tolerance, config)
+    drift (``WALK``) instead of the systematic one; ``drift_seed``: the buildings' drift
+    noise draw."""
+    return score_drift_cases(_drift_cases(work, names, walk, drift_seed), work, tolerance,
+                             config)
 
 
 DRIFTED_MAX_CELLS = 100_000_000  # ~3.2 GB at ~32 bytes a cell
@@ -643,12 +647,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--drift-model", choices=("systematic", "walk"), default="systematic",
                     help="with --drifted: 3 %% scale and 0.8°/m (systematic) or wheel "
                     "odometry's random walk (walk: -2 %%, -0.5°/m, 0.01 rad/√m, 0.01 m/√m)")
+    ap.add_argument("--drift-seed", type=int, default=0,
+                    help="with --drifted: the seed of the buildings' drift noise (the "
+                    "simulated worlds keep their own)")
     args = ap.parse_args(argv)
     if args.drifted:
         with tempfile.TemporaryDirectory(prefix="sonarmap-drift-") as tmp:
             drift_rows = drifted_comparison(args.keep if args.keep is not None else Path(tmp),
                                             args.tolerance, tuple(args.cases), args.config,
-                                            walk=args.drift_model == "walk")
+                                            walk=args.drift_model == "walk",
+                                            drift_seed=args.drift_seed)
         print(drift_markdown(drift_rows))
         return 0
 

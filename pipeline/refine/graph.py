@@ -19,8 +19,9 @@ remove most of its drift. Residuals, each whitened by its square-root informatio
 
 ``⊖`` subtracts poses component-wise with the angle wrapped. A robust loss (Cauchy,
 scale ``robust_scale``) bounds the pull of a wrong match. The Jacobian is analytic; small
-graphs take exact trust-region steps on it dense, large ones sparse Levenberg-Marquardt
-steps (:data:`DENSE_MAX_VARIABLES`).
+graphs take scipy's exact trust-region steps, computed from Cholesky factorisations of the
+normal matrix (:mod:`pipeline.refine.trust_region`), large ones sparse
+Levenberg-Marquardt steps (:data:`DENSE_MAX_VARIABLES`).
 """
 
 from __future__ import annotations
@@ -110,6 +111,7 @@ class _Problem:
         self.w_odo = 1.0 / _odometry_sigmas(odo, opt)
         self.n_var = 3 * self.n + (2 if opt.calibrate else 0)
         self._pattern: tuple[I64, I64, I64] | None = None
+        self._places: tuple[I64, I64, int] | None = None  # the entries' rows, columns
 
     def unpack(self, v: F64) -> tuple[F64, float, float]:
         x = v[: 3 * self.n].reshape(self.n, 3)
@@ -165,20 +167,24 @@ class _Problem:
         return out
 
     def _entries(self, v: F64) -> tuple[I64, I64, F64, int]:
-        """The Jacobian's non-zero entries: rows, columns, values and the number of rows."""
+        """The Jacobian's non-zero entries: rows, columns, values and the number of rows
+        (the rows and columns, which depend on the constraints alone, found once)."""
         x, k, b = self.unpack(v)
         rows: list[I64] = []
         cols: list[I64] = []
         vals: list[F64] = []
+        known = self._places is not None
 
         def put(r0: I64, c0: I64, block: F64) -> None:
             """Blocks ``block[m]`` (3 × w) at rows ``r0[m]..+3``, columns ``c0[m]..+w``."""
+            vals.append(block.ravel())
+            if known:
+                return
             w = block.shape[2]
             rr = r0[:, None, None] + np.arange(3)[None, :, None]
             cc = c0[:, None, None] + np.arange(w)[None, None, :]
             rows.append(np.broadcast_to(rr, block.shape).ravel())
             cols.append(np.broadcast_to(cc, block.shape).ravel())
-            vals.append(block.ravel())
 
         put(np.array([0]), np.array([0]),
             np.diag([1e3, 1e3, 1.0 / math.radians(0.01)])[None])
@@ -225,11 +231,14 @@ class _Problem:
             put(r0, 3 * mt.j, np.einsum("mab,mbc->mac", mt.u, jb))
             r += 3 * len(mt)
         if self.opt.calibrate:
-            rows.append(np.array([r, r + 1]))
-            cols.append(np.array([self.n_var - 2, self.n_var - 1]))
+            if not known:
+                rows.append(np.array([r, r + 1]))
+                cols.append(np.array([self.n_var - 2, self.n_var - 1]))
             vals.append(np.array([1.0 / self.opt.prior_scale, 1.0 / self.opt.prior_bias]))
             r += 2
-        return np.concatenate(rows), np.concatenate(cols), np.concatenate(vals), r
+        if self._places is None:
+            self._places = (np.concatenate(rows), np.concatenate(cols), r)
+        return self._places[0], self._places[1], np.concatenate(vals), self._places[2]
 
     def match_chi2(self, v: F64) -> F64:
         return match_chi2(self.unpack(v)[0], self.matches)
@@ -250,19 +259,34 @@ def robust_cost(r: F64, scale: float) -> float:
     return float(0.5 * np.sum(scale**2 * np.log1p((r / scale) ** 2)))
 
 
-# Variables up to which the steps are exact trust-region steps on the dense Jacobian (an
-# SVD, O(m·n²): ~0.5 s single-threaded at 700 variables, so ~130 anchors, about 1 km of 8 m
-# submaps); larger graphs take Levenberg-Marquardt steps on the sparse Jacobian
-# (:mod:`pipeline.refine.sparse_lm`, a sparse LU per step). The sparse steps on small graphs
-# too were measured (docs/POSE_REFINEMENT.md, "Time"): 20-25 % less CPU per run, the same
-# solution to 1e-5 m on most solves, but a different local minimum on a few with wrong
-# closures, and the Intel lab's walk row moved (ATE 0.241 → 0.304 m): not the default there.
-# (scipy's iterative lsmr steps, used for large graphs before, stopped early: FHW's walk row
-# solved by them reached ATE 1.73 m against 0.70 m exact.)
+# Variables up to which the steps are scipy's exact trust-region steps (from a dense
+# Cholesky factorisation of the n × n normal matrix per trial α, :mod:`trust_region`: ~0.3 ms
+# at 300 variables; scipy's own SVD of the m × n Jacobian took ~10× that); larger graphs
+# take Levenberg-Marquardt steps on the sparse Jacobian (:mod:`pipeline.refine.sparse_lm`,
+# a sparse LU per step). The sparse steps on small graphs too were measured
+# (docs/POSE_REFINEMENT.md, "Time"): the same solution to 1e-5 m on most solves, but a
+# different local minimum on a few with wrong closures, and the Intel lab's walk row moved
+# (ATE 0.241 → 0.304 m): not the default there. (scipy's iterative lsmr steps, used for
+# large graphs before, stopped early: FHW's walk row solved by them reached ATE 1.73 m
+# against 0.70 m exact.)
 DENSE_MAX_VARIABLES = 400
 
 
 def _trust_region(prob: _Problem, v0: F64, opt: GraphOptions) -> Any:
+    """scipy's exact trust-region steps (:mod:`pipeline.refine.trust_region`): a
+    least-squares start with ``linear_start``, then the Cauchy loss."""
+    from pipeline.refine.trust_region import minimise
+
+    if opt.linear_start:  # least squares first: a robust loss ignores what starts far off
+        v0 = minimise(prob.residuals, prob.jacobian, v0, loss_scale=None, max_nfev=50,
+                      xtol=1e-8, ftol=1e-8).x
+    return minimise(prob.residuals, prob.jacobian, v0, loss_scale=opt.robust_scale,
+                    max_nfev=200, xtol=1e-10, ftol=1e-10)
+
+
+def _trust_region_scipy(prob: _Problem, v0: F64, opt: GraphOptions) -> Any:
+    """:func:`_trust_region` by scipy's own ``least_squares`` (an SVD of the dense Jacobian
+    per step): the reference the Cholesky steps are tested against."""
     from scipy.optimize import least_squares
 
     how: dict[str, object] = {"jac": prob.jacobian_dense, "tr_solver": "exact"}
@@ -278,10 +302,11 @@ def _trust_region(prob: _Problem, v0: F64, opt: GraphOptions) -> Any:
 def solve(x0: F64, odo: Odometry, matches: MatchConstraints, opt: GraphOptions,
           method: str | None = None) -> Solution:
     """Optimise the anchors (and the calibration) from ``x0``: by ``method``
-    ``"trust-region"`` (scipy's least_squares, exact steps on the dense Jacobian) or
-    ``"sparse"`` (Levenberg-Marquardt on the sparse Jacobian,
-    :mod:`pipeline.refine.sparse_lm`); by default the first up to
-    :data:`DENSE_MAX_VARIABLES` variables, the second beyond."""
+    ``"trust-region"`` (scipy's exact trust-region steps from Cholesky factorisations,
+    :mod:`pipeline.refine.trust_region`), ``"scipy"`` (the same by scipy's least_squares, an
+    SVD of the dense Jacobian per step: the reference) or ``"sparse"`` (Levenberg-Marquardt
+    on the sparse Jacobian, :mod:`pipeline.refine.sparse_lm`); by default the first up to
+    :data:`DENSE_MAX_VARIABLES` variables, the last beyond."""
     prob = _Problem(x0, odo, matches, opt)
     v0 = np.concatenate([x0.ravel(), [opt.scale_centre, 0.0] if opt.calibrate else []])
     cost0 = robust_cost(prob.residuals(v0), opt.robust_scale)
@@ -295,6 +320,8 @@ def solve(x0: F64, odo: Odometry, matches: MatchConstraints, opt: GraphOptions,
                           xtol=1e-8, ftol=1e-8).x
         res = minimise(prob.residuals, prob.jacobian, v0, loss_scale=opt.robust_scale,
                        max_nfev=200, xtol=1e-10, ftol=1e-10)
+    elif method == "scipy":
+        res = _trust_region_scipy(prob, v0, opt)
     else:
         res = _trust_region(prob, v0, opt)
     x, k, b = prob.unpack(res.x)

@@ -572,3 +572,22 @@ def beam_coverage(rx: np.ndarray, ry: np.ndarray, sx: np.ndarray, sy: np.ndarray
                 if 0 <= ix < w and 0 <= iy < h:
                     cover[iy, ix] = True
     return cover
+
+
+@njit(cache=True, nogil=True)
+def normal_equations(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray,
+                     w: np.ndarray, f: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(JᵀJ, Jᵀf)`` of ``J = diag(w)·M``, ``M`` the CSR matrix ``(data, indices, indptr)``
+    with ``n`` columns (:mod:`pipeline.refine.trust_region`): ``JᵀJ`` dense, summed row by
+    row (a pose graph's rows hold a few entries each)."""
+    a = np.zeros((n, n))
+    g = np.zeros(n)
+    for r in range(indptr.shape[0] - 1):
+        wr = w[r]
+        for p in range(indptr[r], indptr[r + 1]):
+            vp = wr * data[p]
+            cp = indices[p]
+            g[cp] += vp * f[r]
+            for q in range(indptr[r], indptr[r + 1]):
+                a[cp, indices[q]] += vp * (wr * data[q])
+    return a, g

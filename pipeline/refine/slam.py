@@ -33,7 +33,8 @@
 6. **Back onto every pose**: the odometry re-integrated with the estimated calibration,
    then each pose moved by the anchors' corrections interpolated in time.
 
-scipy's ``least_squares`` with a sparse Jacobian pattern solves the graph (deterministic).
+scipy's trust-region least squares (its steps from Cholesky factorisations,
+:mod:`~pipeline.refine.trust_region`) solves the graph (deterministic).
 """
 
 from __future__ import annotations

@@ -39,6 +39,7 @@ def _warm_refinement() -> None:
         consistency_placed,
         correlation_grid,
         free_samples,
+        normal_equations,
         poses_at,
         step_segments,
         structure_tensor_at,
@@ -54,6 +55,8 @@ def _warm_refinement() -> None:
     free_samples(none1, none1, none2, none2, none1, none1, 0.2, 0.0, 0.0, 0.1, np.zeros((2, 2)))
     correlation_grid(np.zeros(2), 1, 1, none1, none1, 1, np.zeros(3), 0.0, 0.0, 0.05,
                      np.zeros(1), cells)
+    normal_equations(np.zeros(2, np.int64), np.zeros(1, np.int64), np.ones(1), np.ones(1),
+                     np.ones(1), 1)
 
 
 if __name__ == "__main__":

@@ -214,3 +214,23 @@ def test_the_placed_consistency_places_as_transform_points_bit_for_bit() -> None
                              np.cos(pose[:, 2]), np.sin(pose[:, 2]), bx, by, sx, sy, *args)
     assert 0.0 < got < 1.0
     assert got == want
+
+
+def test_the_normal_equations_are_the_dense_products() -> None:
+    """kernels.normal_equations: JᵀJ and Jᵀf of the row-weighted CSR matrix, as numpy's
+    dense products (entries that share a row and column, and empty rows, included)."""
+    from scipy.sparse import csr_matrix
+
+    from pipeline.refine.kernels import normal_equations
+
+    rng = np.random.default_rng(4)
+    dense = np.where(rng.uniform(size=(40, 12)) < 0.2, rng.normal(size=(40, 12)), 0.0)
+    dense[5] = 0.0
+    m = csr_matrix(dense)
+    w, f = rng.uniform(0.1, 2.0, 40), rng.normal(size=40)
+    a, g = normal_equations(m.indptr.astype(np.int64), m.indices.astype(np.int64), m.data,
+                            w, f, 12)
+    j = w[:, None] * m.toarray()
+    np.testing.assert_allclose(a, j.T @ j, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(g, j.T @ f, rtol=1e-12, atol=1e-14)
+    assert np.array_equal(a, a.T)

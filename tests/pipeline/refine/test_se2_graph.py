@@ -141,3 +141,60 @@ def test_the_matches_degrees_of_freedom_count_what_they_add() -> None:
     assert match_dof(x0, Odometry(odo, travelled), vague, opt, 0.0, 0.0) < 0.05
     assert match_dof(x0, Odometry(odo, travelled), loop.take(np.array([False])), opt,
                      0.0, 0.0) == 0.0
+
+
+def test_the_cholesky_steps_are_scipys_trust_region_steps() -> None:
+    """pipeline.refine.trust_region takes scipy's exact trust-region steps (an SVD per step
+    there, Cholesky factorisations here): the same iterations, the same solution to 1e-9,
+    from the least-squares start and under the Cauchy loss, with a wrong closure."""
+    truth, odo, travelled, x0 = biased_square()
+    i, j = np.r_[np.arange(15), 15, 2], np.r_[np.arange(1, 16), 0, 9]
+    z = between(truth[i], truth[j])
+    z[-1] += [1.0, -0.8, 0.3]
+    u = np.repeat(sqrt_information(np.diag([0.05**2, 0.05**2, math.radians(2) ** 2]))[None], 17, 0)
+    args = (x0, Odometry(odo, travelled), MatchConstraints(i, j, z, u))
+    for linear_start in (False, True):
+        opt = GraphOptions(0.02, math.radians(0.5), True, 0.1, math.radians(2.0), 1.0,
+                           linear_start)
+        ours = solve(*args, opt)
+        scipy = solve(*args, opt, method="scipy")
+        assert ours.iterations == scipy.iterations > 5
+        np.testing.assert_allclose(ours.anchors, scipy.anchors, rtol=0, atol=1e-9)
+        assert ours.scale_error == pytest.approx(scipy.scale_error, abs=1e-9)
+        assert ours.heading_bias == pytest.approx(scipy.heading_bias, abs=1e-9)
+        assert ours.cost_final == pytest.approx(scipy.cost_final, rel=1e-9)
+        assert ours.match_chi2[-1] > 16.0  # the wrong closure stands out in both
+
+
+def test_the_trust_region_stops_as_scipy_does() -> None:
+    """The stopping tests of scipy's trf, each status and evaluation count as scipy reports
+    them (a Rosenbrock valley with a residual left at its minimum): ftol (2), both (4),
+    xtol (3), max_nfev (0), with and without the Cauchy loss; gtol (1) at a minimum."""
+    from scipy.optimize import least_squares
+    from scipy.sparse import csr_matrix
+
+    from pipeline.refine.trust_region import minimise
+
+    def fun(v: np.ndarray) -> np.ndarray:
+        return np.array([10 * (v[1] - v[0] ** 2), 1 - v[0], 0.3 * (v[0] + v[1] - 1)])
+
+    def jac(v: np.ndarray) -> np.ndarray:
+        return np.array([[-20 * v[0], 10.0], [-1.0, 0.0], [0.3, 0.3]])
+
+    start = np.array([-1.2, 1.0])
+    for status, kw in ((2, {"ftol": 1e-6, "xtol": 1e-15, "max_nfev": 100}),
+                       (4, {"ftol": 1e-2, "xtol": 1e-2, "max_nfev": 100}),
+                       (3, {"ftol": 1e-15, "xtol": 1e-6, "max_nfev": 100}),
+                       (0, {"ftol": 1e-15, "xtol": 1e-15, "max_nfev": 5})):
+        for loss in (None, 1.0):
+            ours = minimise(fun, lambda v: csr_matrix(jac(v)), start, loss_scale=loss,
+                            gtol=1e-12, **kw)
+            ref = least_squares(fun, start, jac=jac, method="trf", tr_solver="exact",
+                                x_scale="jac", loss="linear" if loss is None else "cauchy",
+                                f_scale=loss or 1.0, gtol=1e-12, **kw)
+            assert ours.status == ref.status == status
+            assert ours.nfev == ref.nfev
+            np.testing.assert_allclose(ours.x, ref.x, rtol=0, atol=1e-9)
+    exact = minimise(lambda v: fun(v)[:2], lambda v: csr_matrix(jac(v)[:2]), np.ones(2),
+                     loss_scale=None, ftol=1e-8, xtol=1e-8, max_nfev=10)
+    assert (exact.status, exact.nfev) == (1, 1)  # a zero gradient at the start: gtol
