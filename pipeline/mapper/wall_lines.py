@@ -42,7 +42,7 @@ NEAR_LINE_M = 0.10  # a cell this close to a wall line's cell is on the wall, m
 # Votes on grid cells often meet a bound exactly (two votes along a grid axis lie half a bin
 # off the bins' lines); such ties count as met, so rounding never decides: cells², rad, cells.
 TIE = 1e-6
-TILE = 128  # cells per side of the tiles the line test works in (any size gives the same lines)
+TILE = 64  # cells per side of the tiles the line test works in (any size gives the same lines)
 
 Votes = npt.NDArray[np.uint16]
 
