@@ -27,6 +27,7 @@ grids. :func:`near_lines` spreads the lines' normals to the cells within
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -38,6 +39,10 @@ from pipeline.mapper.types import F32, F64, B, GridSpec
 LINE_BINS = 18  # direction bins of the normal line over [0, π): 10°, finer than a cone
 LINE_THICK = 1.0  # spread of a line's votes across it, cells (σ)
 NEAR_LINE_M = 0.10  # a cell this close to a wall line's cell is on the wall, m
+# Votes on grid cells often meet a bound exactly (two votes along a grid axis lie half a bin
+# off the bins' lines); such ties count as met, so rounding never decides: cells², rad, cells.
+TIE = 1e-6
+TILE = 64  # cells per side of the tiles the line test works in (any size gives the same lines)
 
 Votes = npt.NDArray[np.uint16]
 
@@ -48,35 +53,66 @@ def empty_votes(grid: GridSpec) -> Votes:
 
 
 def wall_lines(votes: Votes, resolution: float, half_length_m: float) -> tuple[B, F32, F32]:
-    """The cells on a wall line and its normal ``(on, nx, ny)`` (module doc)."""
+    """The cells on a wall line and its normal ``(on, nx, ny)`` (module doc).
+
+    Worked tile by tile, and only where a bin has votes within the box's reach: the cost
+    follows the cells the sonar saw, not the grid's extent (a 2 km corridor's grid is 95 %
+    unseen)."""
     bins, h, w = votes.shape
     n = max(1, round(half_length_m / resolution))
-    rows, cols = np.mgrid[0:h, 0:w].astype(np.float64)
     best: F64 = np.zeros((h, w))
     nx: F32 = np.zeros((h, w), dtype=np.float32)
     ny: F32 = np.zeros((h, w), dtype=np.float32)
     for b in range(bins):
-        v = votes[b].astype(np.float64)
-        if not v.any():
-            continue
         psi = (b + 0.5) * math.pi / bins
-        c, s = math.cos(psi), math.sin(psi)
-        on_n, on_t = cols * c + rows * s, rows * c - cols * s  # cell coordinates, cells
-        with np.errstate(invalid="ignore", divide="ignore"):
-            m = box_sum(v, n)
-            mn, mt = box_sum(v * on_n, n) / m, box_sum(v * on_t, n) / m
-            var_n = box_sum(v * on_n * on_n, n) / m - mn * mn
-            var_t = box_sum(v * on_t * on_t, n) / m - mt * mt
-            cov = box_sum(v * on_n * on_t, n) / m - mn * mt
-            tilt = 0.5 * np.arctan2(2.0 * cov, var_t - var_n)  # principal axis off t
-            ok = ((box_sum((v > 0).astype(np.float64), n) >= 2.0)
-                  & (var_n <= LINE_THICK ** 2) & (var_t >= 4.0 * var_n)
-                  & (np.abs(tilt) <= 0.5 * math.pi / bins) & (np.abs(on_n - mn) <= 1.0)
-                  & (m > best))
-        best = np.where(ok, m, best)
-        nx = np.where(ok, np.float32(c), nx)
-        ny = np.where(ok, np.float32(s), ny)
+        for r0, c0 in _tiles_with_votes(votes[b], n):
+            rows, cols = slice(r0, min(r0 + TILE, h)), slice(c0, min(c0 + TILE, w))
+            # the tile and the n cells around it: every box around a tile cell lies inside
+            outer = votes[b, max(r0 - n, 0):rows.stop + n, max(c0 - n, 0):cols.stop + n]
+            m, ok = _line_test(outer.astype(np.float64), psi, n, bins)
+            inner = (slice(r0 - max(r0 - n, 0), r0 - max(r0 - n, 0) + rows.stop - r0),
+                     slice(c0 - max(c0 - n, 0), c0 - max(c0 - n, 0) + cols.stop - c0))
+            m, ok = m[inner], ok[inner] & (m[inner] > best[rows, cols])
+            best[rows, cols] = np.where(ok, m, best[rows, cols])
+            nx[rows, cols] = np.where(ok, np.float32(math.cos(psi)), nx[rows, cols])
+            ny[rows, cols] = np.where(ok, np.float32(math.sin(psi)), ny[rows, cols])
     return best > 0, nx, ny
+
+
+def _tiles_with_votes(v: Votes, n: int) -> list[tuple[int, int]]:
+    """The corners of the :data:`TILE`-cell tiles with a vote within ``n`` cells."""
+    h, w = v.shape
+    th, tw = -(-h // TILE), -(-w // TILE)
+    rr, cc = np.nonzero(v)
+    if rr.size == 0:
+        return []
+    hit = np.zeros((th, tw), dtype=bool)
+    for dr in (-n, 0, n):  # a vote reaches the tiles its (2n + 1)² box touches (n < TILE)
+        for dc in (-n, 0, n):
+            r, c = np.clip(rr + dr, 0, h - 1) // TILE, np.clip(cc + dc, 0, w - 1) // TILE
+            hit[r, c] = True
+    tr, tc = np.nonzero(hit)
+    return [(int(i) * TILE, int(j) * TILE) for i, j in zip(tr, tc, strict=True)]
+
+
+def _line_test(v: npt.NDArray[Any], psi: float, n: int, bins: int) -> tuple[F64, B]:
+    """Each cell's box of votes ``m`` and whether the cell lies on their line (module doc),
+    in coordinates local to ``v``."""
+    c, s = math.cos(psi), math.sin(psi)
+    rows, cols = np.mgrid[0:v.shape[0], 0:v.shape[1]].astype(np.float64)
+    on_n, on_t = cols * c + rows * s, rows * c - cols * s  # cell coordinates, cells
+    with np.errstate(invalid="ignore", divide="ignore"):
+        m = box_sum(v, n)
+        mn, mt = box_sum(v * on_n, n) / m, box_sum(v * on_t, n) / m
+        var_n = box_sum(v * on_n * on_n, n) / m - mn * mn
+        var_t = box_sum(v * on_t * on_t, n) / m - mt * mt
+        cov = box_sum(v * on_n * on_t, n) / m - mn * mt
+        tilt = 0.5 * np.arctan2(2.0 * cov, var_t - var_n)  # principal axis off t
+        ok: B = ((box_sum((v > 0).astype(np.float64), n) >= 2.0)
+                 & (var_n <= LINE_THICK ** 2 + TIE) & (var_t >= 4.0 * var_n - TIE)
+                 & (np.abs(tilt) <= 0.5 * math.pi / bins + TIE)
+                 & (np.abs(on_n - mn) <= 1.0 + TIE))
+    return m, ok
 
 
 def near_lines(on: B, nx: F32, ny: F32, radius_cells: float) -> tuple[B, F32, F32]:

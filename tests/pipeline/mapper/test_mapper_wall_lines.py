@@ -5,7 +5,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
+import pipeline.mapper.wall_lines as wall_lines_module
 from pipeline.mapper.kernels.lines import vote_tangents
 from pipeline.mapper.types import GridSpec
 from pipeline.mapper.wall_lines import LINE_BINS, empty_votes, near_lines, wall_lines
@@ -115,3 +117,47 @@ def test_a_cone_edge_on_a_bin_centre_votes_the_same_whatever_the_last_bits() -> 
     assert exact == [7, 8, 9, 10]  # 75°, 85°, 95° and the edge 105°
     assert bins_voted(np.nextafter(math.pi / 2, 0.0)) == exact
     assert bins_voted(np.nextafter(math.pi / 2, 4.0)) == exact
+
+
+def scattered_walls(shape: tuple[int, int], seed: int, axis_aligned: bool) -> np.ndarray:
+    """Votes of 60 noisy straight walls (on the grid's axes when ``axis_aligned``: their
+    votes lie exactly half a bin off the bins' lines) and stray single votes."""
+    rng = np.random.default_rng(seed)
+    votes = np.zeros((LINE_BINS, *shape), dtype=np.uint16)
+    for _ in range(60):
+        b = int(rng.integers(LINE_BINS))
+        psi = rng.choice([0.0, math.pi / 2]) if axis_aligned else (b + 0.5) * math.pi / LINE_BINS
+        r0, c0 = rng.integers(0, shape[0]), rng.integers(0, shape[1])
+        for t in np.linspace(-20, 20, 25):
+            r = round(r0 + t * math.cos(psi) + rng.normal(0, 0.4))
+            c = round(c0 - t * math.sin(psi) + rng.normal(0, 0.4))
+            if 0 <= r < shape[0] and 0 <= c < shape[1]:
+                votes[b, r, c] += rng.integers(1, 4)
+    votes += (rng.random(votes.shape) < 0.002).astype(np.uint16)
+    return votes
+
+
+@pytest.mark.parametrize("axis_aligned", [False, True])
+def test_the_lines_do_not_depend_on_the_tiles(monkeypatch: pytest.MonkeyPatch,
+                                              axis_aligned: bool) -> None:
+    # the line test works tile by tile where votes are; one tile over the whole grid (the
+    # way it was computed before) gives the same cells and normals, ties included
+    votes = scattered_walls((300, 410), 1, axis_aligned)
+    on, nx, ny = wall_lines(votes, 0.05, 0.3)
+    monkeypatch.setattr(wall_lines_module, "TILE", 4096)
+    on1, nx1, ny1 = wall_lines(votes, 0.05, 0.3)
+    assert on.sum() > 1000
+    assert np.array_equal(on, on1) and np.array_equal(nx, nx1) and np.array_equal(ny, ny1)
+
+
+def test_two_votes_along_a_grid_axis_meet_the_tilt_bound_exactly_and_count() -> None:
+    # a wall along x seen from five places, its votes in the bin of normals 80-90°: they
+    # lie on one row, 5° off that bin's line (the bound), so rounding must not decide
+    # whether they are a line
+    b = LINE_BINS // 2 - 1
+    votes = empty_votes(GridSpec(0.0, 0.0, 0.05, 40, 20))
+    votes[b, 10, 12:29:4] = 1
+    on, nx, ny = wall_lines(votes, 0.05, 0.3)
+    assert on[10, 12:29].all() and not on[8].any() and not on[12].any()
+    psi = (b + 0.5) * math.pi / LINE_BINS
+    assert np.allclose(nx[10, 12:29], math.cos(psi)) and np.allclose(ny[10, 12:29], math.sin(psi))
