@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from benchmarks.research.wall_lines_variants import link_segments, vote_segments
+from benchmarks.research.wall_lines_variants import vote_segments
 from pipeline.mapper.kernels.lines import vote_tangents
 from pipeline.mapper.types import GridSpec
 from pipeline.mapper.wall_lines import LINE_BINS, empty_votes, wall_lines
@@ -36,26 +36,6 @@ def along(cells: np.ndarray) -> np.ndarray:
     x, y = (cols + 0.5) * GRID.resolution, (rows + 0.5) * GRID.resolution
     return np.stack([x * math.cos(PSI) + y * math.sin(PSI) - WALL,
                      y * math.cos(PSI) - x * math.sin(PSI)])
-
-
-def largest_hole(cells: np.ndarray) -> float:
-    """The longest stretch (m) along the wall without a cell within 0.10 m of it."""
-    off, pos = along(cells)
-    return float(np.diff(np.sort(pos[np.abs(off) <= 0.10])).max())
-
-
-def test_a_gap_the_sonar_did_not_hear_is_joined_up_to_the_gap_length() -> None:
-    # heard every 0.1 m over two stretches, unheard over 0.9 m between them
-    t = np.concatenate([np.arange(0.0, 1.0, 0.1), np.arange(1.9, 3.0, 0.1)])
-    on, nx, ny = wall_lines(heard_from(t), GRID.resolution, 0.3)
-    assert largest_hole(on) > 0.4  # the box test leaves the unheard stretch open
-    joined, jnx, jny = link_segments(on, nx, ny, 1.2 / GRID.resolution)
-    added = joined & ~on
-    assert np.abs(along(added)[0]).max() <= 2 * GRID.resolution  # on the wall
-    assert largest_hole(joined) <= 1.01 * GRID.resolution  # end to end
-    assert np.abs(jnx[added] * math.cos(PSI) + jny[added] * math.sin(PSI)).min() > 0.999
-    short, _, _ = link_segments(on, nx, ny, 0.5 / GRID.resolution)
-    assert largest_hole(short) > 0.4  # a gap longer than the joining length stays open
 
 
 def test_two_places_far_apart_make_a_segment_the_box_test_misses() -> None:
