@@ -12,7 +12,7 @@ import pytest
 
 from formats.writers.trajectory_csv import read_trajectory
 from pipeline.config import Config, PoseRefinementConfig
-from pipeline.refine.correlative import Window, correlate
+from pipeline.refine.correlative import LikelihoodField, Window, correlate
 from pipeline.refine.graph import GraphOptions, MatchConstraints, Odometry, _Problem
 from pipeline.tools.simulate import SimOptions
 from pipeline.tools.trajectory_error import trajectory_error
@@ -160,18 +160,22 @@ def test_a_closure_the_graph_cannot_explain_is_dropped_and_the_right_ones_stay()
     assert chi2[2] == 0.0 and (chi2[:2] <= CHI2_OUTLIER).all()
 
 
-def test_the_compiled_correlation_gives_the_numpy_versions_bits() -> None:
-    from pipeline.refine.correlative import (
-        LikelihoodField,
-        _coverage,
-        _loglik,
-        _loglik_reference,
-    )
+def _room_against_room(seeds: tuple[int, int], res: float, margin: float
+                       ) -> tuple[LikelihoodField, np.ndarray, np.ndarray, np.ndarray]:
+    """A room's evidence field and beam coverage, and another draw of the room's echoes to
+    match against it: ``(field, coverage, query x, query y)``."""
+    from pipeline.refine.correlative import _coverage
 
-    rx, ry, sx, sy = _room(np.random.default_rng(0))
-    qx, qy, _, _ = _room(np.random.default_rng(1))
-    fld = LikelihoodField.of_points(rx, ry, res=0.05, sigma=0.1, margin=1.0)
-    cover = _coverage(fld, rx, ry, sx, sy, 0.1)
+    rx, ry, sx, sy = _room(np.random.default_rng(seeds[0]))
+    qx, qy, _, _ = _room(np.random.default_rng(seeds[1]))
+    fld = LikelihoodField.of_points(rx, ry, res=res, sigma=0.1, margin=margin)
+    return fld, _coverage(fld, rx, ry, sx, sy, 0.1), qx, qy
+
+
+def test_the_compiled_correlation_gives_the_numpy_versions_bits() -> None:
+    from pipeline.refine.correlative import _loglik, _loglik_reference
+
+    fld, cover, qx, qy = _room_against_room((0, 1), res=0.05, margin=1.0)
     centre = np.array([0.1, -0.05, 0.02])
     dyaw, offsets = np.linspace(-0.1, 0.1, 5), np.arange(-8, 9) * 0.05
     fast = _loglik(fld, cover, math.log(0.55), qx, qy, centre, dyaw, offsets)
@@ -184,17 +188,9 @@ def test_the_compiled_correlation_gives_the_numpy_versions_bits() -> None:
 def test_the_compiled_correlation_keeps_its_bits_where_the_query_leaves_the_field() -> None:
     """The kernel pads the field and clamps far points: lookups near and far beyond each
     edge, and offsets that skip cells, still give the numpy version's values."""
-    from pipeline.refine.correlative import (
-        LikelihoodField,
-        _coverage,
-        _loglik,
-        _loglik_reference,
-    )
+    from pipeline.refine.correlative import _loglik, _loglik_reference
 
-    rx, ry, sx, sy = _room(np.random.default_rng(3))
-    qx, qy, _, _ = _room(np.random.default_rng(4))
-    fld = LikelihoodField.of_points(rx, ry, res=0.1, sigma=0.1, margin=0.3)
-    cover = _coverage(fld, rx, ry, sx, sy, 0.1)
+    fld, cover, qx, qy = _room_against_room((3, 4), res=0.1, margin=0.3)
     h, w = fld.values.shape
     dyaw = np.linspace(-0.2, 0.2, 3)
     for centre in (np.array([0.0, 0.0, 0.0]), np.array([w * 0.1 * 0.6, -0.4, 0.5]),
