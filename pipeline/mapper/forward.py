@@ -66,9 +66,9 @@ from pipeline.mapper.work_share import WorkShare
 from pipeline.stages import reading_quality as rq
 
 T = TypeVar("T")
-INCIDENCE_BINS = 9
+INCIDENCE_BINS = 9  # equal bins of the detection curve over [0, 90°]
 # Groups of E-step counts the worker thread may have pending (each holds its group's cones).
-COUNT_BACKLOG = 2  # equal bins of the detection curve over [0, 90°]
+COUNT_BACKLOG = 2
 
 
 def fitted_detection(stats: F64) -> F64:
