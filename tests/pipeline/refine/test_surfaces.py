@@ -364,3 +364,58 @@ def test_a_scale_the_echoes_are_not_more_consistent_under_is_not_applied(
     drifted = _calibrated(runs["drifted"], runs["drifted"][1])
     assert drifted.scale_error == pytest.approx(0.04)
     assert drifted.scale_consistency_z >= 3.0
+
+
+def _scripted(monkeypatch: pytest.MonkeyPatch, offset: FixedPoint, oriented: FixedPoint,
+              echoes_z: float) -> None:
+    """The patch models' fixed points and the echoes' consistency z replaced by these."""
+    import pipeline.refine.calibration as calibration
+    from pipeline.refine.scores import Consistency
+
+    monkeypatch.setattr(calibration, "fixed_points",
+                        lambda ests: [oriented if e.tilt else offset for e in ests])
+    monkeypatch.setattr(SurfaceScale, "fixed_point",
+                        lambda self: oriented if self.tilt else offset)
+    monkeypatch.setattr(Consistency, "more_consistent_z", lambda *_: echoes_z)
+
+
+@pytest.mark.parametrize(("echoes_z", "applied"), [(4.0, 0.03), (2.0, 0.0), (-4.0, 0.0)])
+def test_the_oriented_patches_second_look_must_be_confirmed_by_the_echoes(
+        runs: dict[str, tuple[Any, Any, Any]], monkeypatch: pytest.MonkeyPatch,
+        echoes_z: float, applied: float) -> None:
+    # The offset-only patches establish no scale (z 1.4); the oriented ones, asked second
+    # on the same echoes, do (z 4.2) and agree: applied only where the echoes are 3 errors
+    # more consistent under it (Belgioioso's realistic true poses: +3.7 %, z 3.0, echoes
+    # +1.0).
+    _scripted(monkeypatch, FixedPoint(0.03, 0.3, (), 0.02), FixedPoint(0.03, 0.3, (), 0.005),
+              echoes_z)
+    cal = _calibrated(runs["drifted"], runs["drifted"][1])
+    assert cal.scale_error == pytest.approx(applied)
+    assert cal.scale_oriented is (applied != 0.0)
+
+
+@pytest.mark.parametrize(("echoes_z", "applied"), [(4.0, 0.03), (0.5, 0.03), (-3.5, 0.0)])
+def test_the_first_patch_models_scale_is_refused_only_where_the_echoes_contradict_it(
+        runs: dict[str, tuple[Any, Any, Any]], monkeypatch: pytest.MonkeyPatch,
+        echoes_z: float, applied: float) -> None:
+    # The offset-only patches establish it (z 4.2): the echoes need not confirm (the 8
+    # front sonars' right 3.7 %: echoes z 0.8), but 3 errors less consistent refuse it
+    # (the realistic corridor's true poses: echoes −11.0).
+    _scripted(monkeypatch, FixedPoint(0.03, 0.3, (), 0.005), FixedPoint(math.nan, 0.3, (), 0.0),
+              echoes_z)
+    cal = _calibrated(runs["drifted"], runs["drifted"][1])
+    assert cal.scale_error == pytest.approx(applied)
+    assert cal.scale_consistency_z == echoes_z
+
+
+def test_a_fixed_point_beyond_the_range_searched_is_not_applied(
+        runs: dict[str, tuple[Any, Any, Any]], monkeypatch: pytest.MonkeyPatch) -> None:
+    # The realistic corridor's true poses: −8.4 ± 1.1 % (z 7.3), once clipped to −5 % and
+    # applied (F1 0.727 → 0.564). Beyond ±5 % it is no scale within the range searched.
+    beyond = FixedPoint(-0.084, 0.3, (), 0.011)
+    _scripted(monkeypatch, beyond, beyond, 10.0)
+    cal = _calibrated(runs["true"], runs["true"][1])
+    assert cal.scale_error == 0.0 and cal.scale_estimate == pytest.approx(-0.084)
+    within = FixedPoint(-0.045, 0.3, (), 0.011)
+    _scripted(monkeypatch, within, within, 10.0)
+    assert _calibrated(runs["true"], runs["true"][1]).scale_error == pytest.approx(-0.045)
