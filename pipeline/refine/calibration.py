@@ -347,7 +347,9 @@ def calibrate(
     (:func:`bias_accepted`, :func:`consistent_bias_accepted`; the default, inf, accepts
     no disagreement either way).
     ``far_echoes``: the echoes out to a longer range (a superset of ``echoes``), which the
-    surfaces' scale uses where they pass :func:`_far_agrees`."""
+    surfaces' scale uses where they pass :func:`_far_agrees`; ``cluster_m``: the travel
+    whose echoes count as one observation in the scale's consistency test
+    (:func:`_surface_calibration`)."""
     lean = systematic if isinstance(systematic, Lean) else Lean(systematic, systematic)
     sharp = Sharpness(t_ns, x, y, yaw, echoes, res=max(res, sigma), sigma=sigma)
     base = sharp(0.0, 0.0)
