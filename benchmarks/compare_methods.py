@@ -31,7 +31,9 @@ rows instead (issue 17): the office, corridor and orchard simulations and the fi
 buildings (Intel lab, Freiburg 101, Örebro, FHW, Belgioioso) emulated with 3 % scale error
 and 0.8°/m heading bias, each mapped by the default method on true poses, on the drifted odometry, refined
 (``--refine-poses``; ``--config`` sets its ``[pose_refinement]``) and refined from true
-poses; F1, ATE before/after and run seconds per case.
+poses; F1, ATE before/after and run seconds per case. ``--sonar-model realistic`` simulates
+and emulates them with the realistic sonar (docs/SONAR_PHYSICS.md) instead of the ideal one,
+the true-pose runs then ``make compare``'s ``build/compare/<name>-realistic.mcap``.
 """
 
 from __future__ import annotations
@@ -469,24 +471,29 @@ DRIFT_CASES = SYNTHETIC_DRIFT_CASES + REAL_ODOMETRY_CASES
 
 
 def _drift_cases(work: Path, names: tuple[str, ...] = DRIFT_CASES, walk: bool = False,
-                 drift_seed: int = 0) -> list[tuple[str, Path, Path, Path, Path]]:
+                 drift_seed: int = 0, sonar_model: str = "ideal"
+                 ) -> list[tuple[str, Path, Path, Path, Path]]:
     """(name, true-pose log, drifted log, truth map, truth trajectory) per case: the office,
     corridor and orchard simulations and the five real buildings (the Belgioioso castle
     beside make compare's four), emulated with drift applied to their corrected poses
-    (:func:`drifted_case`; ``drift_seed`` draws the buildings' drift noise)."""
+    (:func:`drifted_case`; ``drift_seed`` draws the buildings' drift noise; ``sonar_model``:
+    the sonar simulated or emulated, docs/SONAR_PHYSICS.md)."""
     drift = WALK if walk else DriftModel(DRIFT_SCALE, DRIFT_BIAS_DEG_PER_M)
     work.mkdir(parents=True, exist_ok=True)
     cases = []
     for case in names:
         seed = f"_seed{drift_seed}" if drift_seed else ""
-        drifted = work / f"{case}_{'walk' if walk else 'drifted'}{seed}.mcap"
-        clean, truth, traj = drifted_case(case, drifted, drift, drift_seed)
+        kind = "walk" if walk else "drifted"
+        drifted = work / f"{case}_{kind}{seed}{_sonar_suffix(sonar_model)}.mcap"
+        clean, truth, traj = drifted_case(case, drifted, drift, drift_seed,
+                                          sonar_model=sonar_model)
         cases.append((case, clean, drifted, truth, traj))
     return cases
 
 
 def drifted_case(case: str, drifted: Path, drift: DriftModel, drift_seed: int = 0,
-                 preset: str | None = None) -> tuple[Path, Path, Path]:
+                 preset: str | None = None, sonar_model: str = "ideal"
+                 ) -> tuple[Path, Path, Path]:
     """(true-pose log, truth map, truth trajectory) of a drifted case, its drifted log
     written to ``drifted`` when missing: a world of ``sample_logs/worlds`` simulated again
     with ``drift`` (the simulation's seed draws its noise; its true run the sample log, or
@@ -495,7 +502,10 @@ def drifted_case(case: str, drifted: Path, drift: DriftModel, drift_seed: int = 
     corrected poses (``drift_seed``), or for ``<building>-odometry`` its own wheel odometry
     (the Radish logs' true-pose runs are ``make compare``'s ``build/compare/<name>.mcap``,
     emulated here when missing). ``preset``: the sonars simulated or emulated as that
-    preset's ring (formats/presets.py), its true-pose run beside ``drifted``."""
+    preset's ring (formats/presets.py), its true-pose run beside ``drifted``.
+    ``sonar_model``: ``"ideal"`` (the sample logs' sonar) or ``"realistic"``
+    (docs/SONAR_PHYSICS.md), the true-pose run then ``make compare``'s
+    ``build/compare/<name>-realistic.mcap`` (simulated or emulated there when missing)."""
     from pipeline.tools.emulate import EmulateOptions, run_emulation
     from pipeline.tools.simulate import SimOptions, run_simulation
 
@@ -507,10 +517,13 @@ def drifted_case(case: str, drifted: Path, drift: DriftModel, drift_seed: int = 
         from formats.presets import PRESETS
 
         clean = REPO / "sample_logs" / name / f"{name}.mcap"
-        sim = SimOptions(seed=1, speed=0.5, ring_rate_hz=5.0, sonar_model="ideal")
+        sim = SimOptions(seed=1, speed=0.5, ring_rate_hz=5.0, sonar_model=sonar_model)
         if preset is not None:  # the world's sonars as that preset's ring
             sim = dataclasses.replace(sim, mounts=PRESETS[preset])
-            clean = drifted.with_name(f"{name}-{preset}.mcap")
+            clean = drifted.with_name(f"{name}-{preset}{_sonar_suffix(sonar_model)}.mcap")
+        elif sonar_model != "ideal":  # make compare's simulation (the same options)
+            clean = REPO / "build" / "compare" / f"{name}{_sonar_suffix(sonar_model)}.mcap"
+            clean.parent.mkdir(parents=True, exist_ok=True)
         elif not clean.exists():
             clean = drifted.with_name(f"{name}.mcap")
         if not clean.exists():
@@ -524,44 +537,51 @@ def drifted_case(case: str, drifted: Path, drift: DriftModel, drift_seed: int = 
                                drift_heading_walk=drift.heading_walk))
         return (clean, clean.with_name(f"{clean.stem}.truth.yaml"),
                 clean.with_name(f"{clean.stem}.truth.csv"))
-    if name == "intel-lab":
+    suffix = _sonar_suffix(sonar_model)
+    if name == "intel-lab" and sonar_model == "ideal":
         src = REPO / "sample_logs" / "intel-lab" / "intel-corrected.log.gz"
         clean = REPO / "sample_logs" / "intel-lab" / "intel.mcap"
-        truth, traj = clean.with_name("intel.laser.yaml"), clean.with_name("intel.truth.csv")
-    elif name in ("freiburg-101", "orebro", "fhw", "belgioioso"):
-        src = REPO / "sample_logs" / "radish" / f"{name}-corrected.log.gz"
-        clean = REPO / "build" / "compare" / f"{name}.mcap"
+    elif name in ("intel-lab", "freiburg-101", "orebro", "fhw", "belgioioso"):
+        stem = "intel" if name == "intel-lab" else name
+        src = (REPO / "sample_logs" / "intel-lab" / "intel-corrected.log.gz"
+               if name == "intel-lab" else
+               REPO / "sample_logs" / "radish" / f"{name}-corrected.log.gz")
+        clean = REPO / "build" / "compare" / f"{stem}{suffix}.mcap"
         if not clean.exists():
             clean.parent.mkdir(parents=True, exist_ok=True)
-            run_emulation(src, clean, "mcap", options=EmulateOptions(sonar_model="ideal"))
-        truth = clean.with_name(f"{name}.laser.yaml")
-        traj = clean.with_name(f"{name}.truth.csv")
+            run_emulation(src, clean, "mcap", options=EmulateOptions(sonar_model=sonar_model))
     else:
         raise SystemExit(f"unknown drifted case {case!r}; known: {', '.join(DRIFT_CASES)}")
     if preset is not None:
-        clean = drifted.with_name(f"{name}-{preset}.mcap")
+        clean = drifted.with_name(f"{name}-{preset}{suffix}.mcap")
         if not clean.exists():
             run_emulation(src, clean, "mcap",
-                          options=EmulateOptions(preset=preset, sonar_model="ideal"))
-        truth = clean.with_name(f"{clean.stem}.laser.yaml")
-        traj = clean.with_name(f"{clean.stem}.truth.csv")
+                          options=EmulateOptions(preset=preset, sonar_model=sonar_model))
+    truth = clean.with_name(f"{clean.stem}.laser.yaml")
+    traj = clean.with_name(f"{clean.stem}.truth.csv")
     if not drifted.exists():
-        opts = (EmulateOptions(raw_odometry=True, preset=preset, sonar_model="ideal") if real
-                else EmulateOptions(drift=drift, drift_seed=drift_seed, preset=preset,
-                                    sonar_model="ideal"))
+        opts = (EmulateOptions(raw_odometry=True, preset=preset, sonar_model=sonar_model)
+                if real else EmulateOptions(drift=drift, drift_seed=drift_seed, preset=preset,
+                                            sonar_model=sonar_model))
         run_emulation(src, drifted, "mcap", options=opts)
     return clean, truth, traj
 
 
+def _sonar_suffix(sonar_model: str) -> str:
+    """A log's name suffix for its sonar model: none for the ideal one (the sample logs),
+    ``-realistic`` (``make compare``'s ``<name>-realistic.mcap``)."""
+    return "" if sonar_model == "ideal" else f"-{sonar_model}"
+
+
 def drifted_comparison(work: Path, tolerance: float, names: tuple[str, ...] = DRIFT_CASES,
                        config: Path | None = None, walk: bool = False,
-                       drift_seed: int = 0) -> list[DriftRow]:
+                       drift_seed: int = 0, sonar_model: str = "ideal") -> list[DriftRow]:
     """Map and score every drifted case (see the section comment); ``config`` (TOML) sets
     the refined runs' ``[pose_refinement]`` (enabled either way); ``walk``: the random-walk
     drift (``WALK``) instead of the systematic one; ``drift_seed``: the buildings' drift
-    noise draw."""
-    return score_drift_cases(_drift_cases(work, names, walk, drift_seed), work, tolerance,
-                             config)
+    noise draw; ``sonar_model``: the sonar the cases are simulated or emulated with."""
+    return score_drift_cases(_drift_cases(work, names, walk, drift_seed, sonar_model), work,
+                             tolerance, config)
 
 
 DRIFTED_MAX_CELLS = 100_000_000  # ~3.2 GB at ~32 bytes a cell
@@ -650,13 +670,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--drift-seed", type=int, default=0,
                     help="with --drifted: the seed of the buildings' drift noise (the "
                     "simulated worlds keep their own)")
+    ap.add_argument("--sonar-model", choices=("ideal", "realistic"), default="ideal",
+                    help="with --drifted: the sonar the cases are simulated or emulated with "
+                    "(docs/SONAR_PHYSICS.md; realistic: make compare's <name>-realistic logs "
+                    "are the true-pose runs)")
     args = ap.parse_args(argv)
     if args.drifted:
         with tempfile.TemporaryDirectory(prefix="sonarmap-drift-") as tmp:
             drift_rows = drifted_comparison(args.keep if args.keep is not None else Path(tmp),
                                             args.tolerance, tuple(args.cases), args.config,
                                             walk=args.drift_model == "walk",
-                                            drift_seed=args.drift_seed)
+                                            drift_seed=args.drift_seed,
+                                            sonar_model=args.sonar_model)
         print(drift_markdown(drift_rows))
         return 0
 

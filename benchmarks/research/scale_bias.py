@@ -127,7 +127,7 @@ def log_echoes(log: Path, max_range_m: float | None = None
                                 eps_max=cfg.mapper.eps_max,
                                 max_echo_range_m=(pr.max_echo_range_m if max_range_m is None
                                                   else max_range_m),
-                                arc_fraction=pr.arc_fraction, time_offset_ns=0, max_gap_ns=gap)
+                                time_offset_ns=0, max_gap_ns=gap)
     tr = sv.track
     return (np.asarray(tr.t_ns), np.asarray(tr.x), np.asarray(tr.y), np.asarray(tr.yaw)), echoes
 

@@ -84,7 +84,7 @@ def configured_calibration(t_ns: I64, x: F64, y: F64, yaw: F64, echoes: Echoes,
         max_bias=(math.radians(cfg.calibration_max_bias_deg_per_m) if max_bias is None
                   else max_bias),
         res=cfg.field_resolution_m, sigma=cfg.field_sigma_m, far_echoes=far,
-        **{**calibration_gates(), **gates},
+        cluster_m=cfg.submap_travel_m, **{**calibration_gates(), **gates},
     )
 
 
@@ -164,6 +164,8 @@ def _calibration_metrics(cal: Calibration, metrics: dict[str, Any]) -> None:
         metrics["scale_fixed_point_slope"] = cal.scale_slope
     if math.isfinite(cal.scale_z):
         metrics["scale_z"] = cal.scale_z
+    if not math.isnan(cal.scale_consistency_z):  # the echoes' test of an established scale
+        metrics["scale_consistency_z"] = cal.scale_consistency_z
     if math.isfinite(cal.scale_estimate):  # applied or not (the gates: calibration.py)
         metrics["scale_estimate"] = cal.scale_estimate
         metrics["scale_standard_error"] = cal.scale_standard_error
@@ -212,12 +214,17 @@ def summary(metrics: dict[str, Any], cfg: PoseRefinementConfig) -> str:
     if "search_heading_bias_deg_per_m" not in metrics:
         parts.append(f"no calibration ({metrics.get('echoes', 0)} echoes)")
     elif metrics.get("search_scale_error"):
+        echoes = (f", the echoes {metrics['scale_consistency_z']:.1f} errors more consistent"
+                  if "scale_consistency_z" in metrics else "")
         parts.append(f"scale error {metrics['search_scale_error']:+.1%} "
-                     f"(z {metrics.get('scale_z', math.nan):.1f}{reach})")
+                     f"(z {metrics.get('scale_z', math.nan):.1f}{echoes}{reach})")
     elif "scale_estimate" in metrics:
         z = metrics.get("scale_z", math.nan)
+        cz = metrics.get("scale_consistency_z", math.nan)
         why = (f"the far echoes disagree: {metrics['scale_far_estimate']:+.1%} ± "
                f"{metrics['scale_far_standard_error']:.1%}" if "scale_far_estimate" in metrics
+               else f"z {z:.1f}, but the echoes are not more consistent under it: "
+               f"{cz:.1f} errors < {MIN_Z:g}" if "scale_consistency_z" in metrics
                else f"z {z:.1f} < {MIN_Z:g}"
                if not z >= MIN_Z
                else f"fixed-point slope {metrics['scale_fixed_point_slope']:.2f}")

@@ -233,6 +233,36 @@ class Consistency(CompiledScore):
     def _score(self, pose: F64) -> float:
         if not self.reference:
             return self._compiled(pose)
+        best = self.per_echo(pose)
+        scored = best >= 0
+        return float(best[scored].mean()) if scored.any() else 0.0
+
+    def more_consistent_z(self, a: tuple[float, float], b: tuple[float, float],
+                          cluster_m: float) -> float:
+        """How many standard errors the echoes are more consistent under the calibration
+        ``a`` than under ``b`` (each ``(k, b)``): per echo scored under both, the difference
+        of its consistency (:meth:`per_echo`); their mean over its standard error, the
+        echoes within each ``cluster_m`` of travel one cluster (neighbours read the same
+        cells, so they are not independent observations). NaN: no echo scored under both
+        or a single cluster; ±inf where the differences do not vary."""
+        from pipeline.refine.submaps import path_length
+
+        ca, cb = self.per_echo(self.poses(*a)), self.per_echo(self.poses(*b))
+        both = (ca >= 0) & (cb >= 0)
+        travel = path_length(self.x, self.y)[self.echo_at]  # the odometry's, m
+        cluster = np.unique(np.floor(travel[both] / cluster_m), return_inverse=True)[1].ravel()
+        if cluster.size == 0 or cluster.max() == 0:
+            return math.nan
+        d = (ca - cb)[both]
+        mean = float(d.mean())
+        residual = np.bincount(cluster, d - mean)  # each cluster's sum about the mean
+        se = math.sqrt(float((residual * residual).sum())) / d.size
+        return mean / se if se > 0 else math.copysign(math.inf, mean) if mean else math.nan
+
+    def per_echo(self, pose: F64) -> F64:
+        """Each echo's consistency at the poses ``pose`` (the best ratio ``H / (H + F)``
+        over its arc; −1 where its arc saw too little evidence): the score is their mean
+        (numpy, the kernel's reference)."""
         wx, wy = self.arcs(pose)
         ox, oy = transform_points(pose, self.sx, self.sy)  # each sonar's position
         dx, dy = wx - ox[:, None], wy - oy[:, None]
@@ -275,9 +305,7 @@ class Consistency(CompiledScore):
         hh, ff = read(shared(wx, wy)), read(shared(fx, fy))
         seen = hh + ff
         ratio = np.where(seen >= MIN_EVIDENCE, hh / np.maximum(seen, 1e-12), -1.0)
-        best = ratio.max(axis=1)
-        scored = best >= 0
-        return float(best[scored].mean()) if scored.any() else 0.0
+        return np.asarray(ratio.max(axis=1))
 
 
 def density_sharpness(x: F64, y: F64, res: float, sigma: float) -> float:

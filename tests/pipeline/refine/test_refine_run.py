@@ -185,6 +185,13 @@ def test_summary_says_what_was_applied_and_why_a_scale_was_not() -> None:
                 "scale_far_estimate": 0.0071, "scale_far_standard_error": 0.0042}
     assert ("scale error not established (+4.6% ± 1.2%, the far echoes disagree: +0.7% ± "
             "0.4%), not applied;") in summary(disputed, cfg)
+    inconsistent = {**doubted, "scale_z": 8.3, "scale_estimate": 0.0496,
+                    "scale_standard_error": 0.0033, "scale_consistency_z": 0.63}
+    assert ("scale error not established (+5.0% ± 0.3%, z 8.3, but the echoes are not more "
+            "consistent under it: 0.6 errors < 3), not applied;") in summary(inconsistent, cfg)
+    confirmed = {**applied, "scale_consistency_z": 6.26}
+    assert summary(confirmed, cfg).startswith(
+        "pose refinement: scale error +3.2% (z 5.5, the echoes 6.3 errors more consistent);")
     undetermined = {"search_scale_error": 0.0, "scale_fixed_point_slope": 1.2,
                     "search_heading_bias_deg_per_m": 0.0, **moved}
     assert "scale error undetermined (fixed-point slope 1.20)" in summary(undetermined, cfg)

@@ -74,6 +74,22 @@ def test_the_compiled_consistency_gives_the_reference_score(true_run: Run,
     assert got == pytest.approx(want, rel=1e-12, abs=1e-12)
 
 
+def test_the_echoes_are_more_consistent_on_true_poses_by_many_standard_errors(
+        true_run: Run) -> None:
+    (t, x, y, yaw), echoes = true_run
+    f = Consistency(t, x, y, yaw, echoes, res=0.1, sigma=0.1)
+    z = f.more_consistent_z((0.0, 0.0), (0.04, 0.0), 8.0)
+    assert z > 3.0  # the true poses against a 4 % scale: clear
+    assert f.more_consistent_z((0.04, 0.0), (0.0, 0.0), 8.0) == pytest.approx(-z)
+    # per echo, the scores whose mean is the score (−1: too little evidence, not scored)
+    each = f.per_echo(f.poses(0.04, 0.0))
+    assert each.shape == (min(len(echoes), 2_500),)  # thinned as the score is
+    assert each[each >= 0].mean() == pytest.approx(f(0.04, 0.0), abs=1e-9)
+    # all the echoes within one cluster: no error to compare with
+    assert math.isnan(f.more_consistent_z((0.0, 0.0), (0.04, 0.0), 1e6))
+    assert math.isnan(f.more_consistent_z((0.0, 0.0), (0.0, 0.0), 8.0))  # no difference
+
+
 def test_a_thinned_consistency_scores_the_whole_cones_of_the_echoes_it_keeps(
         true_run: Run) -> None:
     (t, x, y, yaw), echoes = true_run

@@ -16,7 +16,7 @@ from test_refine_sensors import drifted_run
 from formats.errors import ConfigError
 from pipeline.config import config_from_dict
 from pipeline.refine.calibration import calibrate
-from pipeline.refine.surfaces import K0S, SurfaceScale
+from pipeline.refine.surfaces import K0S, FixedPoint, SurfaceScale
 
 BIAS = math.radians(0.8) / 1.03  # the drift's heading bias per reported metre
 
@@ -302,3 +302,120 @@ def test_the_recentred_window_reaches_the_scale_the_gates_judge(
     # the provisional scale (it steers the bias search) as before, the one judged re-centred
     assert made[0] is False and made[-1] is True
     assert cal.scale_error == pytest.approx(0.03, abs=0.01)  # within ±4 %: as before
+
+
+def _with_ranges(echoes: Any, range_m: np.ndarray) -> Any:
+    """``echoes`` with other ranges, their arcs placed again."""
+    import dataclasses
+
+    moved = dataclasses.replace(echoes, range_m=range_m)
+    bx, by = moved.arc(0.8)
+    return dataclasses.replace(moved, bx=bx, by=by)
+
+
+def _one_sided_outliers(echoes: Any) -> Any:
+    """Every third echo answered from farther away, 0.2-1.0 m (a multipath ghost, a wide
+    cone's farther surface): lengthened, never shortened."""
+    n = len(echoes)
+    third = np.arange(n) % 3 == 0
+    longer = echoes.range_m.copy()
+    longer[third] += 0.2 + 0.8 * ((np.arange(n)[third] * 0.618) % 1.0)
+    return _with_ranges(echoes, longer)
+
+
+def _calibrated(run: tuple[Any, Any, Any], echoes: Any) -> Any:
+    track, _, _ = run
+    t, x, y, yaw = (np.asarray(v) for v in (track.t_ns, track.x, track.y, track.yaw))
+    return calibrate(t, x, y, yaw, echoes, max_scale=0.05, max_bias=math.radians(3.0),
+                     res=0.05, sigma=0.1, min_gain=0.01, strong_gain=0.10, tilt="fallback",
+                     recentre=True)
+
+
+def test_one_sided_long_echoes_read_as_no_scale_and_leave_a_true_one_found(
+        runs: dict[str, tuple[Any, Any, Any]]) -> None:
+    # A third of the echoes lengthened by 0.2-1.0 m: the patches' robust loss leaves them
+    # out. On true poses the estimate stays within its error of 0 (measured +0.3 ± 0.5 %)
+    # and nothing is applied; the 3 % of the drifted run is still found (+3.6 ± 0.5 %) and
+    # applied, the echoes more consistent under it by ~7 standard errors although the
+    # lengthened echoes dilute their consistency gain to 0.8 %.
+    true = _calibrated(runs["true"], _one_sided_outliers(runs["true"][1]))
+    assert abs(true.scale_estimate) < 2 * true.scale_standard_error
+    assert true.scale_error == 0.0
+    drifted = _calibrated(runs["drifted"], _one_sided_outliers(runs["drifted"][1]))
+    assert drifted.scale_error == pytest.approx(0.03, abs=0.01)
+    assert drifted.scale_consistency_z >= 3.0
+
+
+def test_a_scale_the_echoes_are_not_more_consistent_under_is_not_applied(
+        runs: dict[str, tuple[Any, Any, Any]], monkeypatch: pytest.MonkeyPatch) -> None:
+    # The patches misled (a realistic sonar's lengthened ranges, Örebro's true poses:
+    # +5.0 ± 0.3 %): a scale 13 errors clear of 0 on true poses. Under it the echoes are
+    # less consistent than on the odometry, so the calibration without it stays.
+    import pipeline.refine.calibration as calibration
+
+    misled = FixedPoint(0.04, 0.3, (), 0.003)
+    monkeypatch.setattr(calibration, "fixed_points", lambda estimators: [misled] * len(estimators))
+    monkeypatch.setattr(SurfaceScale, "fixed_point", lambda self: misled)
+    cal = _calibrated(runs["true"], runs["true"][1])
+    assert cal.scale_z >= 3.0  # the patches alone would apply it
+    assert cal.scale_consistency_z < -3.0  # the echoes say the odometry is better
+    assert cal.scale_error == 0.0 and cal.scale_estimate == pytest.approx(0.04)
+    # the same estimate on the drifted run, where it is nearly right: applied
+    drifted = _calibrated(runs["drifted"], runs["drifted"][1])
+    assert drifted.scale_error == pytest.approx(0.04)
+    assert drifted.scale_consistency_z >= 3.0
+
+
+def _scripted(monkeypatch: pytest.MonkeyPatch, offset: FixedPoint, oriented: FixedPoint,
+              echoes_z: float) -> None:
+    """The patch models' fixed points and the echoes' consistency z replaced by these."""
+    import pipeline.refine.calibration as calibration
+    from pipeline.refine.scores import Consistency
+
+    monkeypatch.setattr(calibration, "fixed_points",
+                        lambda ests: [oriented if e.tilt else offset for e in ests])
+    monkeypatch.setattr(SurfaceScale, "fixed_point",
+                        lambda self: oriented if self.tilt else offset)
+    monkeypatch.setattr(Consistency, "more_consistent_z", lambda *_: echoes_z)
+
+
+@pytest.mark.parametrize(("echoes_z", "applied"), [(4.0, 0.03), (2.0, 0.0), (-4.0, 0.0)])
+def test_the_oriented_patches_second_look_must_be_confirmed_by_the_echoes(
+        runs: dict[str, tuple[Any, Any, Any]], monkeypatch: pytest.MonkeyPatch,
+        echoes_z: float, applied: float) -> None:
+    # The offset-only patches establish no scale (z 1.4); the oriented ones, asked second
+    # on the same echoes, do (z 4.2) and agree: applied only where the echoes are 3 errors
+    # more consistent under it (Belgioioso's realistic true poses: +3.7 %, z 3.0, echoes
+    # +1.0).
+    _scripted(monkeypatch, FixedPoint(0.03, 0.3, (), 0.02), FixedPoint(0.03, 0.3, (), 0.005),
+              echoes_z)
+    cal = _calibrated(runs["drifted"], runs["drifted"][1])
+    assert cal.scale_error == pytest.approx(applied)
+    assert cal.scale_oriented is (applied != 0.0)
+
+
+@pytest.mark.parametrize(("echoes_z", "applied"), [(4.0, 0.03), (0.5, 0.03), (-3.5, 0.0)])
+def test_the_first_patch_models_scale_is_refused_only_where_the_echoes_contradict_it(
+        runs: dict[str, tuple[Any, Any, Any]], monkeypatch: pytest.MonkeyPatch,
+        echoes_z: float, applied: float) -> None:
+    # The offset-only patches establish it (z 4.2): the echoes need not confirm (the 8
+    # front sonars' right 3.7 %: echoes z 0.8), but 3 errors less consistent refuse it
+    # (the realistic corridor's true poses: echoes −11.0).
+    _scripted(monkeypatch, FixedPoint(0.03, 0.3, (), 0.005), FixedPoint(math.nan, 0.3, (), 0.0),
+              echoes_z)
+    cal = _calibrated(runs["drifted"], runs["drifted"][1])
+    assert cal.scale_error == pytest.approx(applied)
+    assert cal.scale_consistency_z == echoes_z
+
+
+def test_a_fixed_point_beyond_the_range_searched_is_not_applied(
+        runs: dict[str, tuple[Any, Any, Any]], monkeypatch: pytest.MonkeyPatch) -> None:
+    # The realistic corridor's true poses: −8.4 ± 1.1 % (z 7.3), once clipped to −5 % and
+    # applied (F1 0.727 → 0.564). Beyond ±5 % it is no scale within the range searched.
+    beyond = FixedPoint(-0.084, 0.3, (), 0.011)
+    _scripted(monkeypatch, beyond, beyond, 10.0)
+    cal = _calibrated(runs["true"], runs["true"][1])
+    assert cal.scale_error == 0.0 and cal.scale_estimate == pytest.approx(-0.084)
+    within = FixedPoint(-0.045, 0.3, (), 0.011)
+    _scripted(monkeypatch, within, within, 10.0)
+    assert _calibrated(runs["true"], runs["true"][1]).scale_error == pytest.approx(-0.045)
