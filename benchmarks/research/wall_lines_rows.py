@@ -91,14 +91,19 @@ def main() -> None:
     if "--only" in args:
         k = args.index("--only")
         only, args = args[k + 1:], args[:k]
+    em = False
     if "--variant" in args:
-        from benchmarks.research.wall_lines_variants import install
-
         k = args.index("--variant")
+        em = args[k + 1].split(",")[0] == "em"
+        if em:  # Thrun's EM iterations (benchmarks/research/em_forward.py)
+            from benchmarks.research.em_forward import install
+        else:
+            from benchmarks.research.wall_lines_variants import install
         install(args[k + 1])
         args = args[:k] + args[k + 2:]
     overrides = {a.split("=", 1)[0]: parse_value(a.split("=", 1)[1]) for a in args}
     results: dict[str, tuple[float, float, float, float]] = {}
+    per_iter: dict[str, object] = {}
     for name, log, truth, octo in ROWS:
         if only and name not in only:
             continue
@@ -116,11 +121,24 @@ def main() -> None:
         results[name] = (ev.f1, ev.precision, ev.recall, ev.f1 - octo)
         print(f"{name:14s} {ev.f1:.3f} ({ev.precision:.2f} / {ev.recall:.2f}) "
               f"{ev.f1 - octo:+.3f}", flush=True)
+        if em:
+            from benchmarks.research import em_forward
+
+            rec = em_forward.RECORDS[-1]
+            iters = em_forward.score_iterations(out / name, truth, traj if traj.is_file()
+                                                else None, log_reach(log, cfg), octo)
+            per_iter[name] = {"rows": iters, "changed": rec["changed"], "cpu": rec["cpu"],
+                              "rho": rec["rho"], "converged": rec["converged"]}
+            print("    iterations: " + "  ".join(
+                f"{k}: {f:.3f} ({lead:+.3f})" for k, (f, _, _, lead) in enumerate(iters))
+                + f"  changed {rec['changed']} cpu "
+                + " ".join(f"{c:.1f}" for c in rec["cpu"]) + " s", flush=True)
     for group, names in GROUPS.items():
         leads = [results[n][3] for n in names if n in results]
         if leads:
             print(f"{group:20s} mean {sum(leads) / len(leads):+.3f} (worst {min(leads):+.3f})")
-    (out / "rows.json").write_text(json.dumps({"overrides": overrides, "rows": results},
+    (out / "rows.json").write_text(json.dumps({"overrides": overrides, "rows": results,
+                                               "iterations": per_iter},
                                               indent=1))
 
 
