@@ -347,7 +347,7 @@ def _map_stream(
 ) -> StreamState:
     """Stages 2-4 over the time-ordered reading stream, into ``mappers`` (and ``spill``)."""
 
-    def integrate(scans: list[Scan]) -> None:
+    def integrate(scans: Sequence[Scan]) -> None:
         with timer.stage("mapping"):
             _integrate(mappers, scans)
 
@@ -371,7 +371,7 @@ def stream_scans(
     sensors: SensorTable,
     grid: GridSpec,
     config: Config,
-    consume: Callable[[list[Scan]], None],
+    consume: Callable[[Sequence[Scan]], None],
     timer: StageTimer | None = None,
     progress: Progress | None = None,
     spill: ScanSpill | None = None,
@@ -404,7 +404,7 @@ def stream_scans(
         with timer.stage("pose_sync"):
             scan_ids, readings = _sync(batch, track, sensors, grid, offset_ns, max_gap_ns, state)
         with timer.stage("scan_building"):
-            scans = list(builder.push(scan_ids, readings))
+            scans = builder.push_batch(scan_ids, readings)  # one batch: no copy per scan
         # Later readings are newer than this chunk: the poses before it are done with.
         track.release_before(int(batch.t_ns[0]) + offset_ns)
         consume(scans)
