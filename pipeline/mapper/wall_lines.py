@@ -31,7 +31,6 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from scipy.ndimage import distance_transform_edt
 
 from pipeline.mapper.kernels.lines import line_moments
 from pipeline.mapper.types import F32, F64, B, GridSpec
@@ -111,7 +110,10 @@ def _line_test(v: npt.NDArray[Any], psi: float, n: int, bins: int) -> tuple[F64,
 
 
 def near_lines(on: B, nx: F32, ny: F32, radius_cells: float) -> tuple[B, F32, F32]:
-    """The cells within ``radius_cells`` of a line cell, with the nearest one's normal."""
+    """The cells within ``radius_cells`` of a line cell, with the nearest one's normal
+    (``scipy.ndimage`` imported here, on the lines' thread: not at the run's start)."""
+    from scipy.ndimage import distance_transform_edt
+
     if not on.any():
         return np.zeros_like(on), np.zeros_like(nx), np.zeros_like(ny)
     dist, (ir, ic) = distance_transform_edt(~on, return_indices=True)
