@@ -3,6 +3,7 @@ attribution traced reading by reading (kernels.specular.trace_readings)."""
 
 from __future__ import annotations
 
+import inspect
 from typing import Any
 
 import numpy as np
@@ -12,18 +13,23 @@ import pipeline.mapper.specular as specular
 from pipeline.config import MapperConfig
 from pipeline.mapper import make_mapper
 from pipeline.mapper.kernels.echo_lists import echo_candidate_lists, spread_candidate_lists
-from pipeline.mapper.kernels.specular import trace_readings
+from pipeline.mapper.kernels.specular import TraceArgs, trace_readings
 from pipeline.mapper.synthetic import ring_scans, room_grid
 
 
-def _last_attribution_calls(monkeypatch: pytest.MonkeyPatch) -> list[list[Any]]:
+def _copy(args: TraceArgs) -> TraceArgs:
+    return TraceArgs(*[a.copy() if isinstance(a, np.ndarray) else a for a in args])
+
+
+def _last_attribution_calls(monkeypatch: pytest.MonkeyPatch) -> list[TraceArgs]:
     """The arguments of every call of the last attribution (with stops, no bearings) of the
     default method on the synthetic room, one thread."""
-    calls: list[list[Any]] = []
+    calls: list[TraceArgs] = []
 
     def capture(*args: Any) -> int:
-        if args[17] and not args[18]:
-            calls.append([a.copy() if isinstance(a, np.ndarray) else a for a in args])
+        named = TraceArgs(*args[:-2])
+        if named.attribute and not named.bearings:
+            calls.append(_copy(named))
         return int(trace_readings(*args))
 
     monkeypatch.setattr(specular, "trace_readings", capture)
@@ -35,31 +41,33 @@ def _last_attribution_calls(monkeypatch: pytest.MonkeyPatch) -> list[list[Any]]:
     return calls
 
 
+def test_trace_args_name_trace_readings_arguments_in_order() -> None:
+    names = list(inspect.signature(trace_readings.py_func).parameters)
+    assert list(TraceArgs._fields) == names[:-2]
+    assert names[-2:] == ["row_lo", "row_hi"]
+
+
 def test_listed_then_spread_is_the_traced_attribution(monkeypatch: pytest.MonkeyPatch) -> None:
     calls = _last_attribution_calls(monkeypatch)
     assert calls
     listed = 0
-    for args in calls:
-        traced = [a.copy() if isinstance(a, np.ndarray) else a for a in args]
-        lost_traced = int(trace_readings(*traced))
-        (cones, up_down, r_inner, _, alpha, half, gx, gy, res, offsets, stops, stopped,
-         *_, free_in, arcs_in, ratio, dilution, _, _, hits, _, _, _, _) = args
-        n = cones.shape[0]
+    for a in calls:
+        traced = _copy(a)
+        rows = a.free_in.shape[0]
+        lost_traced = int(trace_readings(*traced, 0, rows))
+        n = a.cones.shape[0]
         for cut in (0, n // 3, n):  # the first readings traced, the rest listed and spread
-            first = [a.copy() if isinstance(a, np.ndarray) else a for a in args]
-            for k in range(6):  # the first readings only
-                first[k] = first[k][:cut]
-            first[9] = offsets[: cut + 1]
-            first[11] = stopped[:cut]
-            lost = int(trace_readings(*first)) if cut else 0
-            got = first[25]
-            lists = echo_candidate_lists(cones, up_down, r_inner, alpha, half, gx, gy, res,
-                                         offsets, stops, stopped, free_in, arcs_in, ratio,
-                                         cut, n)
+            first = _copy(a).first(cut)
+            assert first.cones.shape[0] == first.stopped_in.shape[0] == cut
+            assert first.offsets.shape[0] == cut + 1
+            lost = int(trace_readings(*first, 0, rows)) if cut else 0
+            lists = echo_candidate_lists(a.cones, a.up_down, a.r_inner, a.alpha, a.half_fov,
+                                         a.gx, a.gy, a.res, a.offsets, a.stops, a.stopped_in,
+                                         a.free_in, a.arcs_in, a.ratio, cut, n)
             assert lists[1].dtype == np.int32 and lists[0].shape == (n - cut + 1,)
             listed += int(lists[0][-1])
-            lost += int(spread_candidate_lists(got, *lists, dilution))
+            lost += int(spread_candidate_lists(first.hits, *lists, a.dilution))
             assert lost == lost_traced
-            assert got.tobytes() == traced[25].tobytes()
-        assert hits.tobytes() != traced[25].tobytes()  # the attribution added hits
+            assert first.hits.tobytes() == traced.hits.tobytes()
+        assert a.hits.tobytes() != traced.hits.tobytes()  # the attribution added hits
     assert listed > 0
