@@ -192,6 +192,11 @@ def run(
     logs, out = _locations(log), location_argument(output)
     cfg = _load(config, format=format, range_topics=range_topic, pose_topic=pose_topic,
                 method=method, resolution=resolution, refine_poses=refine_poses)
+    if _OWN_PROCESS:
+        # The modules' objects (numpy's, numba's, scipy's: most of the heap) live as long
+        # as the process: frozen, the run's full collections no longer walk them (an hour's
+        # run made three, 0.11 s of CPU with the GIL held; two, 0.03 s, frozen).
+        gc.freeze()
     if quiet or json_out:
         result = run_pipeline(logs, out, cfg, force=force, compare_correction=compare_correction)
     else:
@@ -398,8 +403,15 @@ _register_commands()
 use_words(app)  # after every command is registered
 
 
+# Set by main(): the process is sonarmap's own (not a test runner's or a library user's),
+# so a command may freeze the objects of its imports (gc.freeze) for the rest of it.
+_OWN_PROCESS = False
+
+
 def main() -> None:
     """Console entry point."""
+    global _OWN_PROCESS
+    _OWN_PROCESS = True
     try:
         app()
     finally:

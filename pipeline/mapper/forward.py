@@ -85,6 +85,28 @@ FIT_SPREAD = np.geomspace(0.1, 2.0, 14)
 FIT_FLOOR = np.linspace(0.0, 0.5, 26)
 
 
+def last_axis_sum(t: F64) -> F64:
+    """``t.sum(axis=-1)`` (float64, C-contiguous), added as numpy's pairwise summation adds a
+    row of 8 to 128 values: eight running sums combined in pairs, then the rest in order, onto
+    0.0: the same bits, in a few whole-array adds instead of numpy's loop per row (the fit's
+    rows are :data:`INCIDENCE_BINS` values)."""
+    n = t.shape[-1]
+    if not 8 <= n <= 128:
+        out: F64 = t.sum(axis=-1)
+        return out
+    c = [t[..., k] for k in range(n)]
+    r = c[:8]
+    i = 8
+    while i < n - n % 8:
+        r = [r[k] + c[i + k] for k in range(8)]
+        i += 8
+    res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+    for k in range(i, n):
+        res = res + c[k]
+    total: F64 = 0.0 + res
+    return total
+
+
 def fit_detection(stats: F64) -> tuple[float, float, float, float]:
     """The detection model ``answered share(θ) = f + (1 − f)·p0·P(θc > θ)`` (θc log-normal:
     median, spread) fitted to the counts per incidence bin by maximum likelihood (binomial,
@@ -94,11 +116,22 @@ def fit_detection(stats: F64) -> tuple[float, float, float, float]:
         None, :, None]
     vis = 1.0 - ndtr(z)  # (median, spread, bin)
     a, n = stats[0, :INCIDENCE_BINS], stats[0, :INCIDENCE_BINS] + stats[1, :INCIDENCE_BINS]
+    miss = n - a
     best = (-math.inf, 1.0, 90.0, 1.0, 0.0)
+    # The binomial log-likelihood a·ln p + (n − a)·ln(1 − p) per bin, in place (the same
+    # operations on the same values as the expression written out: the same bits).
+    p, q = np.empty_like(vis), np.empty_like(vis)
     for f in FIT_FLOOR:
         for p0 in FIT_HEAD_ON:
-            p = np.clip(f + (1.0 - f) * p0 * vis, 1e-6, 1.0 - 1e-6)
-            ll = (a * np.log(p) + (n - a) * np.log1p(-p)).sum(axis=-1)
+            np.multiply((1.0 - f) * p0, vis, out=p)
+            np.add(f, p, out=p)
+            np.clip(p, 1e-6, 1.0 - 1e-6, out=p)
+            np.log1p(np.negative(p, out=q), out=q)
+            np.log(p, out=p)
+            p *= a
+            q *= miss
+            p += q
+            ll = last_axis_sum(p)
             k = int(np.argmax(ll))
             if ll.flat[k] > best[0]:
                 i, j = np.unravel_index(k, ll.shape)

@@ -38,7 +38,6 @@ import math
 import time
 from collections.abc import Callable
 from concurrent.futures import Future
-from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -50,6 +49,7 @@ from pipeline.mapper.free_space import cone_table
 from pipeline.mapper.kernels.attribution import empty_grid
 from pipeline.mapper.kernels.echo_lists import echo_candidate_lists, spread_candidate_lists
 from pipeline.mapper.kernels.specular import (
+    TraceArgs,
     shadow_offsets,
     shadow_profiles,
     silent_candidates,
@@ -71,19 +71,6 @@ LATE_GROUP = 4 * GROUP
 # A split attribution's balance: this thread's own and listing seconds, its share, and
 # the band thread's seconds (appended once it is done).
 Balance = tuple[float, float, float, list[float]]
-# trace_readings' arguments that are one value per reading (cones … half_fov, stopped_in)
-# and its offsets into the shadow profiles (one more).
-PER_READING, OFFSETS = (0, 1, 2, 3, 4, 5, 11), 9
-
-
-def _first_readings(args: tuple[Any, ...], cut: int) -> tuple[Any, ...]:
-    """:func:`trace_readings`' arguments for its first ``cut`` readings alone (the offsets
-    keep pointing into the same shadow profiles)."""
-    out = list(args)
-    for k in PER_READING:
-        out[k] = args[k][:cut]
-    out[OFFSETS] = args[OFFSETS][:cut + 1]
-    return tuple(out)
 
 
 def visibility_table(median_deg: float, spread: float) -> F64:
@@ -248,13 +235,15 @@ class SpecularMapper(AttributionMapper):
                 self._shadow_basis = (nx2, ny2, cons2, self.cos_table)
 
         # The kernel's arguments taken now: the band thread holds arrays, not the mapper.
-        args = (
-            cones, up_down, r_inner, free_r[rows], alpha, half,
-            g.origin_x, g.origin_y, g.resolution, offsets, stops, stopped,
-            self.nx, self.ny, self.consistency, self.cos_table, self.v_unknown, attribute,
-            first, self.free if first else self.free2, self.arcs if first else self.arcs2,
-            cfg.attr_candidate_ratio, cfg.attr_dilution, self.free2, self.arcs2,
-            self.hits if first else self.hits2, self.arc_c, self.arc_s,
+        args = TraceArgs(
+            cones=cones, up_down=up_down, r_inner=r_inner, r_free=free_r[rows], alpha=alpha,
+            half_fov=half, gx=g.origin_x, gy=g.origin_y, res=g.resolution, offsets=offsets,
+            stops=stops, stopped_in=stopped, nx=self.nx, ny=self.ny, cons=self.consistency,
+            table=self.cos_table, v_unknown=self.v_unknown, attribute=attribute,
+            bearings=first, free_in=self.free if first else self.free2,
+            arcs_in=self.arcs if first else self.arcs2, ratio=cfg.attr_candidate_ratio,
+            dilution=cfg.attr_dilution, free_out=self.free2, arcs_out=self.arcs2,
+            hits=self.hits if first else self.hits2, arc_c=self.arc_c, arc_s=self.arc_s,
         )
 
         def trace(row_lo: int, row_hi: int) -> int:
@@ -303,27 +292,27 @@ class SpecularMapper(AttributionMapper):
             theirs = upper.result()
         self._trace_share.update(own, time.thread_time() - t, theirs, share)
 
-    def _split_attribution(self, args: tuple[Any, ...], n: int,
+    def _split_attribution(self, args: TraceArgs, n: int,
                            started: float) -> tuple[Callable[[], int], Balance]:
         """Pass 3's attribution of a group split in two (no bearings): this thread lists
         the echo candidates of its last readings now, the band thread traces the first ones
         and spreads those lists after them (:mod:`~pipeline.mapper.kernels.echo_lists`);
-        :class:`WorkShare` sizes the parts. ``args``: :func:`trace_readings`'."""
+        :class:`WorkShare` sizes the parts."""
         share = self._attribution_share.share
         cut = n - round(share * n)
         own = time.thread_time() - started
-        (cones, up_down, r_inner, _, alpha, half, gx, gy, res, offsets, stops, stopped,
-         *_, free_in, arcs_in, ratio, dilution, _, _, hits, _, _) = args
-        lists = echo_candidate_lists(cones, up_down, r_inner, alpha, half, gx, gy, res,
-                                     offsets, stops, stopped, free_in, arcs_in, ratio, cut, n)
+        a = args
+        lists = echo_candidate_lists(a.cones, a.up_down, a.r_inner, a.alpha, a.half_fov, a.gx,
+                                     a.gy, a.res, a.offsets, a.stops, a.stopped_in, a.free_in,
+                                     a.arcs_in, a.ratio, cut, n)
         mine = time.thread_time() - started - own
-        first_part = (*_first_readings(args, cut), 0, free_in.shape[0])  # all rows
+        first = args.first(cut)
         seconds: list[float] = []
 
         def work() -> int:
             t = time.thread_time()
-            lost = int(trace_readings(*first_part))
-            lost += int(spread_candidate_lists(hits, *lists, dilution))
+            lost = int(trace_readings(*first, 0, a.free_in.shape[0]))  # all rows
+            lost += int(spread_candidate_lists(a.hits, *lists, a.dilution))
             seconds.append(time.thread_time() - t)
             return lost
 

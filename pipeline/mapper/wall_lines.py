@@ -31,9 +31,8 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from scipy.ndimage import distance_transform_edt
 
-from pipeline.mapper.specular import box_sum
+from pipeline.mapper.kernels.lines import line_moments
 from pipeline.mapper.types import F32, F64, B, GridSpec
 
 LINE_BINS = 18  # direction bins of the normal line over [0, π): 10°, finer than a cone
@@ -97,26 +96,24 @@ def _tiles_with_votes(v: Votes, n: int) -> list[tuple[int, int]]:
 
 def _line_test(v: npt.NDArray[Any], psi: float, n: int, bins: int) -> tuple[F64, B]:
     """Each cell's box of votes ``m`` and whether the cell lies on their line (module doc),
-    in coordinates local to ``v``."""
-    c, s = math.cos(psi), math.sin(psi)
-    rows, cols = np.mgrid[0:v.shape[0], 0:v.shape[1]].astype(np.float64)
-    on_n, on_t = cols * c + rows * s, rows * c - cols * s  # cell coordinates, cells
-    with np.errstate(invalid="ignore", divide="ignore"):
-        m = box_sum(v, n)
-        mn, mt = box_sum(v * on_n, n) / m, box_sum(v * on_t, n) / m
-        var_n = box_sum(v * on_n * on_n, n) / m - mn * mn
-        var_t = box_sum(v * on_t * on_t, n) / m - mt * mt
-        cov = box_sum(v * on_n * on_t, n) / m - mn * mt
+    in coordinates local to ``v``. The box moments are compiled
+    (:func:`~pipeline.mapper.kernels.lines.line_moments`: numpy's operations in its order,
+    the same bits); the principal axis is numpy's ``arctan2`` of them."""
+    m, _, var_n, var_t, cov, cells, off = line_moments(v, math.cos(psi), math.sin(psi), n)
+    with np.errstate(invalid="ignore"):
         tilt = 0.5 * np.arctan2(2.0 * cov, var_t - var_n)  # principal axis off t
-        ok: B = ((box_sum((v > 0).astype(np.float64), n) >= 2.0)
+        ok: B = ((cells >= 2.0)
                  & (var_n <= LINE_THICK ** 2 + TIE) & (var_t >= 4.0 * var_n - TIE)
                  & (np.abs(tilt) <= 0.5 * math.pi / bins + TIE)
-                 & (np.abs(on_n - mn) <= 1.0 + TIE))
+                 & (off <= 1.0 + TIE))
     return m, ok
 
 
 def near_lines(on: B, nx: F32, ny: F32, radius_cells: float) -> tuple[B, F32, F32]:
-    """The cells within ``radius_cells`` of a line cell, with the nearest one's normal."""
+    """The cells within ``radius_cells`` of a line cell, with the nearest one's normal
+    (``scipy.ndimage`` imported here, on the lines' thread: not at the run's start)."""
+    from scipy.ndimage import distance_transform_edt
+
     if not on.any():
         return np.zeros_like(on), np.zeros_like(nx), np.zeros_like(ny)
     dist, (ir, ic) = distance_transform_edt(~on, return_indices=True)

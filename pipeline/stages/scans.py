@@ -24,7 +24,7 @@ import numpy as np
 from formats.arrays import I64
 from formats.errors import InputError
 from pipeline.config import ScanConfig
-from pipeline.mapper.types import SCAN_FIELDS, Scan
+from pipeline.mapper.types import SCAN_FIELDS, Scan, ScanBatch
 from pipeline.stages.pose_sync import PoseTrack
 
 
@@ -102,18 +102,23 @@ class ScanBuilder:
 
     def push(self, scan_ids: I64, readings: Scan) -> Iterator[Scan]:
         """Add readings (already pose-synced); yield every scan that is complete."""
+        yield from self.push_batch(scan_ids, readings)
+
+    def push_batch(self, scan_ids: I64, readings: Scan) -> ScanBatch:
+        """Add readings (already pose-synced); the scans that are complete, as one batch
+        (views of the readings: no scan is copied; the mappers group a batch without
+        joining its scans again)."""
         if len(readings) == 0:
-            return
+            return ScanBatch(readings, [0])
         rows = _Rows(self._keys.keys(readings.t_ns, scan_ids), readings)
         if self._carry is not None:
             rows = _Rows.concat(self._carry, rows)
         starts = np.flatnonzero(np.r_[True, rows.key[1:] != rows.key[:-1]])
         # The last run may continue in the next chunk: keep it back.
         last = int(starts[-1])
-        for a, b in zip(starts[:-1].tolist(), starts[1:].tolist(), strict=True):
-            self.count += 1
-            yield rows.scan.take(slice(a, b))
+        self.count += len(starts) - 1
         self._carry = rows.take(slice(last, None))
+        return ScanBatch(rows.scan.take(slice(0, last)), starts.tolist())
 
     def flush(self) -> Iterator[Scan]:
         """Yield the last scan."""

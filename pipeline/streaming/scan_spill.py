@@ -38,7 +38,11 @@ class ScanSpill:
 
     def add(self, scans: Sequence[Scan], readings_seen: int) -> None:
         """Append one batch of scans (in order) and the readings streamed so far."""
-        if scans:
+        if isinstance(scans, ScanBatch):  # joined already: its readings as they are
+            if scans:
+                self._readings.append(*(getattr(scans.cat, name) for name in SCAN_FIELDS))
+                self._scans.append(np.diff(scans.bounds))
+        elif scans:
             self._readings.append(*(
                 np.concatenate([getattr(s, name) for s in scans]) for name in SCAN_FIELDS))
             self._scans.append([len(s) for s in scans])

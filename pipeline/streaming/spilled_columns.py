@@ -65,7 +65,7 @@ class ColumnSpill:
         if any(a.shape != (n,) for a in arrays):
             raise ValueError("spilled columns must be one-dimensional and of one length")
         for f, a in zip(self._files, arrays, strict=True):
-            f.write(a.tobytes())
+            f.write(a.data)  # the array's bytes, not a copy of them
         self.rows += n
 
     def finish(self) -> MappedColumns:

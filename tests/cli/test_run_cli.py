@@ -376,3 +376,39 @@ def test_progress_has_the_real_total_from_the_first_pass(tmp_path):
     done = [d for _s, d, _t in mapping]
     assert done == sorted(done) and done[-1] == 5 * readings
     assert any(readings // 2 < d < readings for d in done)  # pass 1 reports as it goes
+
+
+_FREEZE_PROBE = """
+import gc, sys
+import pipeline.run
+from cli.app import main
+seen = []
+inner = pipeline.run.run
+def run(*a, **k):
+    seen.append(gc.get_freeze_count())
+    return inner(*a, **k)
+pipeline.run.run = run
+sys.argv = ["sonarmap", "run", sys.argv[1], "-o", sys.argv[2], "--quiet"]
+try:
+    main()
+finally:
+    print("FROZEN_AT_START", seen, file=sys.stderr)
+"""
+
+
+def test_sonarmap_run_starts_with_its_imports_frozen_in_its_own_process_only(
+        runner, tmp_path: Path) -> None:
+    # sonarmap's own process: the run's full collections skip the imports' objects
+    log = str(SAMPLES / "office" / "office.mcap")
+    proc = subprocess.run([sys.executable, "-c", _FREEZE_PROBE, log, str(tmp_path / "own")],
+                          cwd=ROOT, capture_output=True, text=True, check=True)
+    frozen = re.search(r"FROZEN_AT_START \[(\d+)\]", proc.stderr)
+    assert frozen is not None and int(frozen.group(1)) > 10_000
+    assert (tmp_path / "own" / "map.pgm").exists()
+    # a test runner's (or a library user's) process: nothing of its is frozen
+    import gc
+
+    before = gc.get_freeze_count()
+    result = _run(runner, ["run", log, "-o", str(tmp_path / "lib"), "--quiet"])
+    assert result.exit_code == 0, result.output
+    assert gc.get_freeze_count() == before

@@ -22,6 +22,7 @@ Loops run in reading order and add in that order, so results are deterministic.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -377,6 +378,50 @@ def trace_readings(
                      stops[offsets[i]:offsets[i + 1]], nx, ny, cons, table, v_unknown,
                      free_out, arcs_out, dbuf, kbuf, xbuf)
     return lost
+
+
+class TraceArgs(NamedTuple):
+    """:func:`trace_readings`' arguments but the row band, by name (in its order: a call is
+    ``trace_readings(*args, row_lo, row_hi)``), so that callers that split a pass (the
+    last attribution's lists, :mod:`~pipeline.mapper.kernels.echo_lists`) address them by
+    name, not by position."""
+
+    cones: F64
+    up_down: B
+    r_inner: F64
+    r_free: F64
+    alpha: F64
+    half_fov: F64
+    gx: float
+    gy: float
+    res: float
+    offsets: I64
+    stops: F64
+    stopped_in: B
+    nx: F32
+    ny: F32
+    cons: F32
+    table: F64
+    v_unknown: float
+    attribute: bool
+    bearings: bool
+    free_in: F32
+    arcs_in: F32
+    ratio: float
+    dilution: float
+    free_out: F32
+    arcs_out: F32
+    hits: F32
+    arc_c: F32
+    arc_s: F32
+
+    def first(self, cut: int) -> TraceArgs:
+        """The arguments for the first ``cut`` readings alone: the per-reading ones cut,
+        the offsets one longer (they keep pointing into the same shadow profiles)."""
+        return self._replace(
+            cones=self.cones[:cut], up_down=self.up_down[:cut], r_inner=self.r_inner[:cut],
+            r_free=self.r_free[:cut], alpha=self.alpha[:cut], half_fov=self.half_fov[:cut],
+            stopped_in=self.stopped_in[:cut], offsets=self.offsets[:cut + 1])
 
 
 def cell_lists(cells: B) -> tuple[I32, I32]:

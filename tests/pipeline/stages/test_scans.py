@@ -8,7 +8,7 @@ import pytest
 from formats.contract import PoseBatch
 from formats.errors import InputError
 from pipeline.config import ScanConfig
-from pipeline.mapper.types import Scan
+from pipeline.mapper.types import Scan, ScanBatch
 from pipeline.stages.pose_sync import build_pose_track
 from pipeline.stages.scans import ScanBuilder, ScanKeys, motion_boundaries
 
@@ -99,3 +99,20 @@ def test_a_one_nanosecond_window_keys_every_stamp_apart():
     keys = ScanKeys(ScanConfig(policy="time", window_s=1e-9), _track_from(7.05))
     t = t0 + np.arange(4, dtype=np.int64)
     assert keys.keys(t, np.full(4, -1)).tolist() == [0, 1, 2, 3]
+
+
+def test_push_batch_is_the_pushed_scans_joined_as_one_batch():
+    t = [0, S // 20, S // 10, 3 * S // 20, S // 5, S // 2]
+    keys = ScanConfig(policy="time", window_s=0.1)
+    one = ScanBuilder(ScanKeys(keys, _track()))
+    scans = list(one.push(np.full(len(t), -1), _readings(t)))
+    b = ScanBuilder(ScanKeys(keys, _track()))
+    batch = b.push_batch(np.full(len(t), -1), _readings(t))
+    assert isinstance(batch, ScanBatch) and batch.bounds == [0, 2, 4, 5]
+    assert batch.cat.t_ns.tolist() == t[:5]  # the window of S // 2 is kept back
+    assert [s.t_ns.tolist() for s in batch] == [s.t_ns.tolist() for s in scans]
+    assert b.count == one.count == 3
+    # a chunk that only continues the kept-back scan completes none
+    assert len(b.push_batch(np.full(1, -1), _readings([S // 2 + 1]))) == 0
+    assert len(b.push_batch(np.full(0, -1), _readings([]))) == 0
+    assert [s.t_ns.tolist() for s in b.flush()] == [[S // 2, S // 2 + 1]] and b.count == 4

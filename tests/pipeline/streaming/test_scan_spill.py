@@ -15,7 +15,7 @@ import pipeline.run as run_module
 from formats import open_log
 from pipeline.config import Config, config_from_dict
 from pipeline.mapper.scan_group import concat_scans
-from pipeline.mapper.types import SCAN_FIELDS, Scan
+from pipeline.mapper.types import SCAN_FIELDS, Scan, ScanBatch
 from pipeline.run import prepare, run, stream_scans
 from pipeline.streaming.scan_spill import ScanSpill
 
@@ -64,6 +64,18 @@ def test_spilled_batches_come_back_as_added_empty_ones_included() -> None:
     np.testing.assert_array_equal(cat.alpha, batches[3][0][1].alpha)
     assert np.shares_memory(cat.alpha, first[3][0].cat.alpha)
     assert next(iter(spilled.batches()))[0][1].range_m[0] == batches[0][0][1].range_m[0]
+
+
+def test_a_batch_of_scans_spills_as_its_scans_do() -> None:
+    # pass 0 hands the spill each chunk's scans as one ScanBatch (views of one join)
+    lists = [([_scan(5, 1), _scan(3, 2)], 8), ([], 9), ([_scan(0, 4), _scan(7, 5)], 20)]
+    spill = ScanSpill()
+    for scans, seen in lists:
+        cat, bounds = concat_scans(scans) if scans else (_scan(0, 0), np.zeros(1, np.int64))
+        spill.add(ScanBatch(cat, bounds.tolist()), seen)
+    got = list(spill.finish().batches())
+    _assert_same_batches(got, lists)
+    assert [b.bounds for b, _ in got] == [[0, 5, 8], [0], [0, 0, 7]]
 
 
 def test_an_empty_spill_streams_its_empty_batches() -> None:
