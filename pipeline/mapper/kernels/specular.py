@@ -30,6 +30,7 @@ from numba import njit
 from pipeline.mapper.kernels.attribution import reach_cells, span_buffers, spread_echo
 from pipeline.mapper.kernels.cone import (
     cone_row_span,
+    cone_row_spans,
     cone_rows,
     edge_sector_spans,
     wrap_angle,
@@ -370,9 +371,16 @@ def trace_readings(
         ca, sa, t_edge, bin_w, nb = _shadow_frame(alpha, half_fov, offsets, i)
         # edge_sector_spans' spans, on this call's rows
         r0, r1 = cone_rows(oy, r_out, s1, s2, up_down[i, 0], up_down[i, 1], gy, res, height)
+        r0, r1 = max(r0, row_lo), min(r1, row_hi - 1)
+        cone_row_spans(ox, oy, r_out, s1, cones[i, 4], s2, cones[i, 6], r0, r1, gx, gy, res,
+                       width, c0s, c1s)
         n = 0
-        for row in range(max(r0, row_lo), min(r1 + 1, row_hi)):
-            n = push_row_span(cones, i, row, gx, gy, res, width, rows, c0s, c1s, n)
+        for j in range(r1 - r0 + 1):  # the non-empty ones, in place
+            if c0s[j] <= c1s[j]:
+                rows[n] = r0 + j
+                c0s[n] = c0s[j]
+                c1s[n] = c1s[j]
+                n += 1
         _count_spans(rows, c0s, c1s, n, row_lo, row_hi, gx, gy, res, ox, oy, r_free[i],
                      r_inner[i], stopped_in[i], ca, sa, t_edge, bin_w, nb,
                      stops[offsets[i]:offsets[i + 1]], nx, ny, cons, table, v_unknown,
