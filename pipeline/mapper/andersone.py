@@ -51,7 +51,16 @@ from pipeline.mapper.kernels.normals import pcg64_words, set_pcg64_words
 from pipeline.mapper.occupancy import FreeLayer, final_probability, occupied_layer
 from pipeline.mapper.reading_features import ReadingFeatures, reading_features
 from pipeline.mapper.scan_group import ScanGroup, count_group, scan_groups
-from pipeline.mapper.types import I32, I64, B, FeatureTable, GridSpec, MapperCounters, MapSnapshot, Scan
+from pipeline.mapper.types import (
+    I32,
+    I64,
+    B,
+    FeatureTable,
+    GridSpec,
+    MapperCounters,
+    MapSnapshot,
+    Scan,
+)
 
 # The kernels' counters array, in its order (kernels.correction.CREATED..CELLS_FREED).
 _KERNEL_COUNTERS = ("features_created", "features_merged", "features_corrected",

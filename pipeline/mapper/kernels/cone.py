@@ -200,8 +200,16 @@ def edge_sector_spans(ox: float, oy: float, s1: float, c1: float, s2: float, c2:
             lo_y = -r_outer
         r0 = max(r0, math.ceil(((oy + lo_y) - gy) / res - 0.5) - 1)
         r1 = min(r1, math.floor(((oy + hi_y) - gy) / res - 0.5) + 1)
+    m = r1 - r0 + 1
+    if m <= 0:
+        return 0
+    # The rows' outer spans at once, at the buffers' end: row r0 + j is read before the
+    # spans written so far (at most 2j + 2 < size − m + j + 1, as m ≤ size / 2) reach it.
+    base = rows.shape[0] - m
+    cone_row_spans(ox, oy, r_outer, s1, c1, s2, c2, r0, r1, gx, gy, res, width, c0s[base:],
+                   c1s[base:])
     for row in range(r0, r1 + 1):
-        a, b = cone_row_span(ox, oy, r_outer, s1, c1, s2, c2, row, gx, gy, res, width)
+        a, b = c0s[base + row - r0], c1s[base + row - r0]
         if a > b:
             continue
         dy = (gy + (row + 0.5) * res) - oy
