@@ -10,7 +10,8 @@ of ``--repeat``; "paper's mapper" is the time spent in
 :class:`~pipeline.mapper.andersone.AndersoneMapper`'s ``prepare``, ``add_free_space`` and
 ``integrate_prepared`` (the parts of ``integrate_group``) during the same runs (the default
 method runs it in its first pass for ``features.parquet``; inline, ``threads = 1``, so that
-process CPU time splits between the two). Prints a Markdown table
+process CPU time splits between the two; ``prepare`` also counts §9's free cones from its
+spans, a small part of attribution's own work). Prints a Markdown table
 (benchmarks/RESULTS.md, "How the cost grows").
 """
 
@@ -40,10 +41,10 @@ _PAPER_STEPS = ("prepare", "add_free_space", "integrate_prepared")
 
 
 def _timed(original: Callable[..., Any], inner: list[float]) -> Callable[..., Any]:
-    def timed(self: AndersoneMapper, arg: Any) -> Any:
+    def timed(self: AndersoneMapper, *args: Any) -> Any:
         c0 = time.process_time()
         try:
-            return original(self, arg)
+            return original(self, *args)
         finally:
             inner[0] += time.process_time() - c0
 

@@ -41,12 +41,26 @@ from pipeline.mapper.features_reference import FeatureSet
 from pipeline.mapper.free_space import free_space_scans
 from pipeline.mapper.kernels import andersone_scans
 from pipeline.mapper.kernels.ellipse import occupied_cells
-from pipeline.mapper.kernels.free_unions import FreeUnions, add_free_unions, free_unions
+from pipeline.mapper.kernels.free_unions import (
+    NO_COUNTS,
+    FreeUnions,
+    add_free_unions,
+    free_unions,
+)
 from pipeline.mapper.kernels.normals import pcg64_words, set_pcg64_words
 from pipeline.mapper.occupancy import FreeLayer, final_probability, occupied_layer
 from pipeline.mapper.reading_features import ReadingFeatures, reading_features
 from pipeline.mapper.scan_group import ScanGroup, count_group, scan_groups
-from pipeline.mapper.types import I64, B, FeatureTable, GridSpec, MapperCounters, MapSnapshot, Scan
+from pipeline.mapper.types import (
+    I32,
+    I64,
+    B,
+    FeatureTable,
+    GridSpec,
+    MapperCounters,
+    MapSnapshot,
+    Scan,
+)
 
 # The kernels' counters array, in its order (kernels.correction.CREATED..CELLS_FREED).
 _KERNEL_COUNTERS = ("features_created", "features_merged", "features_corrected",
@@ -99,27 +113,31 @@ class AndersoneMapper:
         for group in scan_groups(scans, self.config):
             self.integrate_group(group)
 
-    def integrate_group(self, group: ScanGroup) -> None:
-        """Add a group of scans in order (:mod:`~pipeline.mapper.scan_group`)."""
+    def integrate_group(self, group: ScanGroup, free_diff: I32 = NO_COUNTS) -> None:
+        """Add a group of scans in order (:mod:`~pipeline.mapper.scan_group`); ``free_diff``
+        as :meth:`prepare`'s."""
         if self.reference:
+            assert free_diff is NO_COUNTS, "the numpy reference counts no free cones"
             group.count(self.counters)
             cat, bounds, codes = group.cat, group.bounds, group.codes
             feats = reading_features(cat, codes, self.config)
             self._reference_group(cat, bounds, codes, feats, np.searchsorted(feats.row, bounds))
             return
-        work = self.prepare(group)
+        work = self.prepare(group, free_diff)
         self.add_free_space(work)
         self.integrate_prepared(work)
 
-    def prepare(self, group: ScanGroup) -> PreparedGroup:
+    def prepare(self, group: ScanGroup, free_diff: I32 = NO_COUNTS) -> PreparedGroup:
         """The group's scan-local half (compiled path); changes nothing, so any thread may
-        prepare a group while another integrates earlier ones."""
+        prepare a group while another integrates earlier ones. A row difference grid
+        ``free_diff`` (the attribution method's) also gets every free cone's cells once
+        (:func:`~pipeline.mapper.kernels.attribution.count_free`, from the same spans)."""
         assert not self.reference, "the numpy reference integrates whole groups"
         g = self.grid
         feats = reading_features(group.cat, group.codes, self.config)
         rows, cones, up_down = group.free_cones
         unions = free_unions(cones, up_down, np.searchsorted(rows, group.bounds), g.origin_x,
-                             g.origin_y, g.resolution, g.width, g.height)
+                             g.origin_y, g.resolution, g.width, g.height, free_diff)
         return PreparedGroup(group.codes, group.n_scans, feats,
                              np.searchsorted(feats.row, group.bounds), unions)
 

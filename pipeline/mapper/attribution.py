@@ -123,14 +123,15 @@ class AttributionMapper:
         g, cfg = self.grid, self.config
         thread = self._paper_thread
         if self.pass_index == 0:
-            # The paper's mapper and the free counts share the group's classes and cones.
-            _, cones, up_down = group.free_cones
-            if thread is None:
-                self.paper.integrate_group(group)
-            else:
-                thread.offer(self._group_index, group)
+            # The paper's mapper and the free counts share the group's classes and cones:
+            # preparing the group for the paper's mapper counts its free cones too.
             assert self._free_diff is not None
-            count_free(cones, up_down, g.origin_x, g.origin_y, g.resolution, self._free_diff)
+            if thread is None:
+                self.paper.integrate_group(group, self._free_diff)
+            elif not thread.offer(self._group_index, group, self._free_diff):
+                _, cones, up_down = group.free_cones
+                count_free(cones, up_down, g.origin_x, g.origin_y, g.resolution,
+                           self._free_diff)
         elif thread is not None:
             thread.give(self._group_index, group)  # the groups pass 0 could not hand over
         cat = group.cat

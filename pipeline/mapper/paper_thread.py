@@ -27,7 +27,9 @@ import threading
 import weakref
 
 from pipeline.mapper.andersone import AndersoneMapper, PreparedGroup
+from pipeline.mapper.kernels.free_unions import NO_COUNTS
 from pipeline.mapper.scan_group import ScanGroup
+from pipeline.mapper.types import I32
 
 # Prepared groups waiting for the thread (64 scans each, ~0.4 MB: reading features and free
 # spaces). The more pass 0 can hand over, the less the thread waits for pass 1 to reach it:
@@ -91,16 +93,19 @@ class PaperThread:
         # finalises can crash the process (seen once: SIGSEGV after SIGTERM mid-run).
         weakref.finalize(self, _cancel, self._queue, cancelled, self._thread)
 
-    def offer(self, index: int, group: ScanGroup) -> None:
+    def offer(self, index: int, group: ScanGroup, free_diff: I32 = NO_COUNTS) -> bool:
         """Pass 0: hand over group ``index`` if it is the next one needed and the queue has
-        room now; after the first miss, pass 0 offers nothing more."""
+        room now; after the first miss, pass 0 offers nothing more. Whether it was handed
+        over (then its free cones were counted into ``free_diff``: :meth:`AndersoneMapper.
+        prepare`)."""
         self._check()
         if not self._offering or index != self.handed:
-            return
+            return False
         if self._queue.full():  # only this thread adds: room now is room at the put
             self._offering = False
-            return
-        self._hand_over(group, block=False)
+            return False
+        self._hand_over(group, block=False, free_diff=free_diff)
+        return True
 
     def give(self, index: int, group: ScanGroup) -> None:
         """Pass 1: hand over group ``index`` if the thread has not had it (waits for room)."""
@@ -111,9 +116,9 @@ class PaperThread:
             raise RuntimeError(f"scan group {index} given before group {self.handed}")
         self._hand_over(group, block=True)
 
-    def _hand_over(self, group: ScanGroup, block: bool) -> None:
+    def _hand_over(self, group: ScanGroup, block: bool, free_diff: I32 = NO_COUNTS) -> None:
         """Prepare the group here, queue it, add its free space (once per group)."""
-        work = self.paper.prepare(group)
+        work = self.paper.prepare(group, free_diff)
         self._queue.put(work, block=block)
         self.paper.add_free_space(work)
         self.handed += 1

@@ -19,7 +19,7 @@ import numpy as np
 from numba import njit
 
 from pipeline.mapper.kernels.cone import (
-    cone_row_span,
+    cone_row_spans,
     cone_rows,
     edge_sector_spans,
     max_sector_spans,
@@ -33,12 +33,15 @@ def count_free(cones: F64, up_down: B, gx: float, gy: float, res: float, diff: I
     the row difference grid ``diff`` (:func:`empty_span_counts`); returns the cells added."""
     height, width = diff.shape[0], diff.shape[1] - 1
     total = 0
+    a_buf = np.empty(reach_cells(cones, res), dtype=np.int64)  # a cone's rows
+    b_buf = np.empty_like(a_buf)
     for i in range(cones.shape[0]):
         ox, oy, radius = cones[i, 0], cones[i, 1], cones[i, 2]
         s1, c1, s2, c2 = cones[i, 3], cones[i, 4], cones[i, 5], cones[i, 6]
         r0, r1 = cone_rows(oy, radius, s1, s2, up_down[i, 0], up_down[i, 1], gy, res, height)
+        cone_row_spans(ox, oy, radius, s1, c1, s2, c2, r0, r1, gx, gy, res, width, a_buf, b_buf)
         for row in range(r0, r1 + 1):
-            a, b = cone_row_span(ox, oy, radius, s1, c1, s2, c2, row, gx, gy, res, width)
+            a, b = a_buf[row - r0], b_buf[row - r0]
             if b >= a:
                 diff[row, a] += 1
                 diff[row, b + 1] -= 1

@@ -5,7 +5,8 @@ cone is rasterised out to its far edge (``d + w/2``, or ``r_max`` for a clearing
 reading) with :mod:`.cone`; a cell of an echo's cone is occupied when
 ``|dist − d| ≤ w/2`` and free when ``dist < d − w/2`` (every cell of a clearing cone is
 free); within a scan a cell gets one update, occupied winning over free; the update is
-the reference's float32 log-odds add and clamp.
+the reference's float32 log-odds add and clamp. A cone's row spans are computed for all
+its rows at once (:func:`~pipeline.mapper.kernels.cone.cone_row_spans`, the same bits).
 """
 
 from __future__ import annotations

@@ -120,6 +120,42 @@ def cone_row_span(ox: float, oy: float, radius: float, s1: float, c1: float, s2:
     return min(max(a, 0), width - 1), min(max(b, 0), width - 1)
 
 
+@njit(cache=True, error_model="numpy")
+def cone_row_spans(ox: float, oy: float, radius: float, s1: float, c1: float, s2: float,
+                   c2: float, r0: int, r1: int, gx: float, gy: float, res: float, width: int,
+                   a_out: np.ndarray, b_out: np.ndarray) -> None:
+    """:func:`cone_row_span` of rows ``r0 .. r1`` into ``a_out[j], b_out[j]`` (row
+    ``r0 + j``; empty when ``a > b``): the same operations in a loop without branches, so the
+    compiler computes several rows at once (their square roots and divisions), the same
+    bits as row by row."""
+    flip1 = s1 > 0  # which side each edge bounds is fixed by the cone
+    flip2 = s2 > 0
+    for j in range(r1 - r0 + 1):
+        dy = (gy + ((r0 + j) + 0.5) * res) - oy
+        h2 = radius * radius - dy * dy
+        ok = h2 > 0
+        h = math.sqrt(max(h2, 0.0))  # any value where not ok: the row is empty
+        lo = -h
+        hi = h
+        b1 = c1 * dy / s1 if s1 != 0.0 else 0.0
+        b2 = c2 * dy / s2 if s2 != 0.0 else 0.0
+        if s1 != 0.0:
+            hi = min(hi, b1) if flip1 else hi
+            lo = lo if flip1 else max(lo, b1)
+        else:
+            ok = ok and not c1 * dy < 0
+        if s2 != 0.0:
+            lo = max(lo, b2) if flip2 else lo
+            hi = hi if flip2 else min(hi, b2)
+        else:
+            ok = ok and not c2 * dy > 0
+        a = math.ceil(((ox + lo) - gx) / res - 0.5)
+        b = math.floor(((ox + hi) - gx) / res - 0.5)
+        ok = ok and a <= b and b >= 0 and a <= width - 1
+        a_out[j] = min(max(a, 0), width - 1) if ok else 0
+        b_out[j] = min(max(b, 0), width - 1) if ok else -1
+
+
 @njit(cache=True)
 def max_sector_spans(r_outer: float, res: float) -> int:
     """An upper bound of the spans :func:`sector_spans` writes for a sector of radius ``r_outer``."""
@@ -164,8 +200,16 @@ def edge_sector_spans(ox: float, oy: float, s1: float, c1: float, s2: float, c2:
             lo_y = -r_outer
         r0 = max(r0, math.ceil(((oy + lo_y) - gy) / res - 0.5) - 1)
         r1 = min(r1, math.floor(((oy + hi_y) - gy) / res - 0.5) + 1)
+    m = r1 - r0 + 1
+    if m <= 0:
+        return 0
+    # The rows' outer spans at once, at the buffers' end: row r0 + j is read before the
+    # spans written so far (at most 2j + 2 < size − m + j + 1, as m ≤ size / 2) reach it.
+    base = rows.shape[0] - m
+    cone_row_spans(ox, oy, r_outer, s1, c1, s2, c2, r0, r1, gx, gy, res, width, c0s[base:],
+                   c1s[base:])
     for row in range(r0, r1 + 1):
-        a, b = cone_row_span(ox, oy, r_outer, s1, c1, s2, c2, row, gx, gy, res, width)
+        a, b = c0s[base + row - r0], c1s[base + row - r0]
         if a > b:
             continue
         dy = (gy + (row + 0.5) * res) - oy
@@ -223,8 +267,14 @@ def cones_row_spans(cones: np.ndarray, up_down: np.ndarray, lo: int, hi: int, gx
         ox, oy, radius = cones[k, 0], cones[k, 1], cones[k, 2]
         s1, c1, s2, c2 = cones[k, 3], cones[k, 4], cones[k, 5], cones[k, 6]
         r0, r1 = cone_rows(oy, radius, s1, s2, up_down[k, 0], up_down[k, 1], gy, res, height)
+        if r1 < r0:
+            continue
+        # The cone's rows written after the spans kept so far, then kept in place.
+        cone_row_spans(ox, oy, radius, s1, c1, s2, c2, r0, r1, gx, gy, res, width, c0s[n:],
+                       c1s[n:])
+        first = n
         for row in range(r0, r1 + 1):
-            a, b = cone_row_span(ox, oy, radius, s1, c1, s2, c2, row, gx, gy, res, width)
+            a, b = c0s[first + row - r0], c1s[first + row - r0]
             if a > b:
                 continue
             owner[n] = k

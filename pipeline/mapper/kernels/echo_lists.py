@@ -6,7 +6,8 @@ the echo over them (adding to the hits), reading by reading. The search does not
 the hits, so one thread may list the candidates of the last readings of a group
 (:func:`echo_candidate_lists`) while another traces the first ones; spreading the lists after
 them (:func:`spread_candidate_lists`) adds the same values to the same cells in the same
-order: the same bits.
+order: the same bits. The arcs' row spans are :mod:`.cone`'s (a cone's rows at once:
+:func:`~pipeline.mapper.kernels.cone.cone_row_spans`).
 """
 
 from __future__ import annotations

@@ -1,7 +1,8 @@
 """Compiled E-step of the detection model (ALGORITHM.md §11): one pass over the readings.
 
 A reading's cone out to ``cones[i, 2]`` (the far edge of its echo's arc, or ``r_max`` for a
-reading with no echo) is visited cell by cell (:mod:`pipeline.mapper.kernels.cone`). Every
+reading with no echo) is visited cell by cell (:mod:`pipeline.mapper.kernels.cone`; its row
+spans computed for all its rows at once, :func:`~pipeline.mapper.kernels.cone.cone_row_spans`). Every
 surface of the map (listed row by row) stops the rays that meet it: it either answers or reflects the
 pulse away, so nothing behind it (within its angular width, bins uniform in the tangent of
 the bearing off the axis, as :mod:`pipeline.mapper.kernels.specular`) is reached by this

@@ -30,8 +30,15 @@ def free_rows(cones: np.ndarray, up_down: np.ndarray, lo: int, hi: int, gx: floa
     ``cones[k]`` = ``(ox, oy, radius, sin e1, cos e1, sin e2, cos e2)``, ``up_down[k]`` =
     whether the wedge holds +90°, −90°.
     """
-    n, _, rows, c0s, c1s, row_lo, row_hi, col_lo, col_hi = cones_row_spans(
-        cones, up_down, lo, hi, gx, gy, res, width, height)
+    return union_of_spans(*cones_row_spans(cones, up_down, lo, hi, gx, gy, res, width, height))
+
+
+@njit(cache=True)
+def union_of_spans(n: int, owner: np.ndarray, rows: np.ndarray, c0s: np.ndarray,
+                   c1s: np.ndarray, row_lo: int, row_hi: int, col_lo: int, col_hi: int
+                   ) -> tuple[int, int, int, np.ndarray, np.ndarray, np.ndarray, int]:
+    """:func:`free_rows` of the row spans :func:`.cone.cones_row_spans` returns (which it
+    leaves as they are)."""
     if n == 0:
         empty = np.zeros(0, dtype=np.int64)
         return 0, 0, -1, np.zeros(1, dtype=np.int64), empty, empty, 0

@@ -9,6 +9,10 @@ the free layer's update (eq. 11 as integer counts per cell: a sum, the same in a
 ``(row0, col0, col1)`` = ``head[k, :3]`` (``head[k, 3]`` its free cell count), its row
 starts ``starts[row_cut[k] : row_cut[k + 1]]`` (indices into its own intervals) and its
 intervals ``c0``/``c1[span_cut[k] : span_cut[k + 1]]`` (:func:`union_of`).
+
+The default method also counts every free cone's cells once per reading (§9's ``free``,
+:func:`.attribution.count_free`): the same cones' row spans, so :func:`free_unions` adds
+them to a row difference grid while it has them, instead of rasterising the cones twice.
 """
 
 from __future__ import annotations
@@ -18,7 +22,11 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from pipeline.mapper.kernels.free_space import add_free_rows, free_rows
+from pipeline.mapper.kernels.cone import cones_row_spans
+from pipeline.mapper.kernels.free_space import add_free_rows, union_of_spans
+
+# No row difference grid to count into (:func:`free_unions`' ``diff``).
+NO_COUNTS = np.zeros((0, 1), dtype=np.int32)
 
 
 class FreeUnions(NamedTuple):
@@ -44,8 +52,15 @@ def _grown(a: np.ndarray, need: int) -> np.ndarray:
 
 @njit(cache=True, nogil=True)
 def free_unions(cones: np.ndarray, up_down: np.ndarray, cone_cut: np.ndarray, gx: float,
-                gy: float, res: float, width: int, height: int) -> FreeUnions:
-    """The union of cones ``cone_cut[k] : cone_cut[k + 1]`` for each scan ``k``, packed."""
+                gy: float, res: float, width: int, height: int,
+                diff: np.ndarray) -> FreeUnions:
+    """The union of cones ``cone_cut[k] : cone_cut[k + 1]`` for each scan ``k``, packed.
+
+    Unless ``diff`` is :data:`NO_COUNTS` (no rows), every cone's cells are also counted
+    once more in the row difference grid ``diff``: :func:`.attribution.count_free` of cones
+    ``cone_cut[0] : cone_cut[-1]`` (integer adds: the same counts in any order).
+    """
+    counting = diff.shape[0] > 0
     n = cone_cut.shape[0] - 1
     head = np.zeros((n, 4), dtype=np.int64)
     row_cut = np.zeros(n + 1, dtype=np.int64)
@@ -54,8 +69,14 @@ def free_unions(cones: np.ndarray, up_down: np.ndarray, cone_cut: np.ndarray, gx
     c0 = np.empty(1024, dtype=np.int64)
     c1 = np.empty(1024, dtype=np.int64)
     for k in range(n):
-        row0, col0, col1, st, a0, a1, count = free_rows(
-            cones, up_down, cone_cut[k], cone_cut[k + 1], gx, gy, res, width, height)
+        spans = cones_row_spans(cones, up_down, cone_cut[k], cone_cut[k + 1], gx, gy, res,
+                                width, height)
+        if counting:
+            m, _, span_row, span_c0, span_c1 = spans[:5]
+            for j in range(m):
+                diff[span_row[j], span_c0[j]] += 1
+                diff[span_row[j], span_c1[j] + 1] -= 1
+        row0, col0, col1, st, a0, a1, count = union_of_spans(*spans)
         head[k, 0] = row0
         head[k, 1] = col0
         head[k, 2] = col1

@@ -29,7 +29,7 @@ from numba import njit
 
 from pipeline.mapper.kernels.attribution import reach_cells, span_buffers, spread_echo
 from pipeline.mapper.kernels.cone import (
-    cone_row_span,
+    cone_row_spans,
     cone_rows,
     edge_sector_spans,
     wrap_angle,
@@ -99,25 +99,15 @@ def listed_row_spans(cones: F64, up_down: B, i: int, alpha: float,
     s1, c1, s2, c2 = cones[i, 3], cones[i, 4], cones[i, 5], cones[i, 6]
     r0, r1 = cone_rows(oy, r_out, s1, s2, up_down[i, 0], up_down[i, 1], gy, res, height)
     b0, b1 = cone_columns(ox, r_out, c1, c2, alpha, hb, gx, res, width)
+    cone_row_spans(ox, oy, r_out, s1, c1, s2, c2, r0, r1, gx, gy, res, width, c0s, c1s)
     n = 0
-    for row in range(r0, r1 + 1):
-        if occ_index[row, b1 + 1] != occ_index[row, b0]:
-            n = push_row_span(cones, i, row, gx, gy, res, width, rows, c0s, c1s, n)
-    return n
-
-
-@njit(cache=True, inline="always")
-def push_row_span(cones: F64, i: int, row: int, gx: float, gy: float, res: float, width: int,
-                  rows: I64, c0s: I64, c1s: I64, n: int) -> int:
-    """Append cone ``i``'s span on ``row`` (:func:`cone_row_span`), if any, as the ``n``-th
-    of ``rows``, ``c0s``, ``c1s``; returns the new count."""
-    c_lo, c_hi = cone_row_span(cones[i, 0], cones[i, 1], cones[i, 2], cones[i, 3], cones[i, 4],
-                               cones[i, 5], cones[i, 6], row, gx, gy, res, width)
-    if c_lo <= c_hi:
-        rows[n] = row
-        c0s[n] = c_lo
-        c1s[n] = c_hi
-        n += 1
+    for row in range(r0, r1 + 1):  # the non-empty listed ones, in place
+        a, b = c0s[row - r0], c1s[row - r0]
+        if a <= b and occ_index[row, b1 + 1] != occ_index[row, b0]:
+            rows[n] = row
+            c0s[n] = a
+            c1s[n] = b
+            n += 1
     return n
 
 
@@ -370,9 +360,16 @@ def trace_readings(
         ca, sa, t_edge, bin_w, nb = _shadow_frame(alpha, half_fov, offsets, i)
         # edge_sector_spans' spans, on this call's rows
         r0, r1 = cone_rows(oy, r_out, s1, s2, up_down[i, 0], up_down[i, 1], gy, res, height)
+        r0, r1 = max(r0, row_lo), min(r1, row_hi - 1)
+        cone_row_spans(ox, oy, r_out, s1, cones[i, 4], s2, cones[i, 6], r0, r1, gx, gy, res,
+                       width, c0s, c1s)
         n = 0
-        for row in range(max(r0, row_lo), min(r1 + 1, row_hi)):
-            n = push_row_span(cones, i, row, gx, gy, res, width, rows, c0s, c1s, n)
+        for j in range(r1 - r0 + 1):  # the non-empty ones, in place
+            if c0s[j] <= c1s[j]:
+                rows[n] = r0 + j
+                c0s[n] = c0s[j]
+                c1s[n] = c1s[j]
+                n += 1
         _count_spans(rows, c0s, c1s, n, row_lo, row_hi, gx, gy, res, ox, oy, r_free[i],
                      r_inner[i], stopped_in[i], ca, sa, t_edge, bin_w, nb,
                      stops[offsets[i]:offsets[i + 1]], nx, ny, cons, table, v_unknown,

@@ -80,3 +80,34 @@ def test_inner_radius_splits_a_row_and_empty_sectors_write_nothing() -> None:
     assert np.all(c1 >= c0)
     assert _kernel_spans(0.0, 0.0, 0.0, 0.3, 0.0, 0.0)[0].size == 0
     assert _kernel_spans(20.0, 20.0, 0.0, 0.3, 0.0, 2.0)[0].size == 0  # off the grid
+
+
+def test_rows_at_once_equal_row_by_row_spans() -> None:
+    # cone_row_spans (branch-free over a cone's rows) against cone_row_span, row by row:
+    # random cones, edges along the axes (sin = 0, cos = ±1), rows past the cone and the
+    # grid, cones clipped at the grid's sides.
+    from pipeline.mapper.kernels.cone import cone_edges, cone_row_span, cone_row_spans
+
+    rng = np.random.default_rng(7)
+    gx, gy, res, width = -3.0, -2.0, 0.05, 90
+    cases = [(rng.uniform(-5, 3), rng.uniform(-4, 4), rng.uniform(0.05, 4.0),
+              rng.uniform(-math.pi, math.pi), rng.uniform(0.01, 1.6)) for _ in range(300)]
+    cases += [(0.3, 0.1, 2.0, hb, hb) for hb in (0.2, 0.5)]  # the first edge along +x
+    cases += [(0.3, 0.1, 2.0, -hb, hb) for hb in (0.2, 0.5)]  # the second edge along +x
+    cases += [(0.3, 0.1, 2.0, math.pi - 0.3, 0.3), (0.3, 0.1, 2.0, -0.5 * math.pi, 0.5)]
+    a_out, b_out = np.empty(400, dtype=np.int64), np.empty(400, dtype=np.int64)
+    kept = empty = 0
+    for ox, oy, radius, alpha, hb in cases:
+        s1, c1, s2, c2, _, _ = cone_edges(alpha, hb)
+        r0, r1 = -5, 150  # past the cone on both sides
+        cone_row_spans(ox, oy, radius, s1, c1, s2, c2, r0, r1, gx, gy, res, width, a_out, b_out)
+        for j in range(r1 - r0 + 1):
+            a, b = cone_row_span(ox, oy, radius, s1, c1, s2, c2, r0 + j, gx, gy, res, width)
+            if a > b:
+                assert a_out[j] > b_out[j]
+                empty += 1
+            else:
+                assert (a_out[j], b_out[j]) == (a, b)
+                kept += 1
+    assert kept > 5_000 and empty > 5_000
+    assert any(cone_edges(a, h)[0] == 0.0 for _, _, _, a, h in cases)

@@ -1,6 +1,7 @@
 """The paper's mapper on a second thread inside the default method: the same features,
-map and counters as inline, wherever the hand-over from pass 0 to pass 1 falls; its errors
-reach the caller."""
+map and counters as inline, wherever the hand-over from pass 0 to pass 1 falls (§9's free
+counts, taken from the hand-over's spans or counted apart, the same); its errors reach the
+caller."""
 
 from __future__ import annotations
 
@@ -16,7 +17,8 @@ from pipeline.config import Config, MapperConfig
 from pipeline.mapper import AttributionMapper
 from pipeline.mapper import paper_thread as pt
 from pipeline.mapper.andersone import AndersoneMapper, PreparedGroup
-from pipeline.mapper.scan_group import ScanGroup
+from pipeline.mapper.kernels.attribution import count_free, empty_span_counts, span_counts
+from pipeline.mapper.scan_group import ScanGroup, scan_groups
 from pipeline.mapper.synthetic import ring_scans, room_grid
 from pipeline.mapper.types import Scan
 
@@ -71,6 +73,16 @@ def test_threaded_features_equal_inline_when_pass_1_hands_over_most_groups(
     groups = -(-len(scans) // 50)  # one group per chunk of 50 scans
     assert 0 < handed_in_pass_0[0] < groups // 2
     _assert_same(threaded, inline)
+    # §9's free counts: from the hand-over's spans (first groups), counted apart (the rest).
+    grid, diff = room_grid(), empty_span_counts(room_grid().shape)
+    for k in range(0, len(scans), 50):
+        for group in scan_groups(scans[k : k + 50], THREADED):
+            _, cones, up_down = group.free_cones
+            count_free(cones, up_down, grid.origin_x, grid.origin_y, grid.resolution, diff)
+    want = span_counts(diff)
+    assert want.max() >= 2
+    np.testing.assert_array_equal(threaded.free, want)
+    np.testing.assert_array_equal(inline.free, want)
 
 
 def test_threaded_features_equal_inline_when_pass_0_hands_over_every_group() -> None:
