@@ -18,6 +18,19 @@ from benchmarks.loopback_s3 import loopback_s3
 ROOT = Path(__file__).resolve().parents[2]
 
 
+@pytest.fixture(autouse=True)
+def default_storage_options() -> Iterator[None]:
+    """Every test starts with the default storage options: a run configures the process's
+    options from its config (formats.storage.options.configure), and a test that takes
+    ``Url(...).fs`` before its run must get the instance the run will use, not one made
+    with the options an earlier test's run left behind."""
+    from formats.storage.options import StorageConfig, configure
+
+    configure(StorageConfig())
+    yield
+    configure(StorageConfig())
+
+
 @pytest.fixture(scope="session")
 def s3_endpoint() -> Iterator[str]:
     """moto's S3 server; the AWS_* variables point boto at it for the whole session."""
