@@ -144,7 +144,7 @@ class AndersoneMapper:
     def add_free_space(self, work: PreparedGroup) -> None:
         """Eq. 11 for every scan of the group: integer counts, the same in any order, and
         read only by :meth:`snapshot`, so it may run beside :meth:`integrate_prepared`."""
-        add_free_unions(self.free_layer.counts, work.unions)
+        add_free_unions(self.free_layer.diff_for_rows(), work.unions)
 
     def integrate_prepared(self, work: PreparedGroup) -> None:
         """Merge and correct the group's scans in order (§6; the free layer is

@@ -38,15 +38,36 @@ class FreeLayer:
     on how many updates it has had: the layer keeps that count per cell and maps it through
     a table of the sequential float32 clamp ``v_k = clamp(v_{k−1} + step)``, bit-identical
     to updating the log-odds in place, while an update is one integer add per cell.
+
+    Row runs of updates may also go into :attr:`row_diff` (``+1`` at a run's first column,
+    ``−1`` past its last: two adds per run, not one per cell); :attr:`counts` sums them in
+    when read (integer adds: the same counts in any order).
     """
 
     def __init__(self, grid: GridSpec, p_free: float, p_min: float, p_max: float) -> None:
         self.grid = grid
-        self.counts: npt.NDArray[np.int32] = np.zeros(grid.shape, dtype=np.int32)
+        self._counts: npt.NDArray[np.int32] = np.zeros(grid.shape, dtype=np.int32)
+        self.row_diff: npt.NDArray[np.int32] = np.zeros((grid.height, grid.width + 1),
+                                                         dtype=np.int32)
+        self._diff_used = False
         self.step = np.float32(logit(p_free))  # − l0, which is 0
         self.l_min = np.float32(logit(p_min))
         self.l_max = np.float32(logit(p_max))
         self._table = _clamp_table(self.step, self.l_min, self.l_max)
+
+    @property
+    def counts(self) -> npt.NDArray[np.int32]:
+        """Updates per cell, :attr:`row_diff`'s summed in (and cleared)."""
+        if self._diff_used:
+            self._counts += np.cumsum(self.row_diff[:, :-1], axis=1, dtype=np.int32)
+            self.row_diff[:] = 0
+            self._diff_used = False
+        return self._counts
+
+    def diff_for_rows(self) -> npt.NDArray[np.int32]:
+        """:attr:`row_diff`, to add row runs to (summed in when :attr:`counts` is read)."""
+        self._diff_used = True
+        return self.row_diff
 
     def update(self, cells: I64) -> None:
         """Apply eq. 11 once to each flat cell index in ``cells`` (must be unique)."""

@@ -23,7 +23,7 @@ import numpy as np
 from numba import njit
 
 from pipeline.mapper.kernels.cone import cones_row_spans
-from pipeline.mapper.kernels.free_space import add_free_rows, union_of_spans
+from pipeline.mapper.kernels.free_space import union_of_spans
 
 # No row difference grid to count into (:func:`free_unions`' ``diff``).
 NO_COUNTS = np.zeros((0, 1), dtype=np.int32)
@@ -104,9 +104,14 @@ def union_of(u: FreeUnions, k: int) -> tuple[int, int, int, np.ndarray, np.ndarr
 
 
 @njit(cache=True, nogil=True)
-def add_free_unions(counts: np.ndarray, u: FreeUnions) -> None:
-    """Eq. 11 once for every free cell of every union: one more update in ``counts``."""
+def add_free_unions(diff: np.ndarray, u: FreeUnions) -> None:
+    """Eq. 11 once for every free cell of every union: one more update in the row
+    difference grid ``diff`` (``+1`` at each interval's first column, ``−1`` past its last;
+    a union's intervals in a row do not overlap)."""
     for k in range(u.head.shape[0]):
         row0, _, _, starts, c0, c1, count = union_of(u, k)
         if count:
-            add_free_rows(counts, row0, starts, c0, c1)
+            for r in range(starts.shape[0] - 1):
+                for i in range(starts[r], starts[r + 1]):
+                    diff[row0 + r, c0[i]] += 1
+                    diff[row0 + r, c1[i] + 1] -= 1

@@ -35,6 +35,21 @@ def test_free_layer_update_and_clamp() -> None:
     assert layer.logodds[0, 0] == 0 and layer.observed.tolist() == [[False, True, False]]
 
 
+def test_free_layer_row_runs_sum_in_when_counts_are_read() -> None:
+    layer = FreeLayer(GridSpec(0, 0, 1.0, 4, 2), 0.35, 0.12, 0.97)
+    layer.update(np.array([0, 5]))
+    diff = layer.diff_for_rows()
+    diff[0, 1] += 1  # row 0, columns 1..3 (past the last: the extra column)
+    diff[0, 4] -= 1
+    diff[1, 0] += 2  # row 1, columns 0..1, twice
+    diff[1, 2] -= 2
+    assert layer.counts.tolist() == [[1, 1, 1, 1], [2, 3, 0, 0]]
+    assert not layer.row_diff.any()  # summed in once
+    assert layer.counts.tolist() == [[1, 1, 1, 1], [2, 3, 0, 0]]
+    assert layer.logodds[1, 1] == np.float32(logit(0.35)) * 3  # three updates, unclamped
+    assert layer.observed[1].tolist() == [True, True, False, False]
+
+
 def test_unknown_is_nan_and_free_probability(grid) -> None:  # type: ignore[no-untyped-def]
     m = AndersoneMapper(MapperConfig(method="andersone", feature_correction=False), grid)
     snap = m.snapshot()
