@@ -110,13 +110,3 @@ def any_free(starts: np.ndarray, c0: np.ndarray, c1: np.ndarray, r: int, a: int,
         if c1[i] >= a:
             return True
     return False
-
-
-@njit(cache=True)
-def add_free_rows(counts: np.ndarray, row0: int, starts: np.ndarray, c0: np.ndarray,
-                  c1: np.ndarray) -> None:
-    """Eq. 11 once for every free cell of the union: one more update in ``counts``."""
-    for r in range(starts.shape[0] - 1):
-        for i in range(starts[r], starts[r + 1]):
-            for c in range(c0[i], c1[i] + 1):
-                counts[row0 + r, c] += 1
