@@ -23,6 +23,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pipeline.mapper.grid_raster import ellipse_spans, mean_cells, span_cells
+from pipeline.mapper.kernels.attribution import empty_span_counts
 from pipeline.mapper.types import F32, F64, I64, B, GridSpec
 
 
@@ -47,8 +48,7 @@ class FreeLayer:
     def __init__(self, grid: GridSpec, p_free: float, p_min: float, p_max: float) -> None:
         self.grid = grid
         self._counts: npt.NDArray[np.int32] = np.zeros(grid.shape, dtype=np.int32)
-        self.row_diff: npt.NDArray[np.int32] = np.zeros((grid.height, grid.width + 1),
-                                                         dtype=np.int32)
+        self.row_diff: npt.NDArray[np.int32] = empty_span_counts(grid.shape)
         self._diff_used = False
         self.step = np.float32(logit(p_free))  # − l0, which is 0
         self.l_min = np.float32(logit(p_min))

@@ -43,10 +43,17 @@ def count_free(cones: F64, up_down: B, gx: float, gy: float, res: float, diff: I
         for row in range(r0, r1 + 1):
             a, b = a_buf[row - r0], b_buf[row - r0]
             if b >= a:
-                diff[row, a] += 1
-                diff[row, b + 1] -= 1
+                add_row_run(diff, row, a, b)
                 total += b - a + 1
     return total
+
+
+@njit(cache=True, inline="always")
+def add_row_run(diff: I32, row: int, c0: int, c1: int) -> None:
+    """One more count for cells ``c0 .. c1`` of ``row`` in the row difference grid ``diff``
+    (:func:`empty_span_counts`): +1 at ``c0``, −1 past ``c1``."""
+    diff[row, c0] += 1
+    diff[row, c1 + 1] -= 1
 
 
 @njit(cache=True)
@@ -94,8 +101,7 @@ def count_arcs(cones: F64, up_down: B, r_inner: F64, gx: float, gy: float, res: 
     for i in range(cones.shape[0]):
         n = _arc_spans(cones, up_down, r_inner, i, gx, gy, res, width, height, rows, c0s, c1s)
         for k in range(n):
-            diff[rows[k], c0s[k]] += 1
-            diff[rows[k], c1s[k] + 1] -= 1
+            add_row_run(diff, rows[k], c0s[k], c1s[k])
 
 
 @njit(cache=True)

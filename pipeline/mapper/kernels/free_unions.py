@@ -22,6 +22,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from pipeline.mapper.kernels.attribution import add_row_run
 from pipeline.mapper.kernels.cone import cones_row_spans
 from pipeline.mapper.kernels.free_space import union_of_spans
 
@@ -74,8 +75,7 @@ def free_unions(cones: np.ndarray, up_down: np.ndarray, cone_cut: np.ndarray, gx
         if counting:
             m, _, span_row, span_c0, span_c1 = spans[:5]
             for j in range(m):
-                diff[span_row[j], span_c0[j]] += 1
-                diff[span_row[j], span_c1[j] + 1] -= 1
+                add_row_run(diff, span_row[j], span_c0[j], span_c1[j])
         row0, col0, col1, st, a0, a1, count = union_of_spans(*spans)
         head[k, 0] = row0
         head[k, 1] = col0
@@ -113,5 +113,4 @@ def add_free_unions(diff: np.ndarray, u: FreeUnions) -> None:
         if count:
             for r in range(starts.shape[0] - 1):
                 for i in range(starts[r], starts[r + 1]):
-                    diff[row0 + r, c0[i]] += 1
-                    diff[row0 + r, c1[i] + 1] -= 1
+                    add_row_run(diff, row0 + r, c0[i], c1[i])
