@@ -67,10 +67,10 @@ def wall_lines(votes: Votes, resolution: float, half_length_m: float) -> tuple[B
         for r0, c0 in _tiles_with_votes(votes[b], n):
             rows, cols = slice(r0, min(r0 + TILE, h)), slice(c0, min(c0 + TILE, w))
             # the tile and the n cells around it: every box around a tile cell lies inside
-            outer = votes[b, max(r0 - n, 0):rows.stop + n, max(c0 - n, 0):cols.stop + n]
+            top, left = max(r0 - n, 0), max(c0 - n, 0)
+            outer = votes[b, top:rows.stop + n, left:cols.stop + n]
             m, ok = _line_test(outer.astype(np.float64), psi, n, bins)
-            inner = (slice(r0 - max(r0 - n, 0), r0 - max(r0 - n, 0) + rows.stop - r0),
-                     slice(c0 - max(c0 - n, 0), c0 - max(c0 - n, 0) + cols.stop - c0))
+            inner = (slice(r0 - top, rows.stop - top), slice(c0 - left, cols.stop - left))
             m, ok = m[inner], ok[inner] & (m[inner] > best[rows, cols])
             best[rows, cols] = np.where(ok, m, best[rows, cols])
             nx[rows, cols] = np.where(ok, np.float32(math.cos(psi)), nx[rows, cols])

@@ -44,3 +44,11 @@ def test_columns_of_different_lengths_are_refused() -> None:
     with pytest.raises(ValueError, match="one length"):
         spill.append([1, 2], [3])
     spill.close()
+
+
+def test_strided_columns_spill_their_values() -> None:
+    base = np.arange(20, dtype=np.int64)
+    spill = ColumnSpill([np.int64], "sonarmap-test-")
+    spill.append(base[::2])  # a view with a stride: its values, not its buffer
+    (col,) = spill.finish().columns
+    np.testing.assert_array_equal(col, np.arange(0, 20, 2))
